@@ -1,0 +1,32 @@
+"""flockkit: data-driven and constrained animation of groups of agents.
+
+The public API. Value types (``Motion``, ``Configuration``, ``State``, regions), the plugin
+lookup (``get``, ``available``, ``hookimpl``) and the convenience layer (``simulate``).
+"""
+
+from . import errors
+from .constraints import Ball, Box, Polygon
+from .convenience import random_flock, simulate
+from .hookspecs import hookimpl
+from .motion import DEFAULT_UP, Configuration, ConfigurationFrame, Motion, State
+from .registry import available, get
+
+__version__ = "0.1.0"
+
+__all__ = [
+    "Motion",
+    "Configuration",
+    "ConfigurationFrame",
+    "State",
+    "DEFAULT_UP",
+    "Ball",
+    "Box",
+    "Polygon",
+    "get",
+    "available",
+    "hookimpl",
+    "simulate",
+    "random_flock",
+    "errors",
+    "__version__",
+]

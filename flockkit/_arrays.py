@@ -1,0 +1,73 @@
+"""Conversion and validation of array fields: float64, read-only, messages that name the field."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from types import MappingProxyType
+
+import numpy as np
+
+from .errors import ValidationError
+
+
+def readonly_float(value, *, field: str) -> np.ndarray:
+    """Return `value` as a new read-only float64 array, or raise ValidationError naming `field`."""
+    try:
+        array = np.array(value, dtype=np.float64, copy=True)
+    except (TypeError, ValueError) as exc:
+        raise ValidationError(f"{field} must be an array of numbers; got {type(value).__name__}: {exc}") from None
+    array.setflags(write=False)
+    return array
+
+
+def check_finite(array: np.ndarray, *, field: str) -> None:
+    """Raise ValidationError naming `field` and the first bad index if `array` holds NaN or inf."""
+    bad = ~np.isfinite(array)
+    if bad.any():
+        first = tuple(int(i) for i in np.argwhere(bad)[0])
+        raise ValidationError(
+            f"{field} must be finite; found {array[first]} at index {first} ({int(bad.sum())} bad values in all)"
+        )
+
+
+def check_agent_array(array: np.ndarray, *, field: str, shape: tuple[int, ...] | None = None) -> None:
+    """Validate an (N, D) array of agent vectors: D in {2, 3}, N >= 1, finite, optionally a given shape."""
+    if shape is not None and array.shape != shape:
+        raise ValidationError(f"{field} must have shape {shape}; got {array.shape}")
+    if array.ndim != 2 or array.shape[1] not in (2, 3) or array.shape[0] < 1:
+        raise ValidationError(f"{field} must have shape (N, D) with N >= 1 and D in {{2, 3}}; got {array.shape}")
+    check_finite(array, field=field)
+
+
+def readonly_mapping(value, *, field: str) -> Mapping[str, np.ndarray]:
+    """Return a read-only name -> read-only float64 array mapping; names must be identifiers."""
+    if value is None:
+        value = {}
+    if not isinstance(value, Mapping):
+        raise ValidationError(f"{field} must be a mapping of names to arrays; got {type(value).__name__}")
+    converted = {}
+    for name, array in value.items():
+        if not isinstance(name, str) or not name.isidentifier():
+            raise ValidationError(f"{field} names must be Python identifiers; got {name!r}")
+        converted[name] = readonly_float(array, field=f"{field}[{name!r}]")
+    return MappingProxyType(converted)
+
+
+def positive_number(value, *, field: str) -> float:
+    """Return `value` as a float, raising ValidationError unless it is finite and > 0."""
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        raise ValidationError(f"{field} must be a positive number; got {value!r}") from None
+    if not np.isfinite(number) or number <= 0:
+        raise ValidationError(f"{field} must be a finite number > 0; got {value!r}")
+    return number
+
+
+def count(value, *, field: str, minimum: int = 1) -> int:
+    """Return `value` as an int, raising ValidationError unless it is an integer >= `minimum`."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ValidationError(f"{field} must be an integer >= {minimum}; got {value!r}")
+    if value < minimum:
+        raise ValidationError(f"{field} must be an integer >= {minimum}; got {value}")
+    return int(value)

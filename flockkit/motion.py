@@ -1,0 +1,346 @@
+"""Motion, Configuration, State and the configuration-space frame (paper 000, section 4.1).
+
+Conventions
+-----------
+Positions are (T, N, D) arrays with D in {2, 3}; `dt` is the time between frames in seconds.
+The velocity of an agent at frame t is the velocity that carries it to frame t + 1,
+``(x[t + 1] - x[t]) / dt``; at the last frame, where there is no next frame, it is the velocity it
+arrived with, ``(x[-1] - x[-2]) / dt``. A one-frame motion has zero velocities.
+"""
+
+from __future__ import annotations
+
+import functools
+from collections.abc import Mapping
+
+import attrs
+import numpy as np
+
+from . import _npzfile
+from ._arrays import check_agent_array, check_finite, positive_number, readonly_float, readonly_mapping
+from .errors import FileFormatError, ValidationError
+
+__all__ = ["Motion", "Configuration", "State", "ConfigurationFrame", "DEFAULT_UP"]
+
+#: The world up direction used for 3D configuration frames unless another is given (z up).
+DEFAULT_UP = (0.0, 0.0, 1.0)
+
+MOTION_FORMAT_VERSION = 1
+
+# Below this fraction of the mean agent speed the mean velocity is treated as zero (agents that
+# cancel each other out give no heading), and below this sine the heading is treated as parallel to up.
+_DEGENERATE = 1e-6
+
+
+def _field(name: str):
+    return attrs.field(converter=functools.partial(readonly_float, field=name))
+
+
+def _arrays_equal(a: Mapping, b: Mapping) -> bool:
+    return a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class ConfigurationFrame:
+    """A rigid world-to-configuration-space transform: ``local = (world - origin) @ axes.T``.
+
+    Attributes
+    ----------
+    origin : ndarray, shape (D,)
+        The center of mass, in world coordinates.
+    axes : ndarray, shape (D, D)
+        Orthonormal rows: the configuration x, y (and z) axes in world coordinates; det = +1.
+    """
+
+    origin: np.ndarray = _field("ConfigurationFrame.origin")
+    axes: np.ndarray = _field("ConfigurationFrame.axes")
+
+    def __attrs_post_init__(self):
+        d = self.origin.shape[0] if self.origin.ndim == 1 else -1
+        if d not in (2, 3) or self.axes.shape != (d, d):
+            raise ValidationError(
+                f"ConfigurationFrame needs origin of shape (D,) and axes of shape (D, D) with D in {{2, 3}}; "
+                f"got {self.origin.shape} and {self.axes.shape}"
+            )
+        check_finite(self.origin, field="ConfigurationFrame.origin")
+        if not np.allclose(self.axes @ self.axes.T, np.eye(d), atol=1e-9) or np.linalg.det(self.axes) < 0:
+            raise ValidationError("ConfigurationFrame.axes must be a proper rotation (orthonormal rows, det = +1)")
+
+    def to_local(self, points) -> np.ndarray:
+        """World points (..., D) to configuration coordinates."""
+        return (np.asarray(points, dtype=np.float64) - self.origin) @ self.axes.T
+
+    def to_world(self, points) -> np.ndarray:
+        """Configuration coordinates (..., D) to world points."""
+        return np.asarray(points, dtype=np.float64) @ self.axes + self.origin
+
+    def vectors_to_local(self, vectors) -> np.ndarray:
+        """World directions (..., D), such as velocities, to configuration coordinates (no translation)."""
+        return np.asarray(vectors, dtype=np.float64) @ self.axes.T
+
+
+def _heading_axes(mean_velocity: np.ndarray, mean_speed: float, up) -> np.ndarray:
+    """Rows x, y(, z) of the configuration frame; see Configuration.frame for the fallbacks."""
+    d = mean_velocity.shape[0]
+    norm = float(np.linalg.norm(mean_velocity))
+    if norm > 0 and norm > _DEGENERATE * mean_speed:
+        x = mean_velocity / norm
+    else:
+        x = np.eye(d)[0]
+    if d == 2:
+        return np.array([x, [-x[1], x[0]]])
+    up = readonly_float(up, field="up")
+    if up.shape != (3,) or not np.all(np.isfinite(up)) or not np.linalg.norm(up) > 0:
+        raise ValidationError(f"up must be a finite, non-zero 3-vector; got {up!r}")
+    y = np.cross(up / np.linalg.norm(up), x)
+    if np.linalg.norm(y) <= _DEGENERATE:
+        # Heading parallel to up: use the world axis least aligned with the heading instead.
+        y = np.cross(np.eye(3)[int(np.argmin(np.abs(x)))], x)
+    y = y / np.linalg.norm(y)
+    return np.array([x, y, np.cross(x, y)])
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class Configuration:
+    """The agents of a group at one instant.
+
+    Parameters
+    ----------
+    positions, velocities : array_like, shape (N, D)
+        World positions and velocities; D in {2, 3}; finite.
+    """
+
+    positions: np.ndarray = _field("Configuration.positions")
+    velocities: np.ndarray = _field("Configuration.velocities")
+
+    def __attrs_post_init__(self):
+        check_agent_array(self.positions, field="Configuration.positions")
+        check_agent_array(self.velocities, field="Configuration.velocities", shape=self.positions.shape)
+
+    def __eq__(self, other):
+        if not isinstance(other, Configuration):
+            return NotImplemented
+        return np.array_equal(self.positions, other.positions) and np.array_equal(self.velocities, other.velocities)
+
+    __hash__ = None
+
+    @property
+    def n_agents(self) -> int:
+        return self.positions.shape[0]
+
+    @property
+    def dims(self) -> int:
+        return self.positions.shape[1]
+
+    def center_of_mass(self) -> np.ndarray:
+        """The mean position, shape (D,)."""
+        return self.positions.mean(axis=0)
+
+    def frame(self, *, up=DEFAULT_UP) -> ConfigurationFrame:
+        """The configuration-space transform of paper 000 section 4.1.
+
+        The origin is the center of mass and the x axis points along the mean velocity. In 2D the
+        y axis is x rotated by +90 degrees. In 3D, y = up x x (normalized) and z = x x y, so z is
+        `up` made perpendicular to the heading.
+
+        Fallbacks, so that every configuration has a frame:
+
+        - if the mean velocity is zero or shorter than 1e-6 times the mean agent speed (a group at
+          rest, or agents cancelling each other out), the x axis is the world x axis;
+        - in 3D, if the heading is parallel to `up` (sine of the angle below 1e-6), `up` is
+          replaced by the world axis least aligned with the heading (lowest index on ties).
+        """
+        speeds = np.linalg.norm(self.velocities, axis=1)
+        axes = _heading_axes(self.velocities.mean(axis=0), float(speeds.mean()), up)
+        return ConfigurationFrame(origin=self.center_of_mass(), axes=axes)
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class State:
+    """What a behavior model needs to continue a simulation.
+
+    Parameters
+    ----------
+    positions, velocities : array_like, shape (N, D)
+        As in Configuration.
+    extra : mapping of str to array_like (N, D), optional
+        Model arrays carried between steps, such as the boids ``wander`` contribution. Names are
+        Python identifiers; each array has the shape of `positions`.
+    """
+
+    positions: np.ndarray = _field("State.positions")
+    velocities: np.ndarray = _field("State.velocities")
+    extra: Mapping[str, np.ndarray] = attrs.field(
+        factory=dict, converter=functools.partial(readonly_mapping, field="State.extra")
+    )
+
+    def __attrs_post_init__(self):
+        check_agent_array(self.positions, field="State.positions")
+        check_agent_array(self.velocities, field="State.velocities", shape=self.positions.shape)
+        for name, array in self.extra.items():
+            check_agent_array(array, field=f"State.extra[{name!r}]", shape=self.positions.shape)
+
+    def __eq__(self, other):
+        if not isinstance(other, State):
+            return NotImplemented
+        return (
+            np.array_equal(self.positions, other.positions)
+            and np.array_equal(self.velocities, other.velocities)
+            and _arrays_equal(self.extra, other.extra)
+        )
+
+    __hash__ = None
+
+    @property
+    def n_agents(self) -> int:
+        return self.positions.shape[0]
+
+    @property
+    def dims(self) -> int:
+        return self.positions.shape[1]
+
+    def configuration(self) -> Configuration:
+        return Configuration(positions=self.positions, velocities=self.velocities)
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class Motion:
+    """The trajectories of a group: positions (T, N, D) sampled every `dt` seconds.
+
+    Parameters
+    ----------
+    positions : array_like, shape (T, N, D)
+        T >= 1 frames, N >= 1 agents, D in {2, 3}; finite.
+    dt : float
+        Seconds between frames, > 0.
+    channels : mapping of str to array_like (T, N, D), optional
+        Named per-agent, per-frame model arrays, such as the boids ``wander`` contribution.
+
+    Indexing with a slice (``motion[10:20]``, ``motion[::2]``) returns a Motion of those frames; a
+    step k multiplies `dt` by k.
+    """
+
+    positions: np.ndarray = _field("Motion.positions")
+    dt: float = attrs.field(converter=functools.partial(positive_number, field="Motion.dt"))
+    channels: Mapping[str, np.ndarray] = attrs.field(
+        factory=dict, converter=functools.partial(readonly_mapping, field="Motion.channels")
+    )
+
+    def __attrs_post_init__(self):
+        shape = self.positions.shape
+        if self.positions.ndim != 3 or shape[2] not in (2, 3) or shape[0] < 1 or shape[1] < 1:
+            raise ValidationError(
+                f"Motion.positions must have shape (T, N, D) with T >= 1, N >= 1 and D in {{2, 3}}; got {shape}"
+            )
+        check_finite(self.positions, field="Motion.positions")
+        for name, array in self.channels.items():
+            field = f"Motion.channels[{name!r}]"
+            if array.shape != shape:
+                raise ValidationError(f"{field} must have the shape of positions {shape}; got {array.shape}")
+            check_finite(array, field=field)
+
+    def __eq__(self, other):
+        if not isinstance(other, Motion):
+            return NotImplemented
+        return (
+            self.dt == other.dt
+            and np.array_equal(self.positions, other.positions)
+            and _arrays_equal(self.channels, other.channels)
+        )
+
+    __hash__ = None
+
+    def __repr__(self) -> str:
+        names = ", ".join(self.channels) or "none"
+        return (
+            f"Motion({self.n_frames} frames x {self.n_agents} agents in {self.dims}D, dt={self.dt:g} s, "
+            f"channels: {names})"
+        )
+
+    @property
+    def n_frames(self) -> int:
+        return self.positions.shape[0]
+
+    @property
+    def n_agents(self) -> int:
+        return self.positions.shape[1]
+
+    @property
+    def dims(self) -> int:
+        return self.positions.shape[2]
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first frame to the last: (T - 1) * dt."""
+        return (self.n_frames - 1) * self.dt
+
+    def velocities(self) -> np.ndarray:
+        """Velocities (T, N, D) by finite differences (see the module docstring for the convention)."""
+        if self.n_frames == 1:
+            return np.zeros_like(self.positions)
+        steps = np.diff(self.positions, axis=0) / self.dt
+        return np.concatenate([steps, steps[-1:]], axis=0)
+
+    def center_of_mass(self) -> np.ndarray:
+        """Mean position per frame, shape (T, D)."""
+        return self.positions.mean(axis=1)
+
+    def _frame_index(self, t) -> int:
+        if isinstance(t, bool) or not isinstance(t, (int, np.integer)):
+            raise ValidationError(f"frame index must be an integer; got {t!r}")
+        if not -self.n_frames <= t < self.n_frames:
+            raise ValidationError(f"frame index {t} is out of range for a motion of {self.n_frames} frames")
+        return int(t) % self.n_frames
+
+    def _velocity_at(self, t: int) -> np.ndarray:
+        if self.n_frames == 1:
+            return np.zeros_like(self.positions[0])
+        a = min(t, self.n_frames - 2)
+        return (self.positions[a + 1] - self.positions[a]) / self.dt
+
+    def configuration(self, t: int) -> Configuration:
+        """The configuration at frame `t` (negative counts from the end)."""
+        t = self._frame_index(t)
+        return Configuration(positions=self.positions[t], velocities=self._velocity_at(t))
+
+    def state(self, t: int) -> State:
+        """The state at frame `t` (negative counts from the end), channels as `extra`."""
+        t = self._frame_index(t)
+        return State(
+            positions=self.positions[t],
+            velocities=self._velocity_at(t),
+            extra={name: array[t] for name, array in self.channels.items()},
+        )
+
+    def __getitem__(self, frames) -> Motion:
+        if not isinstance(frames, slice):
+            raise TypeError("index a Motion with a slice of frames; use state(t) or configuration(t) for one frame")
+        start, stop, step = frames.indices(self.n_frames)
+        if step < 1:
+            raise ValidationError(f"Motion slices need a positive step; got {step}")
+        selected = range(start, stop, step)
+        if len(selected) == 0:
+            raise ValidationError(f"slice {frames} selects no frames of a motion of {self.n_frames} frames")
+        return Motion(
+            positions=self.positions[frames],
+            dt=self.dt * step,
+            channels={name: array[frames] for name, array in self.channels.items()},
+        )
+
+    def save(self, path) -> None:
+        """Write the motion to `path` (.npz with JSON metadata; atomic, no pickle)."""
+        arrays = {"positions": self.positions}
+        arrays.update({f"channel.{name}": array for name, array in self.channels.items()})
+        _npzfile.write(path, kind="motion", version=MOTION_FORMAT_VERSION, arrays=arrays, metadata={"dt": self.dt})
+
+    @classmethod
+    def load(cls, path) -> Motion:
+        """Read a motion written by :meth:`save`; raises FileFormatError naming the file if it is not one."""
+        arrays, header = _npzfile.read(path, kind="motion", versions=(MOTION_FORMAT_VERSION,))
+        if "positions" not in arrays:
+            raise FileFormatError(f"{path}: motion file has no 'positions' array")
+        channels = {name.removeprefix("channel."): a for name, a in arrays.items() if name.startswith("channel.")}
+        try:
+            return cls(positions=arrays["positions"], dt=header.get("dt"), channels=channels)
+        except ValidationError as exc:
+            raise FileFormatError(f"{path}: invalid motion: {exc}") from None

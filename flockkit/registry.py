@@ -1,0 +1,348 @@
+"""Plugin discovery, validation and lookup.
+
+Plugins are modules found through entry points in the ``flockkit`` group (the built-ins too),
+plus any plugin object passed to :func:`register`. The pluggy manager is built lazily, on the
+first lookup, never at import time; :func:`reset` drops it so the next lookup rebuilds it (tests
+use this after changing the environment).
+
+Set ``FLOCKKIT_BLOCK_PLUGINS=name,...`` to skip plugins by their entry-point name (the ``plugin``
+column of ``flockkit plugins``).
+"""
+
+from __future__ import annotations
+
+import difflib
+import importlib.metadata
+import inspect
+import os
+import re
+import threading
+from collections.abc import Callable
+
+import attrs
+import pluggy
+
+from . import hookspecs
+from .errors import PluginError, UnknownPluginError, ValidationError
+from .interfaces import PROTOCOLS
+
+__all__ = ["Component", "Registry", "get", "available", "describe", "register", "reset", "plugin_manager", "interface_problems"]
+
+ENTRY_POINT_GROUP = "flockkit"
+BLOCK_VARIABLE = "FLOCKKIT_BLOCK_PLUGINS"
+KINDS = tuple(PROTOCOLS)
+_NAME = re.compile(r"^[a-z][a-z0-9]*(?:[-_][a-z0-9]+)*$")
+
+
+@attrs.frozen(kw_only=True)
+class Component:
+    """One registered component: what ``flockkit plugins`` lists."""
+
+    kind: str
+    name: str
+    factory: Callable
+    description: str
+    plugin: str
+    distribution: str | None
+    version: str | None
+
+    @property
+    def origin(self) -> str:
+        where = f"distribution {self.distribution} {self.version}" if self.distribution else "registered at run time"
+        return f"plugin {self.plugin!r} ({where})"
+
+
+def _protocol_methods(protocol: type) -> dict[str, inspect.Signature]:
+    methods = {}
+    for name, value in vars(protocol).items():
+        if inspect.isfunction(value) and not name.startswith("_"):
+            signature = inspect.signature(value)
+            methods[name] = signature.replace(parameters=list(signature.parameters.values())[1:])
+    return methods
+
+
+def _method_signature(owner, name: str) -> inspect.Signature:
+    """The call signature of `owner.name` as seen from an instance, for a class or an instance."""
+    if isinstance(owner, type):
+        raw = inspect.getattr_static(owner, name)
+        if isinstance(raw, staticmethod):
+            return inspect.signature(raw.__func__)
+        signature = inspect.signature(getattr(owner, name))
+        if isinstance(raw, classmethod):
+            return signature
+        return signature.replace(parameters=list(signature.parameters.values())[1:])
+    return inspect.signature(getattr(owner, name))
+
+
+def _parameter_problems(expected: inspect.Signature, actual: inspect.Signature) -> list[str]:
+    params = list(actual.parameters.values())
+    kinds = {p.kind for p in params}
+    positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    problems = []
+    for index, wanted in enumerate(expected.parameters.values()):
+        if index >= len(positional):
+            if inspect.Parameter.VAR_POSITIONAL not in kinds:
+                problems.append(f"missing parameter {wanted.name!r}")
+            continue
+        got = positional[index]
+        if got.name != wanted.name:
+            problems.append(f"parameter {index + 1} is named {got.name!r}; expected {wanted.name!r}")
+        elif wanted.default is not inspect.Parameter.empty and got.default is inspect.Parameter.empty:
+            problems.append(f"parameter {wanted.name!r} needs a default (the interface's is {wanted.default!r})")
+    for extra in positional[len(expected.parameters) :] + [p for p in params if p.kind == p.KEYWORD_ONLY]:
+        if extra.default is inspect.Parameter.empty:
+            problems.append(f"extra parameter {extra.name!r} has no default, so callers of the interface cannot call it")
+    return problems
+
+
+def interface_problems(component, kind: str) -> list[str]:
+    """What `component` (a class or an instance) lacks to honour the protocol of `kind`; [] if nothing."""
+    problems = []
+    for name, expected in _protocol_methods(PROTOCOLS[kind]).items():
+        shown = f"{name}({', '.join(expected.parameters)})"
+        if not callable(getattr(component, name, None)):
+            problems.append(f"{shown}: missing")
+            continue
+        try:
+            actual = _method_signature(component, name)
+        except (TypeError, ValueError):
+            continue  # builtins without signatures: nothing to check
+        problems.extend(f"{shown}: {problem}" for problem in _parameter_problems(expected, actual))
+    return problems
+
+
+def _interface_error(component: Component, problems: list[str]) -> PluginError:
+    protocol = PROTOCOLS[component.kind].__name__
+    lines = "\n".join(f"  - {p}" for p in problems)
+    return PluginError(
+        f"{component.origin} registers {component.kind} {component.name!r}, which does not honour the "
+        f"{protocol} interface:\n{lines}\nFix the plugin, or skip it with {BLOCK_VARIABLE}={component.plugin}."
+    )
+
+
+class Registry:
+    """The object passed to each ``flockkit_register_<kind>s`` hook."""
+
+    def __init__(self, kind: str, plugin: str, distribution, table: dict[str, Component]):
+        self.kind = kind
+        self._plugin = plugin
+        self._distribution = distribution
+        self._table = table
+
+    def add(self, name: str, factory: Callable, *, description: str = "") -> None:
+        """Register `factory` under `name`; ``factory(**params)`` must return a component of this kind.
+
+        Raises PluginError, naming the plugin and the component, for a bad name, a name already
+        taken, a factory that is not callable, or a class without the methods of the interface.
+        """
+        dist = self._distribution
+        component = Component(
+            kind=self.kind,
+            name=name,
+            factory=factory,
+            description=str(description),
+            plugin=self._plugin,
+            distribution=dist.project_name if dist else None,
+            version=dist.version if dist else None,
+        )
+        if not isinstance(name, str) or not _NAME.match(name):
+            raise PluginError(
+                f"{component.origin} registers a {self.kind} named {name!r}:\n"
+                "  names are lower case letters and digits, words joined by '-' or '_', starting with a letter"
+            )
+        if name in self._table:
+            other = self._table[name]
+            raise PluginError(
+                f"{self.kind} {name!r} is registered twice:\n  - by {other.origin}\n  - by {component.origin}\n"
+                f"Uninstall one, or skip one with {BLOCK_VARIABLE}=<plugin>."
+            )
+        if not callable(factory):
+            raise PluginError(f"{component.origin} registers {self.kind} {name!r} with a factory that is not callable: {factory!r}")
+        if isinstance(factory, type):
+            problems = interface_problems(factory, self.kind)
+            if problems:
+                raise _interface_error(component, problems)
+        self._table[name] = component
+
+
+@attrs.frozen
+class _Dist:
+    project_name: str
+    version: str
+
+
+class _State:
+    def __init__(self):
+        self.lock = threading.RLock()
+        self.manager: pluggy.PluginManager | None = None
+        self.components: dict[str, dict[str, Component]] | None = None
+        self.runtime_plugins: list[tuple[object, str]] = []
+        self.distributions: dict[str, _Dist] = {}  # plugin name -> its distribution, for listings
+
+
+_state = _State()
+
+
+def _blocked() -> set[str]:
+    return {name.strip() for name in os.environ.get(BLOCK_VARIABLE, "").split(",") if name.strip()}
+
+
+def _build_manager() -> pluggy.PluginManager:
+    manager = pluggy.PluginManager(hookspecs.PROJECT)
+    manager.add_hookspecs(hookspecs)
+    for name in _blocked():
+        manager.set_blocked(name)
+    _state.distributions = {}
+    for entry_point in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+        dist = entry_point.dist
+        where = f"distribution {dist.name} {dist.version}" if dist else "an unknown distribution"
+        if manager.is_blocked(entry_point.name):
+            continue
+        if manager.has_plugin(entry_point.name):
+            other = _state.distributions.get(entry_point.name)
+            raise PluginError(
+                f"two distributions declare the flockkit plugin {entry_point.name!r}:\n"
+                f"  - {other.project_name if other else '?'}\n  - {dist.name if dist else '?'}\n"
+                f"Uninstall one, or skip both with {BLOCK_VARIABLE}={entry_point.name}."
+            )
+        try:
+            plugin = entry_point.load()
+        except Exception as exc:
+            raise PluginError(
+                f"plugin {entry_point.name!r} ({where}) failed to import {entry_point.value!r}:\n"
+                f"  {type(exc).__name__}: {exc}\nFix it, or skip it with {BLOCK_VARIABLE}={entry_point.name}."
+            ) from exc
+        _register_with(manager, plugin, entry_point.name, where)
+        if dist is not None:
+            _state.distributions[entry_point.name] = _Dist(dist.name, dist.version)
+    for plugin, name in _state.runtime_plugins:
+        _register_with(manager, plugin, name, "registered at run time")
+    try:
+        manager.check_pending()
+    except pluggy.PluginValidationError as exc:
+        raise PluginError(
+            f"plugin {exc.plugin_name!r} implements a hook flockkit does not define:\n  {exc}\n"
+            f"Known hooks: {', '.join(hookspecs.HOOKS.values())}."
+        ) from None
+    return manager
+
+
+def _register_with(manager, plugin, name: str, where: str) -> None:
+    if manager.is_blocked(name):
+        return
+    try:
+        manager.register(plugin, name=name)
+    except (pluggy.PluginValidationError, ValueError) as exc:
+        raise PluginError(f"plugin {name!r} ({where}) cannot be registered:\n  {exc}") from None
+
+
+def _collect(manager: pluggy.PluginManager) -> dict[str, dict[str, Component]]:
+    components: dict[str, dict[str, Component]] = {}
+    for kind, hook_name in hookspecs.HOOKS.items():
+        table = components[kind] = {}
+        for impl in getattr(manager.hook, hook_name).get_hookimpls():
+            registry = Registry(kind, impl.plugin_name, _state.distributions.get(impl.plugin_name), table)
+            try:
+                impl.function(**{name: registry for name in impl.argnames})
+            except PluginError:
+                raise
+            except Exception as exc:
+                raise PluginError(
+                    f"plugin {impl.plugin_name!r} failed in {hook_name}:\n  {type(exc).__name__}: {exc}"
+                ) from exc
+    return components
+
+
+def plugin_manager() -> pluggy.PluginManager:
+    """The pluggy manager, built on first use."""
+    with _state.lock:
+        if _state.manager is None:
+            _state.manager = _build_manager()
+        return _state.manager
+
+
+def _components() -> dict[str, dict[str, Component]]:
+    with _state.lock:
+        if _state.components is None:
+            _state.components = _collect(plugin_manager())
+        return _state.components
+
+
+def register(plugin: object, name: str | None = None) -> None:
+    """Add a plugin object (a module or any object with hook implementations) without an entry
+    point, for scripts and tests. It is kept until :func:`reset`."""
+    with _state.lock:
+        _state.runtime_plugins.append((plugin, name or getattr(plugin, "__name__", None) or repr(plugin)))
+        _state.manager = None
+        _state.components = None
+
+
+def reset() -> None:
+    """Forget the plugin manager and run-time plugins; the next lookup discovers plugins afresh."""
+    with _state.lock:
+        _state.runtime_plugins.clear()
+        _state.manager = None
+        _state.components = None
+
+
+def _check_kind(kind: str) -> None:
+    if kind not in KINDS:
+        close = difflib.get_close_matches(str(kind), KINDS, n=1)
+        hint = f" Did you mean {close[0]!r}?" if close else ""
+        raise UnknownPluginError(f"unknown plugin kind {kind!r}; the kinds are {', '.join(KINDS)}.{hint}")
+
+
+def describe(kind: str | None = None) -> list[Component]:
+    """Every registered component (of one kind, if given), sorted by kind and name."""
+    if kind is not None:
+        _check_kind(kind)
+    return [
+        component
+        for k, table in _components().items()
+        if kind in (None, k)
+        for component in sorted(table.values(), key=lambda c: c.name)
+    ]
+
+
+def available(kind: str | None = None):
+    """Names of the installed components: a sorted list for one `kind`, else a dict kind -> list."""
+    if kind is not None:
+        _check_kind(kind)
+        return sorted(_components()[kind])
+    return {k: sorted(table) for k, table in _components().items()}
+
+
+def _lookup(kind: str, name: str) -> Component:
+    _check_kind(kind)
+    table = _components()[kind]
+    if name in table:
+        return table[name]
+    installed = ", ".join(sorted(table)) or "none"
+    close = difflib.get_close_matches(str(name), list(table), n=3, cutoff=0.6)
+    hint = f" Did you mean {' or '.join(map(repr, close))}?" if close else ""
+    raise UnknownPluginError(f"no {kind} named {name!r} is installed; installed {kind}s: {installed}.{hint}")
+
+
+def get(kind: str, name: str, **params):
+    """A configured component: ``factory(**params)`` of the `kind` component registered as `name`.
+
+    Raises UnknownPluginError (a KeyError) for an unknown kind or name, listing what is installed
+    and close matches; ValidationError for parameters the factory does not take; PluginError if the
+    factory returns something that does not honour the interface.
+    """
+    component = _lookup(kind, name)
+    try:
+        signature = inspect.signature(component.factory)
+    except (TypeError, ValueError):
+        signature = None
+    if signature is not None:
+        try:
+            signature.bind(**params)
+        except TypeError as exc:
+            accepted = ", ".join(p for p in signature.parameters if p not in ("self", "args", "kwargs")) or "none"
+            raise ValidationError(f"{kind} {name!r}: {exc}; its parameters are: {accepted}") from None
+    instance = component.factory(**params)
+    problems = interface_problems(instance, kind)
+    if problems:
+        raise _interface_error(component, problems)
+    return instance

@@ -1,0 +1,196 @@
+"""Conformance checks for behavior models (``flockkit.interfaces.BehaviorModel``).
+
+Each check is ``check_<property>(name, model)`` and raises AssertionError saying what is wrong.
+They run on a few fixed flocks (2D and 3D, one agent to a hundred) so results are reproducible.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..convenience import random_flock
+from ..errors import ValidationError
+from ..motion import Motion, State
+
+STEPS = 12
+SEED = 20031
+
+
+def _flocks() -> list[State]:
+    rng = np.random.default_rng(SEED)
+    return [random_flock(n_agents=n, dims=d, rng=rng) for n, d in ((1, 2), (12, 2), (8, 3), (100, 2))]
+
+
+def _forward(model, state, steps=STEPS, seed=0) -> Motion:
+    return model.forward(state, steps, np.random.default_rng(seed))
+
+
+def _backward(model, state, steps=STEPS, seed=0) -> Motion:
+    return model.backward(state, steps, np.random.default_rng(seed))
+
+
+def _check_motion(name, motion, state, steps, operation):
+    assert isinstance(motion, Motion), f"{name}.{operation} returned {type(motion).__name__}, not a flockkit.Motion"
+    expected = (steps + 1, state.n_agents, state.dims)
+    assert motion.positions.shape == expected, (
+        f"{name}.{operation}(state of {state.n_agents} agents in {state.dims}D, steps={steps}) returned positions "
+        f"of shape {motion.positions.shape}; expected {expected}"
+    )
+    assert motion.positions.dtype == np.float64, f"{name}.{operation} positions have dtype {motion.positions.dtype}"
+    assert np.all(np.isfinite(motion.positions)), f"{name}.{operation} returned non-finite positions"
+
+
+def _close(a, b, scale=1.0) -> bool:
+    return np.allclose(a, b, rtol=1e-9, atol=1e-9 * scale)
+
+
+def check_forward_shape(name, model):
+    """forward returns a finite float64 Motion of steps + 1 frames with the state's agents and dims."""
+    for state in _flocks():
+        for steps in (0, 1, STEPS):
+            _check_motion(name, _forward(model, state, steps), state, steps, "forward")
+
+
+def check_backward_shape(name, model):
+    """backward returns a finite float64 Motion of steps + 1 frames with the state's agents and dims."""
+    for state in _flocks():
+        for steps in (0, 1, STEPS):
+            _check_motion(name, _backward(model, state, steps), state, steps, "backward")
+
+
+def check_forward_starts_at_initial(name, model):
+    """The first frame of forward has the initial positions exactly, and its velocities."""
+    for state in _flocks():
+        motion = _forward(model, state)
+        assert np.array_equal(motion.positions[0], state.positions), f"{name}.forward: frame 0 positions differ from the initial state"
+        assert _close(motion.velocities()[0], state.velocities), f"{name}.forward: frame 0 velocities differ from the initial state"
+
+
+def check_backward_ends_at_final(name, model):
+    """The last frame of backward has the final positions exactly, and its velocities."""
+    for state in _flocks():
+        motion = _backward(model, state)
+        assert np.array_equal(motion.positions[-1], state.positions), f"{name}.backward: last frame positions differ from the final state"
+        scale = float(np.abs(state.positions).max()) / motion.dt
+        assert _close(motion.velocities()[-1], state.velocities, scale), f"{name}.backward: last frame velocities differ from the final state"
+
+
+def check_deterministic(name, model):
+    """The same seeded Generator gives the same motion, forward and backward."""
+    state = _flocks()[1]
+    for operation in (_forward, _backward):
+        first, second = operation(model, state, seed=7), operation(model, state, seed=7)
+        assert first == second, f"{name}: two {operation.__name__[1:]} runs with the same seed differ"
+    assert _forward(model, state, seed=7) != _forward(model, state, seed=8), f"{name}.forward ignores its rng"
+
+
+def _snapshot(value):
+    if isinstance(value, Motion):
+        return value.positions.copy(), {k: v.copy() for k, v in value.channels.items()}
+    return value.positions.copy(), value.velocities.copy(), {k: v.copy() for k, v in value.extra.items()}
+
+
+def _unchanged(before, after) -> bool:
+    return all(
+        np.array_equal(a, b) if isinstance(a, np.ndarray) else a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+        for a, b in zip(before, after)
+    )
+
+
+def check_inputs_unchanged(name, model):
+    """forward, backward and log_plausibility leave their inputs as they were."""
+    state = _flocks()[1]
+    motion = _forward(model, state)
+    for label, value, call in (
+        ("forward", state, lambda: _forward(model, state)),
+        ("backward", state, lambda: _backward(model, state)),
+        ("log_plausibility", motion, lambda: model.log_plausibility(motion)),
+    ):
+        before = _snapshot(value)
+        call()
+        assert _unchanged(before, _snapshot(value)), f"{name}.{label} changed its input"
+
+
+def check_rejects_negative_steps(name, model):
+    """A negative step count raises flockkit.errors.ValidationError."""
+    state = _flocks()[1]
+    for label, call in (("forward", model.forward), ("backward", model.backward)):
+        try:
+            call(state, -1, np.random.default_rng(0))
+        except ValidationError:
+            continue
+        except Exception as exc:  # noqa: BLE001 - the wrong error type is the failure we report
+            raise AssertionError(f"{name}.{label}(steps=-1) raised {type(exc).__name__}, not ValidationError") from exc
+        raise AssertionError(f"{name}.{label}(steps=-1) raised nothing; expected ValidationError")
+
+
+def check_log_plausibility_finite(name, model):
+    """log_plausibility of a forward motion is a finite float64 array with one entry per frame."""
+    for state in _flocks():
+        motion = _forward(model, state)
+        values = np.asarray(model.log_plausibility(motion))
+        assert values.shape == (motion.n_frames,), f"{name}.log_plausibility returned shape {values.shape}; expected ({motion.n_frames},)"
+        assert values.dtype == np.float64, f"{name}.log_plausibility returned dtype {values.dtype}"
+        assert np.all(np.isfinite(values)), f"{name}.log_plausibility is not finite on a forward motion: {values}"
+
+
+def check_log_plausibility_prefers_forward(name, model):
+    """On average a forward motion is more plausible than the same motion with positional noise."""
+    rng = np.random.default_rng(SEED)
+    clean, noisy = [], []
+    for index, state in enumerate(_flocks()):
+        motion = _forward(model, state, steps=30, seed=index)
+        step = np.linalg.norm(np.diff(motion.positions, axis=0), axis=-1)
+        noise = rng.normal(0.0, 0.25 * float(np.median(step)), motion.positions.shape)
+        shaken = Motion(positions=motion.positions + noise, dt=motion.dt, channels=motion.channels)
+        clean.append(float(np.sum(model.log_plausibility(motion))))
+        noisy.append(float(np.sum(model.log_plausibility(shaken))))
+    assert np.mean(clean) > np.mean(noisy), (
+        f"{name}.log_plausibility does not prefer forward motions: mean {np.mean(clean):.4g} for forward motions, "
+        f"{np.mean(noisy):.4g} for the same with noise"
+    )
+
+
+def check_log_plausibility_window(name, model):
+    """log_plausibility(motion, start, stop) equals log_plausibility(motion)[start:stop]."""
+    rng = np.random.default_rng(SEED)
+    for state in _flocks():
+        motion = _forward(model, state, steps=20)
+        full = np.asarray(model.log_plausibility(motion))
+        t = motion.n_frames
+        windows = [(0, t), (0, 0), (t, t), (0, 1), (t - 1, t), (1, 3)]
+        windows += [tuple(sorted(rng.integers(0, t + 1, 2))) for _ in range(6)]
+        for start, stop in windows:
+            part = np.asarray(model.log_plausibility(motion, start, stop))
+            scale = max(1.0, float(np.abs(full).max(initial=0.0)))
+            assert part.shape == (stop - start,) and _close(part, full[start:stop], scale), (
+                f"{name}.log_plausibility(motion, {start}, {stop}) differs from the full evaluation's slice"
+            )
+
+
+def check_rejects_bad_window(name, model):
+    """A window outside the motion raises flockkit.errors.ValidationError."""
+    motion = _forward(model, _flocks()[1])
+    for start, stop in ((3, 2), (0, motion.n_frames + 1), (-1, 2)):
+        try:
+            model.log_plausibility(motion, start, stop)
+        except ValidationError:
+            continue
+        except Exception as exc:  # noqa: BLE001
+            raise AssertionError(f"{name}.log_plausibility(start={start}, stop={stop}) raised {type(exc).__name__}, not ValidationError") from exc
+        raise AssertionError(f"{name}.log_plausibility(start={start}, stop={stop}) raised nothing; expected ValidationError")
+
+
+CHECKS = (
+    check_forward_shape,
+    check_backward_shape,
+    check_forward_starts_at_initial,
+    check_backward_ends_at_final,
+    check_deterministic,
+    check_inputs_unchanged,
+    check_rejects_negative_steps,
+    check_log_plausibility_finite,
+    check_log_plausibility_prefers_forward,
+    check_log_plausibility_window,
+    check_rejects_bad_window,
+)

@@ -1,0 +1,133 @@
+"""Hypothesis strategies for flockkit values, in the style of ``hypothesis.extra.numpy``.
+
+Arguments are keyword-only; bad arguments raise ``hypothesis.errors.InvalidArgument`` when the
+strategy is created, not when it is drawn from::
+
+    from hypothesis import given
+    from flockkit.testing import strategies as fst
+
+    @given(fst.motions(max_frames=30, dims=3))
+    def test_something(motion): ...
+"""
+
+from __future__ import annotations
+
+import math
+
+from hypothesis import strategies as st
+from hypothesis.errors import InvalidArgument
+from hypothesis.extra import numpy as hnp
+
+from ..motion import Configuration, Motion, State
+
+__all__ = ["configurations", "states", "motions"]
+
+
+def _check_count(name, value, low=1):
+    if isinstance(value, bool) or not isinstance(value, int) or value < low:
+        raise InvalidArgument(f"{name} must be an integer >= {low}; got {value!r}")
+
+
+def _check_range(low_name, low, high_name, high, floor=1):
+    _check_count(low_name, low, floor)
+    _check_count(high_name, high, floor)
+    if low > high:
+        raise InvalidArgument(f"{low_name}={low} must be <= {high_name}={high}")
+
+
+def _check_positive(name, value):
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise InvalidArgument(f"{name} must be a finite number > 0; got {value!r}")
+
+
+def _dims(dims):
+    if dims is None:
+        return st.sampled_from((2, 3))
+    if dims not in (2, 3):
+        raise InvalidArgument(f"dims must be 2, 3 or None (either); got {dims!r}")
+    return st.just(dims)
+
+
+def _names(name, value):
+    names = tuple(value)
+    for item in names:
+        if not isinstance(item, str) or not item.isidentifier():
+            raise InvalidArgument(f"{name} must hold Python identifiers; got {item!r}")
+    return names
+
+
+def _vectors(shape, bound):
+    return hnp.arrays("float64", shape, elements=st.floats(-bound, bound, allow_nan=False, allow_infinity=False))
+
+
+def _validate(min_agents, max_agents, max_coordinate, max_speed):
+    _check_range("min_agents", min_agents, "max_agents", max_agents)
+    _check_positive("max_coordinate", max_coordinate)
+    _check_positive("max_speed", max_speed)
+
+
+def configurations(*, min_agents=1, max_agents=10, dims=None, max_coordinate=100.0, max_speed=10.0):
+    """Configurations with N in [min_agents, max_agents], D = `dims` (None: 2 or 3), coordinates
+    in [-max_coordinate, max_coordinate] and velocity components in [-max_speed, max_speed]."""
+    _validate(min_agents, max_agents, max_coordinate, max_speed)
+    dims_strategy = _dims(dims)
+
+    @st.composite
+    def draw_configuration(draw):
+        shape = (draw(st.integers(min_agents, max_agents)), draw(dims_strategy))
+        return Configuration(positions=draw(_vectors(shape, max_coordinate)), velocities=draw(_vectors(shape, max_speed)))
+
+    return draw_configuration()
+
+
+def states(*, min_agents=1, max_agents=10, dims=None, max_coordinate=100.0, max_speed=10.0, extra=()):
+    """States as in :func:`configurations`, with one (N, D) array per name in `extra`, its
+    components in [-max_speed, max_speed]."""
+    _validate(min_agents, max_agents, max_coordinate, max_speed)
+    names = _names("extra", extra)
+    dims_strategy = _dims(dims)
+
+    @st.composite
+    def draw_state(draw):
+        shape = (draw(st.integers(min_agents, max_agents)), draw(dims_strategy))
+        return State(
+            positions=draw(_vectors(shape, max_coordinate)),
+            velocities=draw(_vectors(shape, max_speed)),
+            extra={name: draw(_vectors(shape, max_speed)) for name in names},
+        )
+
+    return draw_state()
+
+
+def motions(
+    *,
+    min_frames=1,
+    max_frames=20,
+    min_agents=1,
+    max_agents=10,
+    dims=None,
+    dt=None,
+    max_coordinate=100.0,
+    channels=(),
+):
+    """Motions with T in [min_frames, max_frames], N in [min_agents, max_agents], D = `dims`
+    (None: 2 or 3), coordinates in [-max_coordinate, max_coordinate], `dt` seconds per frame
+    (None: drawn from [0.01, 1]) and one channel per name in `channels`."""
+    _check_range("min_frames", min_frames, "max_frames", max_frames)
+    _validate(min_agents, max_agents, max_coordinate, 1.0)
+    if dt is not None:
+        _check_positive("dt", dt)
+    names = _names("channels", channels)
+    dims_strategy = _dims(dims)
+    dt_strategy = st.just(float(dt)) if dt is not None else st.floats(0.01, 1.0)
+
+    @st.composite
+    def draw_motion(draw):
+        shape = (draw(st.integers(min_frames, max_frames)), draw(st.integers(min_agents, max_agents)), draw(dims_strategy))
+        return Motion(
+            positions=draw(_vectors(shape, max_coordinate)),
+            dt=draw(dt_strategy),
+            channels={name: draw(_vectors(shape, max_coordinate)) for name in names},
+        )
+
+    return draw_motion()

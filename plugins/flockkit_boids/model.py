@@ -1,0 +1,333 @@
+"""The boids behavior model of paper 004, section 3.1.
+
+One step at frame t (1 <= t < T - 1), for every agent at once:
+
+    wander[t]  = unit(wander[t - 1]) + impulse,   impulse = direction * length,
+                 direction uniform on the unit circle/sphere, length ~ N(0, wander_sigma)
+    request    = (sum over rules r of weight_r * rule_r(x[t], v[t - 1]) + wander_weight * wander[t]) / sum of weights
+    v[t]       = v[t - 1] + acceleration * dt * request
+    x[t + 1]   = x[t] + v[t] * dt
+
+with v[t] = (x[t + 1] - x[t]) / dt, the Motion velocity convention. Frame 0 only drifts with the
+initial velocity, so the first frame keeps the initial state exactly. Because the request is
+affine in the wander contribution, the contribution (and so the impulse) of every step can be
+recovered exactly from positions alone: that is `log_plausibility`.
+
+The rules (each a dimensionless vector of order 1), over the neighbors an agent perceives (within
+`perception_radius` and inside its field of view around its heading):
+
+- separation: sum of unit vectors away from neighbors closer than `separation_radius`, each
+  scaled by (1 - distance / separation_radius);
+- cohesion: (neighbors' mean position - own position) / perception_radius;
+- alignment: (neighbors' mean velocity - own velocity) / target_speed;
+- speed: (target_speed - speed) / target_speed along the heading;
+- avoidance: sum over obstacles of the outward surface normal scaled by
+  clip(1 - distance / avoid_distance, 0, 2).
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import attrs
+import numpy as np
+from scipy.spatial import cKDTree
+
+import flockkit
+from flockkit.errors import ValidationError
+
+_WANDER = "wander"
+
+
+def _positive(name):
+    def check(instance, attribute, value):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+            raise ValidationError(f"boids parameter {name} must be a finite number > 0; got {value!r}")
+
+    return check
+
+
+def _non_negative(name):
+    def check(instance, attribute, value):
+        if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
+            raise ValidationError(f"boids parameter {name} must be a finite number >= 0; got {value!r}")
+
+    return check
+
+
+def _number(name, check, default):
+    return attrs.field(default=default, converter=functools.partial(_to_float, name=name), validator=check(name))
+
+
+def _to_float(value, name):
+    if isinstance(value, bool):
+        raise ValidationError(f"boids parameter {name} must be a number; got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ValidationError(f"boids parameter {name} must be a number; got {value!r}") from None
+
+
+def _obstacles(value):
+    obstacles = tuple(value)
+    for index, obstacle in enumerate(obstacles):
+        if not isinstance(obstacle, (flockkit.Ball, flockkit.Box, flockkit.Polygon)):
+            raise ValidationError(
+                f"boids parameter obstacles[{index}] must be a flockkit.Ball, Box or Polygon; got {type(obstacle).__name__}"
+            )
+    return obstacles
+
+
+def _unit(vectors: np.ndarray) -> np.ndarray:
+    norms = np.sqrt(np.einsum("nd,nd->n", vectors, vectors))[:, None]
+    return np.divide(vectors, norms, out=np.zeros_like(vectors), where=norms > 0)
+
+
+@attrs.frozen(kw_only=True)
+class Boids:
+    """Reynolds-style flocking with wander, as used by Anderson et al. (2003).
+
+    Parameters
+    ----------
+    dt : float
+        Seconds per frame (0.1: the paper samples at 10 Hz).
+    perception_radius, separation_radius : float
+        How far an agent sees its neighbors, and how close they must be to push it away.
+    field_of_view : float
+        Full angle of the perception cone in degrees, centered on the heading (360: all round).
+        Backward simulation centers it on the opposite direction.
+    target_speed : float
+        The speed the speed rule steers to, in length units per second.
+    acceleration : float
+        Scale of the combined request, in length units per second squared.
+    separation_weight, cohesion_weight, alignment_weight, avoidance_weight, speed_weight, wander_weight : float
+        Weights of the weighted average; wander_weight must be > 0 so plausibility can be inferred.
+    wander_sigma : float
+        Standard deviation of the wander impulse length (sigma_w = 0.125 in the paper).
+    avoid_distance : float
+        Distance from an obstacle's surface at which avoidance starts.
+    obstacles : sequence of flockkit.Ball, flockkit.Box or flockkit.Polygon
+        Static obstacles, of the motion's dimension.
+    kdtree_above : int
+        Agent count above which neighbors are found with a cKDTree (memory linear in N) instead of an
+        N x N distance matrix (faster for small flocks).
+    """
+
+    dt: float = _number("dt", _positive, 0.1)
+    perception_radius: float = _number("perception_radius", _positive, 3.0)
+    separation_radius: float = _number("separation_radius", _positive, 0.8)
+    field_of_view: float = _number("field_of_view", _positive, 300.0)
+    target_speed: float = _number("target_speed", _positive, 1.0)
+    acceleration: float = _number("acceleration", _positive, 4.0)
+    separation_weight: float = _number("separation_weight", _non_negative, 1.5)
+    cohesion_weight: float = _number("cohesion_weight", _non_negative, 3.0)
+    alignment_weight: float = _number("alignment_weight", _non_negative, 3.0)
+    avoidance_weight: float = _number("avoidance_weight", _non_negative, 3.0)
+    speed_weight: float = _number("speed_weight", _non_negative, 6.0)
+    wander_weight: float = _number("wander_weight", _positive, 1.0)
+    wander_sigma: float = _number("wander_sigma", _positive, 0.125)
+    avoid_distance: float = _number("avoid_distance", _positive, 1.5)
+    obstacles: tuple = attrs.field(default=(), converter=_obstacles)
+    kdtree_above: int = 64
+
+    def __attrs_post_init__(self):
+        if self.field_of_view > 360:
+            raise ValidationError(f"boids parameter field_of_view must be in (0, 360] degrees; got {self.field_of_view}")
+        if isinstance(self.kdtree_above, bool) or not isinstance(self.kdtree_above, int) or self.kdtree_above < 0:
+            raise ValidationError(f"boids parameter kdtree_above must be an integer >= 0; got {self.kdtree_above!r}")
+
+    # -- the three operations -------------------------------------------------------------
+
+    def forward(self, initial: flockkit.State, steps: int, rng: np.random.Generator, *, progress=None) -> flockkit.Motion:
+        """Simulate `steps` steps from `initial`; ``steps + 1`` frames, the first equal to `initial`."""
+        self._check_state(initial, "initial")
+        steps = _steps(steps)
+        positions, wander = self._simulate(
+            initial.positions, initial.velocities, self._wander_of(initial, rng), steps, rng, perception=1.0, progress=progress
+        )
+        return flockkit.Motion(positions=positions, dt=self.dt, channels={_WANDER: wander})
+
+    def backward(self, final: flockkit.State, steps: int, rng: np.random.Generator, *, progress=None) -> flockkit.Motion:
+        """``steps + 1`` frames ending at `final`: simulate from `final` with velocities reversed and
+        perception reversed (agents react to those behind them), then reverse time (004, 3.1)."""
+        self._check_state(final, "final")
+        steps = _steps(steps)
+        positions, wander = self._simulate(
+            final.positions, -final.velocities, -self._wander_of(final, rng), steps, rng, perception=-1.0, progress=progress
+        )
+        return flockkit.Motion(positions=positions[::-1], dt=self.dt, channels={_WANDER: -wander[::-1]})
+
+    def log_plausibility(self, motion: flockkit.Motion, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """Log density, summed over agents, of the wander impulses inferred at frames start..stop-1.
+
+        Per agent, log N(|impulse|; 0, wander_sigma) as in paper 004 section 3.4.2. Frames 0 and
+        T - 1 carry no impulse and contribute 0.
+        """
+        start, stop = self._window(motion, start, stop)
+        impulses = self.wander_impulses(motion, start, stop)
+        squared = np.einsum("tnd,tnd->t", impulses, impulses)
+        agents = motion.n_agents
+        log_norm = agents * (math.log(self.wander_sigma) + 0.5 * math.log(2 * math.pi))
+        values = -squared / (2 * self.wander_sigma**2) - log_norm
+        frames = np.arange(start, stop)
+        return np.where((frames >= 1) & (frames <= motion.n_frames - 2), values, 0.0)
+
+    def wander_impulses(self, motion: flockkit.Motion, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """The wander impulses (stop - start, N, D) a forward simulation would have drawn to produce
+        `motion` at frames start..stop-1; zero at frames 0 and T - 1, which carry none.
+
+        The contribution before frame 1 is read from the ``wander`` channel (zero if absent); every
+        later one is inferred from positions, so proposals that move positions need not update it.
+        """
+        start, stop = self._window(motion, start, stop)
+        x, dt = motion.positions, motion.dt
+        impulses = np.zeros((stop - start, motion.n_agents, motion.dims))
+        first, last = max(start, 1), min(stop, motion.n_frames - 1)  # frames with an impulse
+        if first >= last:
+            return impulses
+        if first == 1:
+            channel = motion.channels.get(_WANDER)
+            previous = channel[0] if channel is not None else np.zeros(x.shape[1:])
+        else:
+            previous = self._infer_wander(x, dt, first - 1)
+        for t in range(first, last):
+            current = self._infer_wander(x, dt, t)
+            impulses[t - start] = current - _unit(previous)
+            previous = current
+        return impulses
+
+    # -- internals -------------------------------------------------------------------------
+
+    @property
+    def _weight_sum(self) -> float:
+        return (
+            self.separation_weight
+            + self.cohesion_weight
+            + self.alignment_weight
+            + self.avoidance_weight
+            + self.speed_weight
+            + self.wander_weight
+        )
+
+    def _check_state(self, state, name):
+        if not isinstance(state, flockkit.State):
+            raise ValidationError(f"boids: {name} must be a flockkit.State; got {type(state).__name__}")
+        for index, obstacle in enumerate(self.obstacles):
+            if obstacle.dims != state.dims:
+                raise ValidationError(
+                    f"boids: obstacles[{index}] is {obstacle.dims}D but the {name} state is {state.dims}D"
+                )
+
+    def _wander_of(self, state, rng) -> np.ndarray:
+        """The state's wander contribution; a state without one starts from random unit vectors
+        (a zero start would make the first impulse's direction ill-conditioned to infer)."""
+        if _WANDER in state.extra:
+            return np.array(state.extra[_WANDER])
+        return _unit(rng.standard_normal(state.positions.shape))
+
+    def _window(self, motion, start, stop) -> tuple[int, int]:
+        if not isinstance(motion, flockkit.Motion):
+            raise ValidationError(f"boids: motion must be a flockkit.Motion; got {type(motion).__name__}")
+        if not math.isclose(motion.dt, self.dt, rel_tol=1e-9):
+            raise ValidationError(f"boids: motion.dt is {motion.dt} s but this model steps dt = {self.dt} s")
+        stop = motion.n_frames if stop is None else stop
+        for name, value in (("start", start), ("stop", stop)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+                raise ValidationError(f"boids: {name} must be an integer frame index; got {value!r}")
+        if not 0 <= start <= stop <= motion.n_frames:
+            raise ValidationError(
+                f"boids: window start={start}, stop={stop} must satisfy 0 <= start <= stop <= {motion.n_frames} (the frame count)"
+            )
+        return int(start), int(stop)
+
+    def _simulate(self, x0, v0, wander0, steps, rng, *, perception, progress):
+        n, d = x0.shape
+        positions = np.empty((steps + 1, n, d))
+        wander = np.empty_like(positions)
+        positions[0], wander[0] = x0, wander0
+        gain = self.acceleration * self.dt / self._weight_sum
+        velocity = np.array(v0)
+        for t in range(steps):
+            if t > 0:
+                direction = _unit(rng.standard_normal((n, d)))
+                wander[t] = _unit(wander[t - 1]) + direction * rng.normal(0.0, self.wander_sigma, (n, 1))
+                steer = self._steering(positions[t], velocity, perception)
+                velocity = velocity + gain * (steer + self.wander_weight * wander[t])
+            else:
+                wander[t] = wander0
+            positions[t + 1] = positions[t] + velocity * self.dt
+            # Continue from the velocity the positions imply, exactly as inference will see it.
+            velocity = (positions[t + 1] - positions[t]) / self.dt
+            if progress is not None:
+                progress(t + 1)
+        if steps:
+            wander[steps] = wander[steps - 1]
+        return positions, wander
+
+    def _infer_wander(self, x, dt, t) -> np.ndarray:
+        """The wander contribution at frame t (1 <= t <= T - 2) implied by frames t - 1, t, t + 1."""
+        before = (x[t] - x[t - 1]) / dt
+        after = (x[t + 1] - x[t]) / dt
+        gain = self.acceleration * dt / self._weight_sum
+        return ((after - before) / gain - self._steering(x[t], before, 1.0)) / self.wander_weight
+
+    def _neighbor_pairs(self, x):
+        """Directed pairs (i, j), i perceiving candidates j within perception_radius, j != i."""
+        n = len(x)
+        radius = self.perception_radius
+        if n > self.kdtree_above:
+            pairs = cKDTree(x).query_pairs(radius, output_type="ndarray")
+            i = np.concatenate([pairs[:, 0], pairs[:, 1]])
+            j = np.concatenate([pairs[:, 1], pairs[:, 0]])
+        else:
+            # Axis by axis: (N, N) differences are much faster than one (N, N, D) broadcast.
+            squared = sum((c[None, :] - c[:, None]) ** 2 for c in x.T)
+            close = squared <= radius * radius
+            np.fill_diagonal(close, False)
+            i, j = np.nonzero(close)
+        return i, j
+
+    def _steering(self, x, v, perception: float) -> np.ndarray:
+        """Sum of weight * rule over every rule but wander, for positions x and headings v."""
+        n, d = x.shape
+        speed = np.sqrt(np.einsum("nd,nd->n", v, v))
+        heading = np.divide(v, speed[:, None], out=np.zeros_like(v), where=speed[:, None] > 0)
+        steer = np.zeros_like(x)
+
+        i, j = self._neighbor_pairs(x)
+        if len(i):
+            offset = x[j] - x[i]
+            distance = np.sqrt(np.einsum("pd,pd->p", offset, offset))
+            if self.field_of_view < 360:
+                cos_half = math.cos(math.radians(self.field_of_view) / 2)
+                ahead = perception * np.einsum("pd,pd->p", offset, heading[i])
+                seen = ahead >= cos_half * distance * (speed[i] > 0)
+                i, j, offset, distance = i[seen], j[seen], offset[seen], distance[seen]
+            count = np.bincount(i, minlength=n).astype(np.float64)
+            share = np.divide(1.0, count, out=np.zeros(n), where=count > 0)
+            # Per pair: cohesion pulls along the offset, separation pushes against it.
+            near = distance < self.separation_radius
+            push = np.zeros_like(distance)
+            push[near] = (1.0 - distance[near] / self.separation_radius) / np.maximum(distance[near], 1e-12)
+            coefficient = self.cohesion_weight * share[i] / self.perception_radius - self.separation_weight * push
+            weighted_offset = offset * coefficient[:, None]
+            alignment = (self.alignment_weight / self.target_speed) * share[i]
+            weighted_velocity = v[j] * alignment[:, None]
+            for axis in range(d):
+                steer[:, axis] += np.bincount(i, weighted_offset[:, axis] + weighted_velocity[:, axis], minlength=n)
+            steer -= (self.alignment_weight / self.target_speed) * v * (count > 0)[:, None]
+
+        steer += (self.speed_weight / self.target_speed) * (self.target_speed - speed)[:, None] * heading
+        for obstacle in self.obstacles:
+            distance = obstacle.signed_distance(x)
+            closeness = np.clip(1.0 - distance / self.avoid_distance, 0.0, 2.0)
+            if closeness.any():
+                steer += self.avoidance_weight * closeness[:, None] * obstacle.surface_normal(x)
+        return steer
+
+
+def _steps(steps) -> int:
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
+        raise ValidationError(f"steps must be an integer >= 0; got {steps!r}")
+    return int(steps)
