@@ -19,6 +19,7 @@ __all__ = [
     "UnknownPluginError",
     "PluginError",
     "FileFormatError",
+    "MissingDependencyError",
 ]
 
 
@@ -47,3 +48,7 @@ class FileFormatError(FlockkitError, ValueError):
     """A file is corrupt, truncated, of another kind or of an unsupported format version.
 
     A file that does not exist raises the built-in ``FileNotFoundError`` instead."""
+
+
+class MissingDependencyError(FlockkitError, ImportError):
+    """An optional dependency is not installed; the message names the extra that provides it."""

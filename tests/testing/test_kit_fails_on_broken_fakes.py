@@ -1,0 +1,80 @@
+"""Every check of the kit passes on a correct model and fails on a model broken in its way."""
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+from hypothesis.errors import InvalidArgument
+
+from flockkit.testing import check_plugin, checks_for, parametrize_with_checks
+from flockkit.testing import strategies as fst
+
+from .fakes import BROKEN, RandomVelocity
+
+BEHAVIOR_CHECKS = {check.__name__: check for check in checks_for("behavior")}
+
+
+def test_every_behavior_check_has_a_broken_fake():
+    assert set(BROKEN) == set(BEHAVIOR_CHECKS)
+
+
+@parametrize_with_checks([("behavior", RandomVelocity())])
+def test_correct_fake_passes(component, check):
+    check(component)
+
+
+@pytest.mark.parametrize("check_name", sorted(BROKEN))
+def test_check_fails_on_its_broken_fake(check_name):
+    with pytest.raises(AssertionError):
+        BEHAVIOR_CHECKS[check_name]("broken", BROKEN[check_name]())
+
+
+@pytest.mark.parametrize("check_name", sorted(BROKEN))
+def test_check_plugin_names_the_failed_check_and_plugin(check_name):
+    with pytest.raises(AssertionError) as info:
+        check_plugin("behavior", BROKEN[check_name](), name="broken-model")
+    message = str(info.value)
+    assert "broken-model" in message and "failed for behavior" in message
+
+
+def test_checks_for_unknown_kind():
+    with pytest.raises(ValueError, match="unknown plugin kind"):
+        checks_for("behaviour")
+
+
+def test_parametrize_ids_name_kind_component_and_check():
+    mark = parametrize_with_checks([("behavior", RandomVelocity())])
+    ids = mark.kwargs["ids"]
+    assert ids[0] == "behavior:RandomVelocity-check_interface"
+    assert len(ids) == len(BEHAVIOR_CHECKS)
+
+
+@pytest.mark.parametrize(
+    "factory, kwargs",
+    [
+        (fst.configurations, {"min_agents": 0}),
+        (fst.configurations, {"min_agents": 5, "max_agents": 2}),
+        (fst.configurations, {"dims": 4}),
+        (fst.configurations, {"max_coordinate": -1.0}),
+        (fst.states, {"max_speed": float("nan")}),
+        (fst.states, {"extra": ["not an identifier"]}),
+        (fst.motions, {"min_frames": 0}),
+        (fst.motions, {"dt": 0}),
+        (fst.motions, {"channels": [3]}),
+    ],
+)
+def test_strategies_reject_bad_arguments_eagerly(factory, kwargs):
+    with pytest.raises(InvalidArgument):
+        factory(**kwargs)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.data())
+def test_strategies_respect_their_bounds(data):
+    config = data.draw(fst.configurations(min_agents=2, max_agents=4, dims=3, max_coordinate=5.0, max_speed=2.0))
+    assert 2 <= config.n_agents <= 4 and config.dims == 3
+    assert abs(config.positions).max() <= 5.0 and abs(config.velocities).max() <= 2.0
+    state = data.draw(fst.states(max_agents=3, extra=["wander"]))
+    assert set(state.extra) == {"wander"} and state.extra["wander"].shape == state.positions.shape
+    motion = data.draw(fst.motions(min_frames=2, max_frames=5, dims=2, dt=0.25, channels=["wander"]))
+    assert 2 <= motion.n_frames <= 5 and motion.dims == 2 and motion.dt == 0.25
+    assert motion.channels["wander"].shape == motion.positions.shape
