@@ -221,7 +221,7 @@ def _build_manager() -> pluggy.PluginManager:
         manager.check_pending()
     except pluggy.PluginValidationError as exc:
         raise PluginError(
-            f"plugin {exc.plugin_name!r} implements a hook flockkit does not define:\n  {exc}\n"
+            f"plugin {manager.get_name(exc.plugin)!r} implements a hook flockkit does not define:\n  {exc}\n"
             f"Known hooks: {', '.join(hookspecs.HOOKS.values())}."
         ) from None
     return manager

@@ -159,7 +159,7 @@ def check_log_plausibility_window(name, model):
         full = np.asarray(model.log_plausibility(motion))
         t = motion.n_frames
         windows = [(0, t), (0, 0), (t, t), (0, 1), (t - 1, t), (1, 3)]
-        windows += [tuple(sorted(rng.integers(0, t + 1, 2))) for _ in range(6)]
+        windows += [tuple(sorted(int(i) for i in rng.integers(0, t + 1, 2))) for _ in range(6)]
         for start, stop in windows:
             part = np.asarray(model.log_plausibility(motion, start, stop))
             scale = max(1.0, float(np.abs(full).max(initial=0.0)))

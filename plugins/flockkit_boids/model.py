@@ -21,8 +21,8 @@ The rules (each a dimensionless vector of order 1), over the neighbors an agent 
 - cohesion: (neighbors' mean position - own position) / perception_radius;
 - alignment: (neighbors' mean velocity - own velocity) / target_speed;
 - speed: (target_speed - speed) / target_speed along the heading;
-- avoidance: sum over obstacles of the outward surface normal scaled by
-  clip(1 - distance / avoid_distance, 0, 2).
+- avoidance: sum over obstacles of (outward surface normal + a sideways turn while approaching),
+  scaled by clip(avoid_distance / distance - 1, 0, 19), which grows like 1 / distance near the surface.
 """
 
 from __future__ import annotations
@@ -321,9 +321,14 @@ class Boids:
         steer += (self.speed_weight / self.target_speed) * (self.target_speed - speed)[:, None] * heading
         for obstacle in self.obstacles:
             distance = obstacle.signed_distance(x)
-            closeness = np.clip(1.0 - distance / self.avoid_distance, 0.0, 2.0)
+            # Grows like 1 / distance near the surface so that no other rule can push an agent in.
+            closeness = np.clip(self.avoid_distance / np.maximum(distance, 0.05 * self.avoid_distance) - 1.0, 0.0, 19.0)
             if closeness.any():
-                steer += self.avoidance_weight * closeness[:, None] * obstacle.surface_normal(x)
+                normal = obstacle.surface_normal(x)
+                along = np.einsum("nd,nd->n", normal, heading)
+                sideways = _unit(normal - along[:, None] * heading)  # steer round, not just brake
+                away = normal + np.maximum(0.0, -along)[:, None] * sideways
+                steer += self.avoidance_weight * closeness[:, None] * away
         return steer
 
 
