@@ -129,7 +129,7 @@ class Boids:
     wander_sigma: float = _number("wander_sigma", _positive, 0.125)
     avoid_distance: float = _number("avoid_distance", _positive, 1.5)
     obstacles: tuple = attrs.field(default=(), converter=_obstacles)
-    kdtree_above: int = 64
+    kdtree_above: int = 128
 
     def __attrs_post_init__(self):
         if self.field_of_view > 360:
@@ -272,21 +272,12 @@ class Boids:
         gain = self.acceleration * dt / self._weight_sum
         return ((after - before) / gain - self._steering(x[t], before, 1.0)) / self.wander_weight
 
-    def _neighbor_pairs(self, x):
-        """Directed pairs (i, j), i perceiving candidates j within perception_radius, j != i."""
-        n = len(x)
-        radius = self.perception_radius
-        if n > self.kdtree_above:
-            pairs = cKDTree(x).query_pairs(radius, output_type="ndarray")
-            i = np.concatenate([pairs[:, 0], pairs[:, 1]])
-            j = np.concatenate([pairs[:, 1], pairs[:, 0]])
-        else:
-            # Axis by axis: (N, N) differences are much faster than one (N, N, D) broadcast.
-            squared = sum((c[None, :] - c[:, None]) ** 2 for c in x.T)
-            close = squared <= radius * radius
-            np.fill_diagonal(close, False)
-            i, j = np.nonzero(close)
-        return i, j
+    def _neighbor_pairs(self, x) -> _Pairs:
+        """Candidate neighbors within perception_radius: every (i, j) of a dense N x N table for
+        small flocks, a cKDTree pair list (memory linear in N) above `kdtree_above` agents."""
+        if len(x) > self.kdtree_above:
+            return _SparsePairs(x, self.perception_radius)
+        return _DensePairs(x, self.perception_radius)
 
     def _steering(self, x, v, perception: float) -> np.ndarray:
         """Sum of weight * rule over every rule but wander, for positions x and headings v."""
@@ -295,28 +286,28 @@ class Boids:
         heading = np.divide(v, speed[:, None], out=np.zeros_like(v), where=speed[:, None] > 0)
         steer = np.zeros_like(x)
 
-        i, j = self._neighbor_pairs(x)
-        if len(i):
-            offset = x[j] - x[i]
-            distance = np.sqrt(np.einsum("pd,pd->p", offset, offset))
-            if self.field_of_view < 360:
-                cos_half = math.cos(math.radians(self.field_of_view) / 2)
-                ahead = perception * np.einsum("pd,pd->p", offset, heading[i])
-                seen = ahead >= cos_half * distance * (speed[i] > 0)
-                i, j, offset, distance = i[seen], j[seen], offset[seen], distance[seen]
-            count = np.bincount(i, minlength=n).astype(np.float64)
-            share = np.divide(1.0, count, out=np.zeros(n), where=count > 0)
-            # Per pair: cohesion pulls along the offset, separation pushes against it.
-            near = distance < self.separation_radius
-            push = np.zeros_like(distance)
-            push[near] = (1.0 - distance[near] / self.separation_radius) / np.maximum(distance[near], 1e-12)
-            coefficient = self.cohesion_weight * share[i] / self.perception_radius - self.separation_weight * push
-            weighted_offset = offset * coefficient[:, None]
-            alignment = (self.alignment_weight / self.target_speed) * share[i]
-            weighted_velocity = v[j] * alignment[:, None]
-            for axis in range(d):
-                steer[:, axis] += np.bincount(i, weighted_offset[:, axis] + weighted_velocity[:, axis], minlength=n)
-            steer -= (self.alignment_weight / self.target_speed) * v * (count > 0)[:, None]
+        pairs = self._neighbor_pairs(x)
+        offsets = pairs.offsets()  # per axis: x_j - x_i
+        distance = np.sqrt(sum(o * o for o in offsets))
+        seen = pairs.within(distance)
+        if self.field_of_view < 360:
+            cos_half = math.cos(math.radians(self.field_of_view) / 2)
+            ahead = perception * sum(o * pairs.rows(h) for o, h in zip(offsets, heading.T))
+            seen &= ahead >= cos_half * distance * pairs.rows(speed > 0)
+        count = pairs.total(seen)
+        share = np.divide(1.0, count, out=np.zeros(n), where=count > 0)
+        # Per pair: cohesion pulls along the offset, separation pushes against it, alignment
+        # averages neighbors' velocities: steer_i = sum_j W_ij (x_j - x_i) + sum_j A_ij v_j - ...
+        push = np.where(
+            distance < self.separation_radius,
+            (1.0 - distance / self.separation_radius) / np.maximum(distance, 1e-12),
+            0.0,
+        )
+        pull = self.cohesion_weight / self.perception_radius * pairs.rows(share)
+        w = np.where(seen, pull - self.separation_weight * push, 0.0)
+        a = np.where(seen, (self.alignment_weight / self.target_speed) * pairs.rows(share), 0.0)
+        steer += pairs.weighted_sum(w, x) - pairs.total(w)[:, None] * x
+        steer += pairs.weighted_sum(a, v) - (self.alignment_weight / self.target_speed) * (count > 0)[:, None] * v
 
         steer += (self.speed_weight / self.target_speed) * (self.target_speed - speed)[:, None] * heading
         for obstacle in self.obstacles:
@@ -330,6 +321,55 @@ class Boids:
                 away = normal + np.maximum(0.0, -along)[:, None] * sideways
                 steer += self.avoidance_weight * closeness[:, None] * away
         return steer
+
+
+class _DensePairs:
+    """All (i, j) as N x N tables; `rows(a)` broadcasts a per-agent array along j."""
+
+    def __init__(self, x, radius):
+        self._x, self._radius = x, radius
+
+    def offsets(self):
+        return [c[None, :] - c[:, None] for c in self._x.T]
+
+    def within(self, distance):
+        close = distance <= self._radius
+        np.fill_diagonal(close, False)
+        return close
+
+    def rows(self, values):
+        return values[:, None]
+
+    def total(self, values):
+        return values.sum(axis=1, dtype=np.float64)
+
+    def weighted_sum(self, weights, y):
+        return weights @ y
+
+
+class _SparsePairs:
+    """Directed pairs (i, j) closer than the radius, from a cKDTree; arrays are one value per pair."""
+
+    def __init__(self, x, radius):
+        pairs = cKDTree(x).query_pairs(radius, output_type="ndarray")
+        self._i = np.concatenate([pairs[:, 0], pairs[:, 1]])
+        self._j = np.concatenate([pairs[:, 1], pairs[:, 0]])
+        self._x = x
+
+    def offsets(self):
+        return [c[self._j] - c[self._i] for c in self._x.T]
+
+    def within(self, distance):
+        return np.ones(distance.shape, dtype=bool)
+
+    def rows(self, values):
+        return values[self._i]
+
+    def total(self, values):
+        return np.bincount(self._i, values, minlength=len(self._x))
+
+    def weighted_sum(self, weights, y):
+        return np.stack([self.total(weights * c[self._j]) for c in y.T], axis=1)
 
 
 def _steps(steps) -> int:
