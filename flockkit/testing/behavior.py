@@ -81,7 +81,6 @@ def check_deterministic(name, model):
     for operation in (_forward, _backward):
         first, second = operation(model, state, seed=7), operation(model, state, seed=7)
         assert first == second, f"{name}: two {operation.__name__[1:]} runs with the same seed differ"
-    assert _forward(model, state, seed=7) != _forward(model, state, seed=8), f"{name}.forward ignores its rng"
 
 
 def _snapshot(value):

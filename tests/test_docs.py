@@ -1,0 +1,44 @@
+"""The documentation: every Python example runs, and every hook and kind is documented."""
+
+import re
+from pathlib import Path
+
+import pytest
+
+from flockkit import hookspecs, registry
+from flockkit.interfaces import PROTOCOLS
+from flockkit.registry import _protocol_methods
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+
+
+def python_blocks(path):
+    return re.findall(r"```python\n(.*?)```", path.read_text(), flags=re.S)
+
+
+@pytest.mark.parametrize("page", [p for p in PAGES if python_blocks(p)], ids=lambda p: str(p.relative_to(ROOT)))
+def test_examples_run(page, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    namespace = {"__name__": "docs_example"}
+    try:
+        for block in python_blocks(page):  # blocks of one page share a namespace, as a reader's session would
+            exec(compile(block, str(page), "exec"), namespace)
+    finally:
+        registry.reset()
+
+
+@pytest.mark.parametrize("kind", list(PROTOCOLS))
+def test_every_kind_has_a_page_stating_its_hook_and_methods(kind):
+    page = (ROOT / "docs" / "kinds" / f"{kind}.md").read_text()
+    assert hookspecs.HOOKS[kind] in page and PROTOCOLS[kind].__name__ in page
+    for method in _protocol_methods(PROTOCOLS[kind]):
+        assert f"`{method}(" in page, f"docs/kinds/{kind}.md does not state {method}"
+    assert hookspecs.HOOKS[kind] in (ROOT / "docs" / "plugins.md").read_text()
+
+
+def test_every_doc_page_is_linked_from_the_index():
+    index = (ROOT / "docs" / "index.md").read_text()
+    for page in (ROOT / "docs").rglob("*.md"):
+        if page.name != "index.md":
+            assert str(page.relative_to(ROOT / "docs")) in index, page
