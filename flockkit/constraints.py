@@ -23,8 +23,9 @@ def _field(name: str):
 
 
 def _unit(vectors: np.ndarray) -> np.ndarray:
+    """Unit vectors; vectors too short to normalize accurately (subnormal scale) become zero."""
     norms = np.linalg.norm(vectors, axis=-1, keepdims=True)
-    return np.divide(vectors, norms, out=np.zeros_like(vectors), where=norms > 0)
+    return np.divide(vectors, norms, out=np.zeros_like(vectors), where=norms > 1e-150)
 
 
 class _Region:
@@ -81,7 +82,7 @@ class Ball(_Region):
         offset = points - self.center
         distance = np.linalg.norm(offset, axis=1)
         normal = _unit(offset)
-        normal[distance == 0, 0] = 1.0  # the center: any direction is nearest; pick +x
+        normal[~normal.any(axis=1), 0] = 1.0  # at the center any direction is nearest; pick +x
         return distance - self.radius, normal
 
 
@@ -122,9 +123,10 @@ class Box(_Region):
         inside = outside_distance == 0
         distance = np.where(inside, q.max(axis=1), outside_distance)
         normal = _unit(outside * side)
-        nearest_face = np.argmax(q[inside], axis=1)
-        normal[inside] = 0.0
-        normal[np.flatnonzero(inside), nearest_face] = side[inside, nearest_face]
+        # Inside (or too close to tell): the outward normal of the nearest face.
+        flat = ~normal.any(axis=1)
+        nearest_face = np.argmax(q[flat], axis=1)
+        normal[np.flatnonzero(flat), nearest_face] = side[flat, nearest_face]
         return distance, normal
 
 
@@ -201,7 +203,7 @@ class Polygon(_Region):
         # On the boundary the gap is zero: use the outward normal of that edge.
         ccw = 1.0 if self._signed_area() > 0 else -1.0
         edge_normals = _unit(np.stack([edge[:, 1], -edge[:, 0]], axis=1) * ccw)
-        on_edge = distance == 0
+        on_edge = ~normal.any(axis=1)
         normal[on_edge] = edge_normals[nearest[on_edge]]
         return distance * sign, normal
 
