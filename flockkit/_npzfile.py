@@ -51,8 +51,12 @@ def read(path, *, kind: str, versions: tuple[int, ...]) -> tuple[dict[str, np.nd
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
     try:
-        with np.load(path, allow_pickle=False) as npz:
-            arrays = {name: npz[name] for name in npz.files}
+        with open(path, "rb") as handle:
+            npz = np.load(handle, allow_pickle=False)
+            if not isinstance(npz, np.lib.npyio.NpzFile):
+                raise ValueError("a single .npy array, not an .npz archive")
+            with npz:
+                arrays = {name: npz[name] for name in npz.files}
     except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as exc:
         raise FileFormatError(f"{path}: not a readable flockkit {kind} file (.npz): {exc}") from None
     raw = arrays.pop(METADATA_KEY, None)

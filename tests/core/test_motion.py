@@ -127,7 +127,10 @@ def test_load_rejects_broken_files(tmp_path):
     garbage.write_bytes(b"not a zip file at all")
     plain = tmp_path / "plain.npz"
     np.savez(plain, positions=np.zeros((2, 2, 2)))
-    for path in (truncated, garbage, plain):
+    single = tmp_path / "single.npz"
+    with open(single, "wb") as handle:
+        np.save(handle, np.zeros((2, 2, 2)))
+    for path in (truncated, garbage, plain, single):
         with pytest.raises(FileFormatError) as info:
             flockkit.Motion.load(path)
         assert str(path) in str(info.value)
