@@ -1,0 +1,24 @@
+"""Shared fixtures. Real captured motion lives in ../shared/data beside the project, never here."""
+
+import os
+from pathlib import Path
+
+import pytest
+
+SHARED_DATA = Path(__file__).resolve().parents[2] / "shared" / "data"
+
+
+def require_folder(folder: Path) -> Path:
+    """`folder` if it exists; else skip, or fail when FLOCKKIT_REQUIRE_SHARED_DATA=1."""
+    if not folder.is_dir():
+        reason = f"real capture data not found at {folder} (put the shared folder beside the project)"
+        if os.environ.get("FLOCKKIT_REQUIRE_SHARED_DATA") == "1":
+            pytest.fail(f"FLOCKKIT_REQUIRE_SHARED_DATA=1 but {reason}")
+        pytest.skip(reason)
+    return folder
+
+
+@pytest.fixture
+def shared_data():
+    """The folder of real captures (see require_folder)."""
+    return require_folder(SHARED_DATA)
