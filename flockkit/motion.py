@@ -100,8 +100,20 @@ def _heading_axes(mean_velocity: np.ndarray, mean_speed: float, up) -> np.ndarra
     return np.array([x, y, np.cross(x, y)])
 
 
+class _OneInstant:
+    """Counts shared by the one-instant types, whose positions are (N, D)."""
+
+    @property
+    def n_agents(self) -> int:
+        return self.positions.shape[0]
+
+    @property
+    def dims(self) -> int:
+        return self.positions.shape[1]
+
+
 @attrs.frozen(kw_only=True, eq=False)
-class Configuration:
+class Configuration(_OneInstant):
     """The agents of a group at one instant.
 
     Parameters
@@ -123,14 +135,6 @@ class Configuration:
         return np.array_equal(self.positions, other.positions) and np.array_equal(self.velocities, other.velocities)
 
     __hash__ = None
-
-    @property
-    def n_agents(self) -> int:
-        return self.positions.shape[0]
-
-    @property
-    def dims(self) -> int:
-        return self.positions.shape[1]
 
     def center_of_mass(self) -> np.ndarray:
         """The mean position, shape (D,)."""
@@ -156,7 +160,7 @@ class Configuration:
 
 
 @attrs.frozen(kw_only=True, eq=False)
-class State:
+class State(_OneInstant):
     """What a behavior model needs to continue a simulation.
 
     Parameters
@@ -190,14 +194,6 @@ class State:
         )
 
     __hash__ = None
-
-    @property
-    def n_agents(self) -> int:
-        return self.positions.shape[0]
-
-    @property
-    def dims(self) -> int:
-        return self.positions.shape[1]
 
     def configuration(self) -> Configuration:
         return Configuration(positions=self.positions, velocities=self.velocities)
