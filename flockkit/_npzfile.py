@@ -1,6 +1,6 @@
 """The one on-disk container of flockkit: an .npz of plain arrays plus a JSON metadata entry.
 
-No pickle: object arrays are refused on write and `allow_pickle=False` on read. Writes go to a
+Plain arrays only: object arrays are refused on write and `allow_pickle=False` on read. Writes go to a
 temporary file in the target folder and are renamed over the target, so an interrupted write never
 leaves a half-written file.
 """
@@ -27,7 +27,7 @@ def write(path, *, kind: str, version: int, arrays: dict[str, np.ndarray], metad
     payload = {name: np.asarray(array) for name, array in arrays.items()}
     for name, array in payload.items():
         if array.dtype == object:
-            raise TypeError(f"refusing to write object array {name!r}: flockkit files never use pickle")
+            raise TypeError(f"refusing to write object array {name!r}: flockkit files hold plain numeric arrays only")
     payload[METADATA_KEY] = np.frombuffer(json.dumps(header).encode("utf-8"), dtype=np.uint8)
     folder = path.parent if str(path.parent) else Path(".")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)

@@ -324,7 +324,7 @@ class Motion:
         )
 
     def save(self, path) -> None:
-        """Write the motion to `path` (.npz with JSON metadata; atomic, no pickle)."""
+        """Write the motion to `path` (.npz of plain arrays with JSON metadata; atomic)."""
         arrays = {"positions": self.positions}
         arrays.update({f"channel.{name}": array for name, array in self.channels.items()})
         _npzfile.write(path, kind="motion", version=MOTION_FORMAT_VERSION, arrays=arrays, metadata={"dt": self.dt})
