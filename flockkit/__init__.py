@@ -8,7 +8,7 @@ from . import errors
 from .constraints import Ball, Box, Polygon
 from .convenience import random_flock, simulate
 from .hookspecs import hookimpl
-from .motion import DEFAULT_UP, Configuration, ConfigurationFrame, Motion, State
+from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State
 from .registry import available, get
 
 __version__ = "0.1.0"
@@ -17,6 +17,7 @@ __all__ = [
     "Motion",
     "Configuration",
     "ConfigurationFrame",
+    "Alignment",
     "State",
     "DEFAULT_UP",
     "Ball",

@@ -20,7 +20,7 @@ from . import _npzfile
 from ._arrays import check_agent_array, check_finite, positive_number, readonly_float, readonly_mapping
 from .errors import FileFormatError, ValidationError
 
-__all__ = ["Motion", "Configuration", "State", "ConfigurationFrame", "DEFAULT_UP"]
+__all__ = ["Motion", "Configuration", "State", "ConfigurationFrame", "Alignment", "DEFAULT_UP"]
 
 #: The world up direction used for 3D configuration frames unless another is given (z up).
 DEFAULT_UP = (0.0, 0.0, 1.0)
@@ -56,15 +56,10 @@ class ConfigurationFrame:
     axes: np.ndarray = _field("ConfigurationFrame.axes")
 
     def __attrs_post_init__(self):
-        d = self.origin.shape[0] if self.origin.ndim == 1 else -1
-        if d not in (2, 3) or self.axes.shape != (d, d):
-            raise ValidationError(
-                f"ConfigurationFrame needs origin of shape (D,) and axes of shape (D, D) with D in {{2, 3}}; "
-                f"got {self.origin.shape} and {self.axes.shape}"
-            )
+        _check_rotation(self.axes, "ConfigurationFrame.axes")
+        if self.origin.shape != (self.axes.shape[0],):
+            raise ValidationError(f"ConfigurationFrame.origin must have shape ({self.axes.shape[0]},); got {self.origin.shape}")
         check_finite(self.origin, field="ConfigurationFrame.origin")
-        if not np.allclose(self.axes @ self.axes.T, np.eye(d), atol=1e-9) or np.linalg.det(self.axes) < 0:
-            raise ValidationError("ConfigurationFrame.axes must be a proper rotation (orthonormal rows, det = +1)")
 
     def to_local(self, points) -> np.ndarray:
         """World points (..., D) to configuration coordinates."""
@@ -77,6 +72,82 @@ class ConfigurationFrame:
     def vectors_to_local(self, vectors) -> np.ndarray:
         """World directions (..., D), such as velocities, to configuration coordinates (no translation)."""
         return np.asarray(vectors, dtype=np.float64) @ self.axes.T
+
+
+def _check_rotation(rotation: np.ndarray, field: str) -> None:
+    d = rotation.shape[0] if rotation.ndim == 2 else -1
+    if d not in (2, 3) or rotation.shape != (d, d):
+        raise ValidationError(f"{field} must have shape (D, D) with D in {{2, 3}}; got {rotation.shape}")
+    check_finite(rotation, field=field)
+    if not np.allclose(rotation @ rotation.T, np.eye(d), atol=1e-9) or np.linalg.det(rotation) < 0:
+        raise ValidationError(f"{field} must be a proper rotation (orthonormal, det = +1)")
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class Alignment:
+    """How configuration `b` best lies on configuration `a`: what a metric's compare(a, b) returns.
+
+    ``a.positions[i] ~= rotation @ b.positions[assignment[i]] + translation``.
+
+    Attributes
+    ----------
+    distance : float
+        The metric's value, >= 0 (for ``icp-hungarian``: E of paper 000 section 4.2, the mean
+        squared distance after alignment).
+    assignment : ndarray of int, shape (N,)
+        A permutation: agent i of `a` takes slot ``assignment[i]`` of `b`.
+    rotation : ndarray, shape (D, D)
+        A proper rotation (det = +1): no reflection, no scaling.
+    translation : ndarray, shape (D,)
+    """
+
+    distance: float = attrs.field(converter=float)
+    assignment: np.ndarray = attrs.field(converter=lambda value: _readonly_int(value, "Alignment.assignment"))
+    rotation: np.ndarray = _field("Alignment.rotation")
+    translation: np.ndarray = _field("Alignment.translation")
+
+    def __attrs_post_init__(self):
+        if not np.isfinite(self.distance) or self.distance < 0:
+            raise ValidationError(f"Alignment.distance must be a finite number >= 0; got {self.distance}")
+        n = self.assignment.shape[0] if self.assignment.ndim == 1 else -1
+        if n < 1 or not np.array_equal(np.sort(self.assignment), np.arange(n)):
+            raise ValidationError(f"Alignment.assignment must be a permutation of 0..N-1; got {self.assignment}")
+        _check_rotation(self.rotation, "Alignment.rotation")
+        if self.translation.shape != (self.rotation.shape[0],):
+            raise ValidationError(
+                f"Alignment.translation must have shape ({self.rotation.shape[0]},); got {self.translation.shape}"
+            )
+        check_finite(self.translation, field="Alignment.translation")
+
+    def __eq__(self, other):
+        if not isinstance(other, Alignment):
+            return NotImplemented
+        return (
+            self.distance == other.distance
+            and np.array_equal(self.assignment, other.assignment)
+            and np.array_equal(self.rotation, other.rotation)
+            and np.array_equal(self.translation, other.translation)
+        )
+
+    __hash__ = None
+
+    def transform(self, points) -> np.ndarray:
+        """Points (..., D) of `b`'s world into `a`'s: ``points @ rotation.T + translation``."""
+        return np.asarray(points, dtype=np.float64) @ self.rotation.T + self.translation
+
+    def residual(self, a: Configuration, b: Configuration) -> float:
+        """Mean squared distance between `a`'s positions and `b`'s, aligned and reassigned."""
+        moved = self.transform(b.positions[self.assignment])
+        return float(np.mean(np.sum((a.positions - moved) ** 2, axis=1)))
+
+
+def _readonly_int(value, field: str) -> np.ndarray:
+    array = np.array(value, copy=True)
+    if array.dtype.kind not in "iu":
+        raise ValidationError(f"{field} must be an array of integers; got dtype {array.dtype}")
+    array = array.astype(np.intp)
+    array.setflags(write=False)
+    return array
 
 
 def _heading_axes(mean_velocity: np.ndarray, mean_speed: float, up) -> np.ndarray:

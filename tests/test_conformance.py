@@ -1,9 +1,9 @@
-"""Every installed behavior model, built-in or third-party, goes through the conformance kit."""
+"""Every installed behavior model and metric, built-in or third-party, goes through the conformance kit."""
 
 import flockkit
 from flockkit.testing import parametrize_with_checks
 
-COMPONENTS = [("behavior", flockkit.get("behavior", name)) for name in flockkit.available("behavior")]
+COMPONENTS = [(kind, flockkit.get(kind, name)) for kind in ("behavior", "metric") for name in flockkit.available(kind)]
 
 
 @parametrize_with_checks(COMPONENTS)

@@ -24,7 +24,7 @@ import functools
 
 from ..interfaces import PROTOCOLS
 from ..registry import interface_problems
-from . import behavior, strategies
+from . import behavior, metric, strategies
 
 __all__ = ["check_plugin", "parametrize_with_checks", "checks_for", "check_interface", "strategies"]
 
@@ -37,7 +37,7 @@ def check_interface(name, component, *, kind):
     )
 
 
-_KIND_CHECKS = {"behavior": behavior.CHECKS}
+_KIND_CHECKS = {"behavior": behavior.CHECKS, "metric": metric.CHECKS}
 
 
 def checks_for(kind: str) -> tuple:

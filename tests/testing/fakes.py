@@ -152,3 +152,115 @@ BROKEN = {
     "check_log_plausibility_window": WindowIgnored,
     "check_rejects_bad_window": WindowUnchecked,
 }
+
+
+# -- metrics: the built-in is the correct base; each fake breaks one check ------------------
+
+from flockkit_icp import IcpHungarian  # noqa: E402
+
+
+class _Wrapped:
+    """Delegates to the built-in metric; subclasses change one thing."""
+
+    def __init__(self):
+        self.inner = IcpHungarian()
+
+    def compare(self, a, b):
+        return self.inner.compare(a, b)
+
+    def lower_bound(self, a, b):
+        return self.inner.lower_bound(a, b)
+
+    def pairwise(self, configurations):
+        return self.inner.pairwise(configurations)
+
+    @staticmethod
+    def _with(found, **changes):
+        fields = dict(distance=found.distance, assignment=found.assignment, rotation=found.rotation, translation=found.translation)
+        fields.update(changes)
+        return flockkit.Alignment(**fields)
+
+
+class NoCompare:
+    def lower_bound(self, a, b):
+        return 0.0
+
+
+class ReturnsTuple(_Wrapped):
+    def compare(self, a, b):
+        found = super().compare(a, b)
+        return found.distance, found.assignment
+
+
+class OffsetDistance(_Wrapped):
+    def compare(self, a, b):
+        found = super().compare(a, b)
+        return self._with(found, distance=found.distance + 1.0)
+
+
+class IgnoresRotation(_Wrapped):
+    """Matches centered positions without rotating: not rotation-invariant."""
+
+    def compare(self, a, b):
+        from scipy.optimize import linear_sum_assignment
+        from scipy.spatial.distance import cdist
+
+        pa, pb = a.positions - a.center_of_mass(), b.positions - b.center_of_mass()
+        cost = cdist(pa, pb, "sqeuclidean")
+        _, assignment = linear_sum_assignment(cost)
+        return flockkit.Alignment(
+            distance=cost[np.arange(len(pa)), assignment].mean(), assignment=assignment,
+            rotation=np.eye(a.dims), translation=a.center_of_mass() - b.center_of_mass(),
+        )
+
+
+class UnderReports(_Wrapped):
+    def compare(self, a, b):
+        found = super().compare(a, b)
+        return self._with(found, distance=found.distance / 10)
+
+
+class LooseBound(_Wrapped):
+    def lower_bound(self, a, b):
+        return 2 * self.inner.compare(a, b).distance + 1.0
+
+
+class WrongPairwise(_Wrapped):
+    def pairwise(self, configurations):
+        matrix = np.asarray(self.inner.pairwise(configurations))
+        return matrix * 2
+
+
+class Jittery(_Wrapped):
+    def compare(self, a, b):
+        found = super().compare(a, b)
+        return self._with(found, distance=found.distance + np.random.default_rng().random() * 1e-6)
+
+
+class MutatesConfiguration(_Wrapped):
+    def compare(self, a, b):
+        b.positions.setflags(write=True)
+        b.positions[0] += 1.0
+        return super().compare(a, b)
+
+
+class Truncates(_Wrapped):
+    def compare(self, a, b):
+        n, d = min(a.n_agents, b.n_agents), min(a.dims, b.dims)
+        cut = [flockkit.Configuration(positions=c.positions[:n, :d], velocities=c.velocities[:n, :d]) for c in (a, b)]
+        return super().compare(*cut)
+
+
+BROKEN_METRICS = {
+    "check_interface": NoCompare,
+    "check_compare_returns_alignment": ReturnsTuple,
+    "check_identical_is_zero": OffsetDistance,
+    "check_rigid_and_permutation_invariant": IgnoresRotation,
+    "check_distance_covers_alignment": UnderReports,
+    "check_lower_bound": LooseBound,
+    "check_pairwise": WrongPairwise,
+    "check_deterministic": Jittery,
+    "check_inputs_unchanged": MutatesConfiguration,
+    "check_rejects_mismatched_sizes": Truncates,
+}
+BROKEN_BY_KIND = {"behavior": BROKEN, "metric": BROKEN_METRICS}

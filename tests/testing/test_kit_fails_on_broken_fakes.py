@@ -8,32 +8,37 @@ from hypothesis.errors import InvalidArgument
 from flockkit.testing import check_plugin, checks_for, parametrize_with_checks
 from flockkit.testing import strategies as fst
 
-from .fakes import BROKEN, RandomVelocity
+from .fakes import BROKEN_BY_KIND, IcpHungarian, RandomVelocity
 
-BEHAVIOR_CHECKS = {check.__name__: check for check in checks_for("behavior")}
-
-
-def test_every_behavior_check_has_a_broken_fake():
-    assert set(BROKEN) == set(BEHAVIOR_CHECKS)
+CASES = [(kind, name) for kind, fakes in BROKEN_BY_KIND.items() for name in sorted(fakes)]
 
 
-@parametrize_with_checks([("behavior", RandomVelocity())])
-def test_correct_fake_passes(component, check):
+def check_named(kind, name):
+    return {check.__name__: check for check in checks_for(kind)}[name]
+
+
+@pytest.mark.parametrize("kind", sorted(BROKEN_BY_KIND))
+def test_every_check_has_a_broken_fake(kind):
+    assert set(BROKEN_BY_KIND[kind]) == {check.__name__ for check in checks_for(kind)}
+
+
+@parametrize_with_checks([("behavior", RandomVelocity()), ("metric", IcpHungarian())])
+def test_correct_components_pass(component, check):
     check(component)
 
 
-@pytest.mark.parametrize("check_name", sorted(BROKEN))
-def test_check_fails_on_its_broken_fake(check_name):
+@pytest.mark.parametrize("kind, check_name", CASES)
+def test_check_fails_on_its_broken_fake(kind, check_name):
     with pytest.raises(AssertionError):
-        BEHAVIOR_CHECKS[check_name]("broken", BROKEN[check_name]())
+        check_named(kind, check_name)("broken", BROKEN_BY_KIND[kind][check_name]())
 
 
-@pytest.mark.parametrize("check_name", sorted(BROKEN))
-def test_check_plugin_names_the_failed_check_and_plugin(check_name):
+@pytest.mark.parametrize("kind, check_name", CASES)
+def test_check_plugin_names_the_failed_check_and_plugin(kind, check_name):
     with pytest.raises(AssertionError) as info:
-        check_plugin("behavior", BROKEN[check_name](), name="broken-model")
+        check_plugin(kind, BROKEN_BY_KIND[kind][check_name](), name="broken-component")
     message = str(info.value)
-    assert "broken-model" in message and "failed for behavior" in message
+    assert "broken-component" in message and f"failed for {kind}" in message
 
 
 def test_checks_for_unknown_kind():
@@ -45,7 +50,7 @@ def test_parametrize_ids_name_kind_component_and_check():
     mark = parametrize_with_checks([("behavior", RandomVelocity())])
     ids = mark.kwargs["ids"]
     assert ids[0] == "behavior:RandomVelocity-check_interface"
-    assert len(ids) == len(BEHAVIOR_CHECKS)
+    assert len(ids) == len(checks_for("behavior"))
 
 
 @pytest.mark.parametrize(

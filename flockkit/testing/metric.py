@@ -1,0 +1,161 @@
+"""Conformance checks for configuration metrics (``flockkit.interfaces.ConfigurationMetric``).
+
+Each check is ``check_<property>(name, metric)`` and raises AssertionError saying what is wrong.
+They compare configurations of simulated flocks (2D and 3D, one agent to fifteen), so results are
+reproducible; rigid copies are made with rotations in general position.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..convenience import random_flock
+from ..errors import ValidationError
+from ..motion import Alignment, Configuration
+
+SEED = 4205
+
+
+def _rotation(dims: int, rng) -> np.ndarray:
+    q, r = np.linalg.qr(rng.standard_normal((dims, dims)))
+    q = q * np.sign(np.diag(r))
+    if np.linalg.det(q) < 0:
+        q[:, 0] *= -1
+    return q
+
+
+def _configurations() -> list[Configuration]:
+    rng = np.random.default_rng(SEED)
+    return [random_flock(n_agents=n, dims=d, rng=rng).configuration() for n, d in ((1, 2), (6, 2), (15, 2), (5, 3), (12, 3))]
+
+
+def _rigid_copy(config: Configuration, rng) -> Configuration:
+    rotation = _rotation(config.dims, rng)
+    order = rng.permutation(config.n_agents)
+    shift = rng.normal(0, 10, config.dims)
+    return Configuration(
+        positions=(config.positions @ rotation.T + shift)[order], velocities=(config.velocities @ rotation.T)[order]
+    )
+
+
+def _pairs():
+    configs = _configurations()
+    rng = np.random.default_rng(SEED + 1)
+    for config in configs:
+        other = random_flock(n_agents=config.n_agents, dims=config.dims, rng=rng).configuration()
+        yield config, other
+
+
+def _scale(config: Configuration) -> float:
+    return max(1.0, float(np.sum(config.positions**2) / config.n_agents))
+
+
+def check_compare_returns_alignment(name, metric):
+    """compare returns a flockkit.Alignment sized for the configurations."""
+    for a, b in _pairs():
+        found = metric.compare(a, b)
+        assert isinstance(found, Alignment), f"{name}.compare returned {type(found).__name__}, not a flockkit.Alignment"
+        assert found.assignment.shape == (a.n_agents,) and found.rotation.shape == (a.dims, a.dims), (
+            f"{name}.compare returned an alignment for {found.assignment.shape[0]} agents in {found.rotation.shape[0]}D; "
+            f"expected {a.n_agents} in {a.dims}D"
+        )
+
+
+def check_identical_is_zero(name, metric):
+    """A configuration is at distance zero from itself."""
+    for config in _configurations():
+        distance = metric.compare(config, config).distance
+        assert distance <= 1e-9 * _scale(config), f"{name}.compare(a, a).distance = {distance}; expected 0"
+
+
+def check_rigid_and_permutation_invariant(name, metric):
+    """A rotated, translated and reordered copy is at distance zero, and the alignment maps it back."""
+    rng = np.random.default_rng(SEED + 2)
+    for config in _configurations():
+        copy = _rigid_copy(config, rng)
+        found = metric.compare(config, copy)
+        tolerance = 1e-8 * _scale(config)
+        assert found.distance <= tolerance, f"{name}: a rigid, reordered copy is at distance {found.distance}; expected 0"
+        residual = found.residual(config, copy)
+        assert residual <= tolerance, f"{name}: the alignment leaves the copy {residual} away (mean squared); expected 0"
+
+
+def check_distance_covers_alignment(name, metric):
+    """The distance is at least the mean squared position residual of the alignment it returns."""
+    for a, b in _pairs():
+        found = metric.compare(a, b)
+        residual = found.residual(a, b)
+        assert found.distance >= residual - 1e-9 * _scale(a), (
+            f"{name}.compare reports distance {found.distance} but its alignment leaves a mean squared residual of {residual}"
+        )
+
+
+def check_lower_bound(name, metric):
+    """lower_bound(a, b), where offered, never exceeds compare(a, b).distance."""
+    if not callable(getattr(metric, "lower_bound", None)):
+        return
+    rng = np.random.default_rng(SEED + 3)
+    for a, b in [*_pairs(), *((c, _rigid_copy(c, rng)) for c in _configurations())]:
+        bound, distance = float(metric.lower_bound(a, b)), metric.compare(a, b).distance
+        assert np.isfinite(bound) and bound <= distance + 1e-9 * _scale(a), (
+            f"{name}.lower_bound = {bound} exceeds compare's distance {distance}"
+        )
+
+
+def check_pairwise(name, metric):
+    """pairwise(configurations), where offered, is a symmetric (K, K) matrix of compare distances."""
+    if not callable(getattr(metric, "pairwise", None)):
+        return
+    rng = np.random.default_rng(SEED + 4)
+    configs = [random_flock(n_agents=6, dims=2, rng=rng).configuration() for _ in range(4)]
+    matrix = np.asarray(metric.pairwise(configs))
+    assert matrix.shape == (4, 4), f"{name}.pairwise returned shape {matrix.shape}; expected (4, 4)"
+    assert np.allclose(matrix, matrix.T) and np.allclose(np.diag(matrix), 0), f"{name}.pairwise is not symmetric with a zero diagonal"
+    for i in range(4):
+        for j in range(i + 1, 4):
+            expected = metric.compare(configs[i], configs[j]).distance
+            assert np.isclose(matrix[i, j], expected, rtol=1e-9, atol=1e-12), (
+                f"{name}.pairwise[{i}, {j}] = {matrix[i, j]} but compare gives {expected}"
+            )
+
+
+def check_deterministic(name, metric):
+    """The same pair gives the same alignment twice."""
+    for a, b in _pairs():
+        assert metric.compare(a, b) == metric.compare(a, b), f"{name}.compare gives different alignments for the same pair"
+
+
+def check_inputs_unchanged(name, metric):
+    """compare leaves both configurations as they were."""
+    for a, b in _pairs():
+        before = [x.copy() for x in (a.positions, a.velocities, b.positions, b.velocities)]
+        metric.compare(a, b)
+        after = (a.positions, a.velocities, b.positions, b.velocities)
+        assert all(np.array_equal(x, y) for x, y in zip(before, after)), f"{name}.compare changed its input"
+
+
+def check_rejects_mismatched_sizes(name, metric):
+    """Configurations of different sizes or dimensions raise flockkit.errors.ValidationError."""
+    rng = np.random.default_rng(SEED + 5)
+    base = random_flock(n_agents=5, dims=2, rng=rng).configuration()
+    for other in (random_flock(n_agents=6, dims=2, rng=rng).configuration(), random_flock(n_agents=5, dims=3, rng=rng).configuration()):
+        try:
+            metric.compare(base, other)
+        except ValidationError:
+            continue
+        except Exception as exc:  # noqa: BLE001 - the wrong error type is the failure we report
+            raise AssertionError(f"{name}.compare of mismatched configurations raised {type(exc).__name__}, not ValidationError") from exc
+        raise AssertionError(f"{name}.compare of {base.n_agents} agents in 2D with {other.n_agents} in {other.dims}D raised nothing")
+
+
+CHECKS = (
+    check_compare_returns_alignment,
+    check_identical_is_zero,
+    check_rigid_and_permutation_invariant,
+    check_distance_covers_alignment,
+    check_lower_bound,
+    check_pairwise,
+    check_deterministic,
+    check_inputs_unchanged,
+    check_rejects_mismatched_sizes,
+)
