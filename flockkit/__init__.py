@@ -7,6 +7,7 @@ lookup (``get``, ``available``, ``hookimpl``) and the convenience layer (``simul
 from . import errors
 from .constraints import Ball, Box, Polygon
 from .convenience import random_flock, simulate
+from .graph import Clip, MotionGraph, Transition
 from .hookspecs import hookimpl
 from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State
 from .registry import available, get
@@ -20,6 +21,9 @@ __all__ = [
     "Alignment",
     "State",
     "DEFAULT_UP",
+    "MotionGraph",
+    "Clip",
+    "Transition",
     "Ball",
     "Box",
     "Polygon",

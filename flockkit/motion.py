@@ -135,6 +135,17 @@ class Alignment:
         """Points (..., D) of `b`'s world into `a`'s: ``points @ rotation.T + translation``."""
         return np.asarray(points, dtype=np.float64) @ self.rotation.T + self.translation
 
+    def inverse(self) -> Alignment:
+        """The alignment of `a` onto `b` (same distance): what compare(b, a) would ideally return."""
+        assignment = np.empty_like(self.assignment)
+        assignment[self.assignment] = np.arange(len(self.assignment))
+        return Alignment(
+            distance=self.distance,
+            assignment=assignment,
+            rotation=self.rotation.T,
+            translation=-self.rotation.T @ self.translation,
+        )
+
     def residual(self, a: Configuration, b: Configuration) -> float:
         """Mean squared distance between `a`'s positions and `b`'s, aligned and reassigned."""
         moved = self.transform(b.positions[self.assignment])

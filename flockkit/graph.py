@@ -1,0 +1,299 @@
+"""Motion graphs (paper 000 section 4.3, after Kovar et al.): clips of a source motion joined by
+transitions between similar configurations.
+
+A builder chooses transitions, pairs of source frames (leave at `start`, arrive at `end`) with the
+metric's Alignment; :meth:`MotionGraph.assemble` turns them into a graph: every transition frame
+is a node, consecutive nodes are joined by clips (frame ranges of the source), and dead ends are
+trimmed by keeping the largest strongly connected component.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from types import MappingProxyType
+
+import attrs
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+from . import _npzfile
+from .errors import FileFormatError, ValidationError
+from .motion import Alignment, Motion
+
+__all__ = ["MotionGraph", "Clip", "Transition"]
+
+GRAPH_FORMAT_VERSION = 1
+
+
+@attrs.frozen(kw_only=True)
+class Clip:
+    """An edge that plays source frames ``start..stop`` (both included) from node `source` to `target`."""
+
+    source: int
+    target: int
+    start: int
+    stop: int
+
+    @property
+    def n_frames(self) -> int:
+        return self.stop - self.start + 1
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class Transition:
+    """An edge from node `source` (source frame `start`) to node `target` (source frame `end`).
+
+    `alignment` is ``metric.compare(configuration(start), configuration(end))``: it lays the
+    motion continuing from `end` onto the world of `start`, and agent i of `start` continues as
+    agent ``alignment.assignment[i]`` of `end`. `blend` is the number of frames over which
+    synthesis blends the two motions.
+    """
+
+    source: int
+    target: int
+    start: int
+    end: int
+    alignment: Alignment
+    blend: int
+
+    def __eq__(self, other):
+        if not isinstance(other, Transition):
+            return NotImplemented
+        return attrs.astuple(self, recurse=False) == attrs.astuple(other, recurse=False)
+
+    __hash__ = None
+
+
+def _frozen_json(value, field: str) -> Mapping:
+    try:
+        return MappingProxyType(json.loads(json.dumps(dict(value or {}))))
+    except (TypeError, ValueError) as exc:
+        raise ValidationError(f"{field} must be a JSON-serializable mapping: {exc}") from None
+
+
+def _thaw(value):
+    if isinstance(value, Mapping):
+        return {k: _thaw(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_thaw(v) for v in value]
+    return value
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class MotionGraph:
+    """A motion graph over a source Motion.
+
+    Attributes
+    ----------
+    motion : Motion
+        The source recording.
+    nodes : ndarray of int, shape (K,)
+        Source frame of each node, increasing.
+    clips : tuple of Clip
+        Clip k joins node k to node k + 1.
+    transitions : tuple of Transition
+    params : mapping
+        The builder's parameters, as JSON values (threshold chosen, candidate stride, ...).
+    provenance : mapping
+        Metric, builder, flockkit version and seed, as JSON values.
+    """
+
+    motion: Motion
+    nodes: np.ndarray = attrs.field(converter=lambda v: _int_array(v, "MotionGraph.nodes"))
+    clips: tuple = attrs.field(converter=tuple)
+    transitions: tuple = attrs.field(converter=tuple)
+    params: Mapping = attrs.field(factory=dict, converter=lambda v: _frozen_json(v, "MotionGraph.params"))
+    provenance: Mapping = attrs.field(factory=dict, converter=lambda v: _frozen_json(v, "MotionGraph.provenance"))
+
+    def __attrs_post_init__(self):
+        k, frames = len(self.nodes), self.motion.n_frames
+        if k < 1 or self.nodes.ndim != 1 or np.any(np.diff(self.nodes) <= 0) or self.nodes[0] < 0 or self.nodes[-1] >= frames:
+            raise ValidationError(f"MotionGraph.nodes must be increasing source frames in 0..{frames - 1}; got {self.nodes}")
+        for index, clip in enumerate(self.clips):
+            if (clip.source, clip.target, clip.start, clip.stop) != (index, index + 1, *self.nodes[index : index + 2]):
+                raise ValidationError(f"MotionGraph.clips[{index}] must join node {index} to node {index + 1} by their frames")
+        if len(self.clips) != k - 1:
+            raise ValidationError(f"MotionGraph needs {k - 1} clips for {k} nodes; got {len(self.clips)}")
+        n, d = self.motion.n_agents, self.motion.dims
+        for index, transition in enumerate(self.transitions):
+            field = f"MotionGraph.transitions[{index}]"
+            if not (0 <= transition.source < k and 0 <= transition.target < k):
+                raise ValidationError(f"{field} joins nodes outside 0..{k - 1}")
+            if (transition.start, transition.end) != (self.nodes[transition.source], self.nodes[transition.target]):
+                raise ValidationError(f"{field} frames do not match its nodes")
+            if transition.alignment.assignment.shape != (n,) or transition.alignment.rotation.shape != (d, d):
+                raise ValidationError(f"{field}.alignment is not for {n} agents in {d}D")
+            if transition.blend < 0:
+                raise ValidationError(f"{field}.blend must be >= 0; got {transition.blend}")
+
+    # -- building ---------------------------------------------------------------------------
+
+    @classmethod
+    def assemble(
+        cls,
+        motion: Motion,
+        transitions: Sequence[tuple[int, int, Alignment, int]],
+        *,
+        params: Mapping | None = None,
+        provenance: Mapping | None = None,
+    ) -> MotionGraph:
+        """Build a graph from transitions ``(start_frame, end_frame, alignment, blend)``: nodes at
+        every transition frame, clips between consecutive nodes, trimmed to the largest strongly
+        connected component (ties: the one holding the earliest frame).
+
+        Raises ValidationError if no transitions are given (a graph needs at least one loop).
+        """
+        if not transitions:
+            raise ValidationError(
+                "no transitions: the recording has no pair of similar configurations under the builder's "
+                "threshold; raise the threshold or record longer motion"
+            )
+        frames = np.unique([f for start, end, _, _ in transitions for f in (start, end)])
+        index = {int(f): i for i, f in enumerate(frames)}
+        k = len(frames)
+        rows = list(range(k - 1)) + [index[s] for s, _, _, _ in transitions]
+        cols = list(range(1, k)) + [index[e] for _, e, _, _ in transitions]
+        adjacency = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(k, k)).tocsr()
+        _, labels = connected_components(adjacency, directed=True, connection="strong")
+        sizes = np.bincount(labels)
+        # The largest component; among equally large ones, the one with the earliest frame.
+        kept = labels == min(np.flatnonzero(sizes == sizes.max()), key=lambda label: np.argmax(labels == label))
+        if kept.sum() < 2 and not any(s == e for s, e, _, _ in transitions):
+            raise ValidationError("the transitions form no loop through the recording; nothing can be walked")
+        nodes = frames[kept]
+        renumber = {int(f): i for i, f in enumerate(nodes)}
+        clips = [Clip(source=i, target=i + 1, start=int(nodes[i]), stop=int(nodes[i + 1])) for i in range(len(nodes) - 1)]
+        # Consecutive kept nodes are consecutive in frame order (a node between two kept nodes is
+        # reachable from one and reaches the other, so it is kept too).
+        kept_transitions = [
+            Transition(source=renumber[s], target=renumber[e], start=int(s), end=int(e), alignment=a, blend=int(b))
+            for s, e, a, b in transitions
+            if s in renumber and e in renumber
+        ]
+        return cls(motion=motion, nodes=nodes, clips=clips, transitions=kept_transitions, params=params, provenance=provenance)
+
+    # -- queries ----------------------------------------------------------------------------
+
+    def out_edges(self, node: int) -> list[tuple[str, int]]:
+        """Edges leaving `node`: ``("clip", k)`` and ``("transition", k)`` pairs, clips first."""
+        edges = [("clip", node)] if node < len(self.clips) else []
+        return edges + [("transition", i) for i, t in enumerate(self.transitions) if t.source == node]
+
+    def edge_target(self, edge: tuple[str, int]) -> int:
+        kind, index = edge
+        return (self.clips if kind == "clip" else self.transitions)[index].target
+
+    def kept_frames(self) -> int:
+        """Source frames that some clip plays."""
+        return int(self.nodes[-1] - self.nodes[0] + 1) if len(self.clips) else 1
+
+    def stats(self) -> dict:
+        """Plain numbers describing the graph; equal graphs give equal dicts."""
+        distances = np.array([t.alignment.distance for t in self.transitions])
+        lengths = np.array([c.n_frames - 1 for c in self.clips], dtype=float)
+        summary = (
+            {"min": float(distances.min()), "median": float(np.median(distances)), "max": float(distances.max())}
+            if len(distances)
+            else {"min": None, "median": None, "max": None}
+        )
+        return {
+            "nodes": int(len(self.nodes)),
+            "edges": len(self.clips) + len(self.transitions),
+            "clips": len(self.clips),
+            "transitions": len(self.transitions),
+            "source_frames": self.motion.n_frames,
+            "frames_kept": self.kept_frames(),
+            "fraction_kept": self.kept_frames() / self.motion.n_frames,
+            "mean_clip_seconds": float(lengths.mean() * self.motion.dt) if len(lengths) else 0.0,
+            "transition_cost": summary,
+        }
+
+    def to_networkx(self):
+        """A ``networkx.MultiDiGraph``: nodes carry `frame`; edges carry `kind`, `index` and, for
+        transitions, `distance` and `blend`. Needs networkx."""
+        try:
+            import networkx as nx
+        except ImportError:
+            from .errors import MissingDependencyError
+
+            raise MissingDependencyError("MotionGraph.to_networkx needs networkx: pip install networkx") from None
+        graph = nx.MultiDiGraph()
+        for node, frame in enumerate(self.nodes):
+            graph.add_node(node, frame=int(frame))
+        for index, clip in enumerate(self.clips):
+            graph.add_edge(clip.source, clip.target, kind="clip", index=index, frames=clip.n_frames)
+        for index, t in enumerate(self.transitions):
+            graph.add_edge(t.source, t.target, kind="transition", index=index, distance=t.alignment.distance, blend=t.blend)
+        return graph
+
+    def __eq__(self, other):
+        if not isinstance(other, MotionGraph):
+            return NotImplemented
+        return (
+            self.motion == other.motion
+            and np.array_equal(self.nodes, other.nodes)
+            and self.clips == other.clips
+            and self.transitions == other.transitions
+            and _thaw(self.params) == _thaw(other.params)
+            and _thaw(self.provenance) == _thaw(other.provenance)
+        )
+
+    __hash__ = None
+
+    # -- files -----------------------------------------------------------------------------
+
+    def save(self, path) -> None:
+        """Write the graph and its source motion to one .npz with JSON metadata (atomic)."""
+        t = self.transitions
+        n, d = self.motion.n_agents, self.motion.dims
+        arrays = {
+            "positions": self.motion.positions,
+            "nodes": self.nodes,
+            "transition_nodes": np.array([(x.source, x.target) for x in t], dtype=np.int64).reshape(-1, 2),
+            "transition_blend": np.array([x.blend for x in t], dtype=np.int64),
+            "transition_distance": np.array([x.alignment.distance for x in t], dtype=np.float64),
+            "transition_assignment": np.array([x.alignment.assignment for x in t], dtype=np.int64).reshape(-1, n),
+            "transition_rotation": np.array([x.alignment.rotation for x in t]).reshape(-1, d, d),
+            "transition_translation": np.array([x.alignment.translation for x in t]).reshape(-1, d),
+        }
+        arrays.update({f"channel.{name}": array for name, array in self.motion.channels.items()})
+        metadata = {"dt": self.motion.dt, "params": _thaw(self.params), "provenance": _thaw(self.provenance)}
+        _npzfile.write(path, kind="graph", version=GRAPH_FORMAT_VERSION, arrays=arrays, metadata=metadata)
+
+    @classmethod
+    def load(cls, path) -> MotionGraph:
+        """Read a graph written by :meth:`save`; FileFormatError naming the file if it is not one."""
+        arrays, header = _npzfile.read(path, kind="graph", versions=(GRAPH_FORMAT_VERSION,))
+        try:
+            motion = Motion(
+                positions=arrays["positions"],
+                dt=header["dt"],
+                channels={k.removeprefix("channel."): v for k, v in arrays.items() if k.startswith("channel.")},
+            )
+            nodes = arrays["nodes"]
+            clips = [Clip(source=i, target=i + 1, start=int(nodes[i]), stop=int(nodes[i + 1])) for i in range(len(nodes) - 1)]
+            transitions = [
+                Transition(
+                    source=int(s), target=int(e), start=int(nodes[s]), end=int(nodes[e]), blend=int(blend),
+                    alignment=Alignment(distance=dist, assignment=assign, rotation=rot, translation=shift),
+                )
+                for (s, e), blend, dist, assign, rot, shift in zip(
+                    arrays["transition_nodes"], arrays["transition_blend"], arrays["transition_distance"],
+                    arrays["transition_assignment"], arrays["transition_rotation"], arrays["transition_translation"],
+                )
+            ]
+            return cls(motion=motion, nodes=nodes, clips=clips, transitions=transitions,
+                       params=header.get("params"), provenance=header.get("provenance"))
+        except (KeyError, IndexError, TypeError, ValidationError) as exc:
+            raise FileFormatError(f"{path}: invalid motion graph: {type(exc).__name__}: {exc}") from None
+
+
+def _int_array(value, field: str) -> np.ndarray:
+    array = np.array(value)
+    if array.dtype.kind not in "iu":
+        raise ValidationError(f"{field} must hold integers; got dtype {array.dtype}")
+    array = array.astype(np.int64)
+    array.setflags(write=False)
+    return array

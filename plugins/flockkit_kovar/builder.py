@@ -1,0 +1,201 @@
+"""Kovar-style motion-graph construction (paper 000 section 4.3).
+
+1. Candidate frames every `candidate_interval` seconds (leaving room for a blend at the end).
+2. The difference matrix E(t_i, t_j) = metric.compare(configuration(t_i), configuration(t_j)).
+3. Transitions at local minima of E (over its 8 neighbors, the diagonal excluded) at least
+   `min_gap` seconds apart and at most the threshold; both directions of each minimum.
+4. ``flockkit.MotionGraph.assemble``: clips between transition frames, dead ends trimmed.
+
+Threshold. Given `threshold` it is absolute. Otherwise it is adaptive: it starts at
+`relative_threshold` times the group's mean squared radius (its mean squared distance to the center
+of mass, averaged over candidates), so it means the same for any units and group size, and
+doubles until at least `min_transitions` transitions qualify (up to the mean squared radius
+itself). With `per_second`, the paper's rule is used instead: the lowest
+``ceil(per_second * duration)`` local minima, whatever their values.
+
+Pruning. With a threshold (absolute or adaptive) and a metric offering ``lower_bound``, E is only
+computed where the bound is at most the threshold. A cell left out has E > threshold, so it can
+neither be a transition nor keep a computed cell under the threshold from being a local minimum:
+``prune=True`` and ``prune=False`` give the identical graph. The `per_second` rule needs every
+value and never prunes.
+"""
+
+from __future__ import annotations
+
+import math
+
+import attrs
+import numpy as np
+
+import flockkit
+from flockkit.errors import ValidationError
+
+
+def _check(name, test, expected):
+    def validator(instance, attribute, value):
+        if not test(value):
+            raise ValidationError(f"kovar parameter {name} must be {expected}; got {value!r}")
+
+    return validator
+
+
+def _number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+
+
+def _positive(value) -> bool:
+    return _number(value) and value > 0
+
+
+def _non_negative(value) -> bool:
+    return _number(value) and value >= 0
+
+
+def _count(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool)
+
+
+@attrs.frozen(kw_only=True)
+class Kovar:
+    """Parameters
+    ----------
+    candidate_interval : float
+        Seconds between candidate frames (rounded to whole frames, at least one).
+    min_gap : float
+        Seconds at least between the two frames of a transition.
+    threshold : float, optional
+        Absolute threshold on E; None: adaptive (see the module docstring).
+    relative_threshold : float
+        Adaptive start, as a fraction of the mean squared group radius.
+    min_transitions : int
+        The adaptive threshold doubles until this many transitions qualify.
+    per_second : float, optional
+        Use the paper's rule instead: the lowest ceil(per_second * duration) local minima.
+    blend_time : float
+        Seconds over which synthesis blends across a transition.
+    prune : bool
+        Skip exact evaluations the metric's lower bound rules out.
+    n_jobs : int
+        joblib workers for the difference matrix (-1: all cores); a Dask cluster can run them
+        through joblib's dask backend.
+    progress : bool
+        Show a progress bar over the difference matrix.
+    """
+
+    candidate_interval: float = attrs.field(default=0.2, validator=_check("candidate_interval", _positive, "a number > 0"))
+    min_gap: float = attrs.field(default=1.0, validator=_check("min_gap", _non_negative, "a number >= 0"))
+    threshold: float | None = attrs.field(default=None, validator=_check("threshold", lambda v: v is None or _positive(v), "None or a number > 0"))
+    relative_threshold: float = attrs.field(default=0.02, validator=_check("relative_threshold", _positive, "a number > 0"))
+    min_transitions: int = attrs.field(default=4, validator=_check("min_transitions", lambda v: _count(v) and v >= 1, "an integer >= 1"))
+    per_second: float | None = attrs.field(default=None, validator=_check("per_second", lambda v: v is None or _positive(v), "None or a number > 0"))
+    blend_time: float = attrs.field(default=0.3, validator=_check("blend_time", _non_negative, "a number >= 0"))
+    prune: bool = attrs.field(default=True, validator=_check("prune", lambda v: isinstance(v, bool), "True or False"))
+    n_jobs: int = attrs.field(default=1, validator=_check("n_jobs", lambda v: _count(v) and v != 0, "a non-zero integer"))
+    progress: bool = attrs.field(default=False, validator=_check("progress", lambda v: isinstance(v, bool), "True or False"))
+
+    def build(self, motion: flockkit.Motion, metric, rng: np.random.Generator) -> flockkit.MotionGraph:
+        """The motion graph of `motion` under `metric` (deterministic; `rng` is not needed)."""
+        if not isinstance(motion, flockkit.Motion):
+            raise ValidationError(f"kovar: motion must be a flockkit.Motion; got {type(motion).__name__}")
+        stride = max(1, round(self.candidate_interval / motion.dt))
+        blend = round(self.blend_time / motion.dt)
+        gap = math.ceil(self.min_gap / motion.dt - 1e-9)
+        frames = np.arange(0, motion.n_frames - blend - 1, stride)
+        if len(frames) < 3:
+            raise ValidationError(
+                f"kovar: a motion of {motion.n_frames} frames gives {len(frames)} candidate frames; "
+                "record longer motion or lower candidate_interval and blend_time"
+            )
+        configs = [motion.configuration(int(f)) for f in frames]
+        matrix = _Matrix(configs, metric, n_jobs=self.n_jobs, progress=self.progress)
+        far = np.abs(frames[:, None] - frames[None, :]) >= max(gap, 1)
+        if self.per_second is not None:
+            matrix.fill(np.ones_like(far))
+            count = math.ceil(self.per_second * motion.duration)
+            minima = _local_minima(matrix.values, far)
+            chosen = sorted(minima, key=lambda ij: (matrix.values[ij], ij))[:count]
+            threshold = float(max((matrix.values[ij] for ij in chosen), default=0.0))
+        else:
+            spread = float(np.mean([np.mean(np.sum((c.positions - c.center_of_mass()) ** 2, axis=1)) for c in configs]))
+            threshold = self.threshold if self.threshold is not None else self.relative_threshold * spread
+            prune = self.prune and callable(getattr(metric, "lower_bound", None))
+            while True:
+                matrix.fill(matrix.lower_bounds() <= threshold if prune else np.ones_like(far))
+                chosen = [ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= threshold]
+                if self.threshold is not None or len(chosen) >= self.min_transitions or threshold >= spread:
+                    break
+                threshold = min(2 * threshold, spread)
+        transitions = [(int(frames[i]), int(frames[j]), matrix.alignment(i, j), blend) for i, j in sorted(chosen)]
+        params = {
+            "candidate_interval": self.candidate_interval, "stride": stride, "min_gap": self.min_gap,
+            "threshold": threshold, "threshold_rule": "per_second" if self.per_second else ("absolute" if self.threshold else "adaptive"),
+            "per_second": self.per_second, "blend_frames": blend, "candidates": len(frames),
+            "evaluated": matrix.evaluated, "prune": self.prune,
+        }
+        return flockkit.MotionGraph.assemble(motion, transitions, params=params, provenance={"builder": "kovar"})
+
+
+class _Matrix:
+    """The difference matrix, computed lazily, symmetric; cells not computed hold +inf."""
+
+    def __init__(self, configs, metric, *, n_jobs, progress):
+        k = len(configs)
+        self.configs, self.metric, self.n_jobs, self.progress = configs, metric, n_jobs, progress
+        self.values = np.full((k, k), np.inf)
+        self.alignments: dict[tuple[int, int], flockkit.Alignment] = {}
+        self._bounds = None
+
+    @property
+    def evaluated(self) -> int:
+        return len(self.alignments)
+
+    def lower_bounds(self) -> np.ndarray:
+        if self._bounds is None:
+            k = len(self.configs)
+            self._bounds = np.zeros((k, k))
+            for i in range(k):
+                for j in range(i + 1, k):
+                    self._bounds[i, j] = self._bounds[j, i] = self.metric.lower_bound(self.configs[i], self.configs[j])
+        return self._bounds
+
+    def fill(self, wanted: np.ndarray) -> None:
+        """Compute every upper-triangle cell where `wanted` holds and that is not computed yet."""
+        cells = [(i, j) for i, j in zip(*np.nonzero(np.triu(wanted, 1))) if (i, j) not in self.alignments]
+        if not cells:
+            return
+        found = _run(self.metric.compare, [(self.configs[i], self.configs[j]) for i, j in cells], self.n_jobs, self.progress)
+        for (i, j), alignment in zip(cells, found):
+            self.alignments[(int(i), int(j))] = alignment
+            self.values[i, j] = self.values[j, i] = alignment.distance
+
+    def alignment(self, i: int, j: int) -> flockkit.Alignment:
+        """compare(config i, config j): computed for i < j, inverted for i > j."""
+        return self.alignments[(i, j)] if i < j else self.alignments[(j, i)].inverse()
+
+
+def _run(function, argument_pairs, n_jobs, progress):
+    """function(*pair) for every pair, through joblib when n_jobs != 1, with an optional bar."""
+    if progress:
+        from tqdm.auto import tqdm
+
+        argument_pairs = tqdm(argument_pairs, desc="difference matrix", unit="pair")
+    if n_jobs == 1:
+        return [function(a, b) for a, b in argument_pairs]
+    from joblib import Parallel, delayed
+
+    return Parallel(n_jobs=n_jobs, batch_size="auto")(delayed(function)(a, b) for a, b in argument_pairs)
+
+
+def _local_minima(values: np.ndarray, far: np.ndarray) -> list[tuple[int, int]]:
+    """Cells (i, j), i != j, at most each of their 8 neighbors (diagonal ignored), with far[i, j]."""
+    k = len(values)
+    padded = np.full((k + 2, k + 2), np.inf)
+    padded[1:-1, 1:-1] = values
+    np.fill_diagonal(padded[1:-1, 1:-1], np.inf)
+    centre = padded[1:-1, 1:-1]
+    is_min = np.isfinite(centre) & far
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            if di or dj:
+                is_min &= centre <= padded[1 + di : k + 1 + di, 1 + dj : k + 1 + dj]
+    return [(int(i), int(j)) for i, j in zip(*np.nonzero(is_min))]

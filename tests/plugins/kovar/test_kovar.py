@@ -1,0 +1,127 @@
+import networkx as nx
+import numpy as np
+import pytest
+
+import flockkit
+from flockkit.errors import FileFormatError, ValidationError
+
+METRIC = flockkit.get("metric", "icp-hungarian")
+
+
+@pytest.fixture(scope="module")
+def recording():
+    return flockkit.simulate(n_agents=6, steps=160, seed=11)
+
+
+@pytest.fixture(scope="module")
+def graph(recording):
+    return flockkit.get("builder", "kovar").build(recording, METRIC, np.random.default_rng(0))
+
+
+def fish(shared_data):
+    table = np.loadtxt(shared_data / "sticklebacks-5" / "ground_truth.csv", delimiter=",")
+    return flockkit.Motion(positions=table[:, 1:].reshape(-1, 5, 2), dt=1 / 15)
+
+
+def structure(graph):
+    return list(graph.nodes), graph.clips, graph.transitions
+
+
+def test_pruning_gives_the_identical_graph(recording, graph):
+    full = flockkit.get("builder", "kovar", prune=False).build(recording, METRIC, np.random.default_rng(0))
+    assert structure(full) == structure(graph) and full.stats() == graph.stats()
+    assert graph.params["evaluated"] <= full.params["evaluated"]
+
+
+def test_pruning_identical_with_an_absolute_threshold(recording, graph):
+    threshold = float(np.median([t.alignment.distance for t in graph.transitions]))
+    pruned, full = (
+        flockkit.get("builder", "kovar", threshold=threshold, prune=prune).build(recording, METRIC, np.random.default_rng(0))
+        for prune in (True, False)
+    )
+    assert structure(pruned) == structure(full)
+    assert pruned.params["evaluated"] < full.params["evaluated"]  # the lower bound did skip work
+
+
+def test_graph_is_strongly_connected_and_consistent(recording, graph):
+    stats = graph.stats()
+    assert stats["transitions"] >= 2 and 0 < stats["fraction_kept"] <= 1
+    network = graph.to_networkx()
+    assert nx.is_strongly_connected(network) and network.number_of_edges() == stats["edges"]
+    for t in graph.transitions:
+        assert abs(t.end - t.start) >= 10  # min_gap 1 s at dt 0.1
+        a, b = recording.configuration(t.start), recording.configuration(t.end)
+        assert t.alignment.residual(a, b) == pytest.approx(t.alignment.distance, rel=1e-6, abs=1e-9)
+        assert t.alignment.distance <= graph.params["threshold"]
+
+
+def test_transitions_are_local_minima_of_the_difference_matrix(recording, graph):
+    stride = graph.params["stride"]
+    last = (graph.params["candidates"] - 1) * stride  # the builder's last candidate frame
+    for t in graph.transitions[:6]:
+        for di in (-stride, 0, stride):
+            for dj in (-stride, 0, stride):
+                i, j = t.start + di, t.end + dj
+                if (di or dj) and i != j and 0 <= i and 0 <= j and max(i, j) <= last:
+                    neighbor = METRIC.compare(recording.configuration(i), recording.configuration(j)).distance
+                    assert t.alignment.distance <= neighbor + 1e-9
+
+
+def test_save_load_round_trip(graph, tmp_path):
+    path = tmp_path / "graph.npz"
+    graph.save(path)
+    loaded = flockkit.MotionGraph.load(path)
+    assert loaded == graph and loaded.stats() == graph.stats()
+    with pytest.raises(FileFormatError, match="'motion'"):
+        flockkit.MotionGraph.load(_motion_file(tmp_path))
+
+
+def _motion_file(tmp_path):
+    path = tmp_path / "motion.npz"
+    flockkit.simulate(n_agents=2, steps=3, seed=0).save(path)
+    return path
+
+
+def test_paper_rule_and_absolute_threshold(recording):
+    per_second = flockkit.get("builder", "kovar", per_second=0.2).build(recording, METRIC, np.random.default_rng(0))
+    assert per_second.params["threshold_rule"] == "per_second"
+    minima = int(np.ceil(0.2 * recording.duration))
+    assert 1 <= len(per_second.transitions) <= 2 * minima  # both directions of each chosen minimum
+    with pytest.raises(ValidationError, match="no transitions"):
+        flockkit.get("builder", "kovar", threshold=1e-12).build(recording, METRIC, np.random.default_rng(0))
+
+
+def test_parallel_build_is_identical(recording, graph):
+    parallel = flockkit.get("builder", "kovar", n_jobs=2).build(recording, METRIC, np.random.default_rng(0))
+    assert parallel == graph
+
+
+def test_sticklebacks_default_graph(shared_data):
+    graph = flockkit.get("builder", "kovar").build(fish(shared_data), METRIC, np.random.default_rng(0))
+    assert graph.stats()["transitions"] >= 3
+    assert nx.is_strongly_connected(graph.to_networkx())
+
+
+@pytest.mark.parametrize(
+    "params, name",
+    [({"candidate_interval": 0}, "candidate_interval"), ({"min_transitions": 0}, "min_transitions"),
+     ({"threshold": -1.0}, "threshold"), ({"n_jobs": 0}, "n_jobs"), ({"prune": "yes"}, "prune")],
+)
+def test_bad_parameters(params, name):
+    with pytest.raises(ValidationError, match=name):
+        flockkit.get("builder", "kovar", **params)
+
+
+def test_too_short_a_recording():
+    with pytest.raises(ValidationError, match="candidate frames"):
+        flockkit.get("builder", "kovar").build(flockkit.simulate(n_agents=3, steps=4, seed=0), METRIC, np.random.default_rng(0))
+
+
+def test_assemble_trims_dead_ends(recording):
+    identity = METRIC.compare(recording.configuration(0), recording.configuration(0))
+    # 50 -> 100 and 100 -> 50 make a loop through 50..100; 150 -> 200 is a dead end.
+    transitions = [(100, 50, identity, 3), (150, 200, identity, 3)]
+    graph = flockkit.MotionGraph.assemble(recording, transitions)
+    assert list(graph.nodes) == [50, 100] and len(graph.transitions) == 1 and graph.kept_frames() == 51
+    with pytest.raises(ValidationError, match="no transitions"):
+        flockkit.MotionGraph.assemble(recording, [])
