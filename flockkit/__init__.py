@@ -6,8 +6,9 @@ lookup (``get``, ``available``, ``hookimpl``) and the convenience layer (``simul
 
 from . import errors
 from .constraints import Ball, Box, Polygon
-from .convenience import random_flock, simulate
-from .graph import Clip, MotionGraph, Transition
+from .convenience import build_graph, random_flock, simulate, walk
+from .graph import Clip, MotionGraph, Transition, Walk
+from .synthesis import synthesize, synthesize_many
 from .hookspecs import hookimpl
 from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State
 from .registry import available, get
@@ -24,6 +25,9 @@ __all__ = [
     "MotionGraph",
     "Clip",
     "Transition",
+    "Walk",
+    "synthesize",
+    "synthesize_many",
     "Ball",
     "Box",
     "Polygon",
@@ -31,6 +35,8 @@ __all__ = [
     "available",
     "hookimpl",
     "simulate",
+    "build_graph",
+    "walk",
     "random_flock",
     "errors",
     "__version__",

@@ -5,14 +5,17 @@ from __future__ import annotations
 import inspect
 import math
 
+import attrs
+
 import numpy as np
 
 from ._arrays import count, positive_number
 from .errors import ValidationError
+from .graph import MotionGraph, Walk
 from .motion import Motion, State
 from .registry import get
 
-__all__ = ["simulate", "random_flock"]
+__all__ = ["simulate", "random_flock", "build_graph", "walk"]
 
 
 def random_flock(*, n_agents: int, dims: int = 2, rng: np.random.Generator, spacing: float = 1.0, speed: float = 1.0) -> State:
@@ -89,3 +92,45 @@ def simulate(
 
     with tqdm(total=steps, unit="step", desc=f"simulating {n_agents} agents") as bar:
         return model.forward(initial, steps, rng, progress=lambda done: bar.update(done - bar.n))
+
+
+def build_graph(
+    motion: Motion,
+    *,
+    builder: str = "kovar",
+    metric: str = "icp-hungarian",
+    metric_params: dict | None = None,
+    seed: int | None = None,
+    **params,
+) -> MotionGraph:
+    """Build a motion graph of `motion` (paper 000 section 4.3).
+
+    `params` go to the builder (for ``kovar``: ``threshold``, ``blend_time``, ``n_jobs``, ...),
+    `metric_params` to the metric (for ``icp-hungarian``: ``velocity_weight``, ...). The graph's
+    provenance records both names and parameters, the flockkit version and the seed.
+    """
+    if not isinstance(motion, Motion):
+        raise ValidationError(f"build_graph needs a flockkit.Motion; got {type(motion).__name__}")
+    metric_params = dict(metric_params or {})
+    graph = get("builder", builder, **params).build(motion, get("metric", metric, **metric_params), np.random.default_rng(seed))
+    from . import __version__
+
+    provenance = {
+        **graph.provenance,
+        "builder": builder,
+        "builder_params": {k: v for k, v in params.items() if isinstance(v, (int, float, str, bool, type(None)))},
+        "metric": metric,
+        "metric_params": {k: v for k, v in metric_params.items() if isinstance(v, (int, float, str, bool, type(None)))},
+        "flockkit": __version__,
+        "seed": seed,
+    }
+    return attrs.evolve(graph, provenance=provenance)
+
+
+def walk(graph: MotionGraph, *, strategy: str = "random", duration: float | None = None, seed: int | None = None, **params) -> Walk:
+    """A walk through `graph` with a walk strategy (``random``; ``region`` with ``region=``)
+    covering `duration` seconds (default: the length of the graph's source motion)."""
+    if not isinstance(graph, MotionGraph):
+        raise ValidationError(f"walk needs a flockkit.MotionGraph; got {type(graph).__name__}")
+    duration = graph.motion.duration if duration is None else duration
+    return get("walk", strategy, **params).walk(graph, np.random.default_rng(seed), duration)

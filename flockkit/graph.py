@@ -22,7 +22,7 @@ from . import _npzfile
 from .errors import FileFormatError, ValidationError
 from .motion import Alignment, Motion
 
-__all__ = ["MotionGraph", "Clip", "Transition"]
+__all__ = ["MotionGraph", "Clip", "Transition", "Walk"]
 
 GRAPH_FORMAT_VERSION = 1
 
@@ -62,6 +62,56 @@ class Transition:
         if not isinstance(other, Transition):
             return NotImplemented
         return attrs.astuple(self, recurse=False) == attrs.astuple(other, recurse=False)
+
+    __hash__ = None
+
+
+def _edge(value) -> tuple[str, int]:
+    kind, index = value
+    if kind not in ("clip", "transition") or isinstance(index, bool) or not isinstance(index, (int, np.integer)) or index < 0:
+        raise ValidationError(f"Walk.edges entries must be ('clip' or 'transition', index >= 0); got {value!r}")
+    return kind, int(index)
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class Walk:
+    """A path through a MotionGraph: where it starts, how the source is placed, and its edges.
+
+    Attributes
+    ----------
+    start : int
+        The node the walk starts at.
+    edges : tuple of (str, int)
+        ``("clip", k)`` or ``("transition", k)``, each leaving the node the previous one reached.
+    rotation, translation : ndarray
+        The start pose: source coordinates map to the world as ``rotation @ p + translation``.
+    """
+
+    start: int = attrs.field(converter=int)
+    edges: tuple = attrs.field(converter=lambda edges: tuple(_edge(e) for e in edges))
+    rotation: np.ndarray = attrs.field(default=None)
+    translation: np.ndarray = attrs.field(default=None)
+
+    def __attrs_post_init__(self):
+        if self.start < 0:
+            raise ValidationError(f"Walk.start must be a node index >= 0; got {self.start}")
+
+    def pose(self, dims: int) -> tuple[np.ndarray, np.ndarray]:
+        """(rotation, translation) of the start pose, identity where not given."""
+        rotation = np.eye(dims) if self.rotation is None else np.asarray(self.rotation, dtype=np.float64)
+        translation = np.zeros(dims) if self.translation is None else np.asarray(self.translation, dtype=np.float64)
+        if rotation.shape != (dims, dims) or translation.shape != (dims,):
+            raise ValidationError(f"Walk start pose must be a ({dims}, {dims}) rotation and a ({dims},) translation")
+        return rotation, translation
+
+    def __eq__(self, other):
+        if not isinstance(other, Walk):
+            return NotImplemented
+        same_pose = all(
+            (x is None and y is None) or (x is not None and y is not None and np.array_equal(x, y))
+            for x, y in ((self.rotation, other.rotation), (self.translation, other.translation))
+        )
+        return self.start == other.start and self.edges == other.edges and same_pose
 
     __hash__ = None
 
@@ -141,7 +191,9 @@ class MotionGraph:
     ) -> MotionGraph:
         """Build a graph from transitions ``(start_frame, end_frame, alignment, blend)``: nodes at
         every transition frame, clips between consecutive nodes, trimmed to the largest strongly
-        connected component (ties: the one holding the earliest frame).
+        connected component (ties: the one holding the earliest frame). Transitions that land less
+        than their blend before the last kept frame are dropped (and the trimming repeated), so a
+        walk can always continue.
 
         Raises ValidationError if no transitions are given (a graph needs at least one loop).
         """
@@ -150,27 +202,24 @@ class MotionGraph:
                 "no transitions: the recording has no pair of similar configurations under the builder's "
                 "threshold; raise the threshold or record longer motion"
             )
-        frames = np.unique([f for start, end, _, _ in transitions for f in (start, end)])
-        index = {int(f): i for i, f in enumerate(frames)}
-        k = len(frames)
-        rows = list(range(k - 1)) + [index[s] for s, _, _, _ in transitions]
-        cols = list(range(1, k)) + [index[e] for _, e, _, _ in transitions]
-        adjacency = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(k, k)).tocsr()
-        _, labels = connected_components(adjacency, directed=True, connection="strong")
-        sizes = np.bincount(labels)
-        # The largest component; among equally large ones, the one with the earliest frame.
-        kept = labels == min(np.flatnonzero(sizes == sizes.max()), key=lambda label: np.argmax(labels == label))
-        if kept.sum() < 2 and not any(s == e for s, e, _, _ in transitions):
-            raise ValidationError("the transitions form no loop through the recording; nothing can be walked")
-        nodes = frames[kept]
+        transitions = list(transitions)
+        while True:
+            nodes = _strongly_connected_frames(transitions)
+            last = nodes[-1] if len(nodes) else -1
+            kept = {int(f) for f in nodes}
+            # A transition must land at least its blend before the last frame, so that a walk can
+            # always go on: clips are always allowed, and at the last node every blend is done.
+            usable = [t for t in transitions if t[0] in kept and t[1] in kept and t[1] + t[3] <= last]
+            if len(usable) == len(transitions):
+                break
+            transitions = usable
+            if not transitions:
+                raise ValidationError("the transitions form no loop through the recording; nothing can be walked")
         renumber = {int(f): i for i, f in enumerate(nodes)}
         clips = [Clip(source=i, target=i + 1, start=int(nodes[i]), stop=int(nodes[i + 1])) for i in range(len(nodes) - 1)]
-        # Consecutive kept nodes are consecutive in frame order (a node between two kept nodes is
-        # reachable from one and reaches the other, so it is kept too).
         kept_transitions = [
             Transition(source=renumber[s], target=renumber[e], start=int(s), end=int(e), alignment=a, blend=int(b))
             for s, e, a, b in transitions
-            if s in renumber and e in renumber
         ]
         return cls(motion=motion, nodes=nodes, clips=clips, transitions=kept_transitions, params=params, provenance=provenance)
 
@@ -184,6 +233,14 @@ class MotionGraph:
     def edge_target(self, edge: tuple[str, int]) -> int:
         kind, index = edge
         return (self.clips if kind == "clip" else self.transitions)[index].target
+
+    def allowed_edges(self, node: int, frames_since_transition: int) -> list[tuple[str, int]]:
+        """Edges a walk may take at `node`: a transition only once its blend has played out
+        (`frames_since_transition` frames of clips since the last one), so blends never overlap."""
+        return [
+            edge for edge in self.out_edges(node)
+            if edge[0] == "clip" or frames_since_transition >= self.transitions[edge[1]].blend
+        ]
 
     def kept_frames(self) -> int:
         """Source frames that some clip plays."""
@@ -288,6 +345,26 @@ class MotionGraph:
                        params=header.get("params"), provenance=header.get("provenance"))
         except (KeyError, IndexError, TypeError, ValidationError) as exc:
             raise FileFormatError(f"{path}: invalid motion graph: {type(exc).__name__}: {exc}") from None
+
+
+def _strongly_connected_frames(transitions) -> np.ndarray:
+    """Frames of the largest strongly connected component (ties: the one with the earliest frame)
+    of the graph whose nodes are the transition frames, joined in order by clips and by the
+    transitions. Consecutive kept frames are joined by clips: a frame between two kept ones is
+    reachable from one and reaches the other, so it is kept too."""
+    frames = np.unique([f for start, end, _, _ in transitions for f in (start, end)])
+    index = {int(f): i for i, f in enumerate(frames)}
+    k = len(frames)
+    rows = list(range(k - 1)) + [index[s] for s, _, _, _ in transitions]
+    cols = list(range(1, k)) + [index[e] for _, e, _, _ in transitions]
+    adjacency = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(k, k)).tocsr()
+    _, labels = connected_components(adjacency, directed=True, connection="strong")
+    sizes = np.bincount(labels)
+    largest = min(np.flatnonzero(sizes == sizes.max()), key=lambda label: np.argmax(labels == label))
+    nodes = frames[labels == largest]
+    if len(nodes) < 2 and not any(s == e for s, e, _, _ in transitions):
+        return np.array([], dtype=np.int64)
+    return nodes
 
 
 def _int_array(value, field: str) -> np.ndarray:
