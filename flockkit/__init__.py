@@ -4,7 +4,7 @@ The public API. Value types (``Motion``, ``Configuration``, ``State``, regions),
 lookup (``get``, ``available``, ``hookimpl``) and the convenience layer (``simulate``).
 """
 
-from . import errors
+from . import errors, io
 from .constraints import Ball, Box, Polygon
 from .convenience import build_graph, random_flock, simulate, walk
 from .graph import Clip, MotionGraph, Transition, Walk
@@ -39,5 +39,6 @@ __all__ = [
     "walk",
     "random_flock",
     "errors",
+    "io",
     "__version__",
 ]

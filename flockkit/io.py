@@ -1,0 +1,205 @@
+"""Reading captured motion into a Motion: wide and long text tables, and (T, N, D) .npy arrays.
+
+Captures do not record their frame rate in a form these readers can trust, so every reader takes
+``dt=`` (seconds per frame) or ``fps=``.
+
+Missing values (NaN, or empty fields in a table, or frames or agents absent from a long table)
+follow one policy, :func:`fill_gaps`: a run of at most `max_gap` missing frames of an agent is
+filled, linearly between its neighbors, or with the nearest known position at the start or end
+of the recording; a longer run raises ValidationError naming the file, the agents and the frames.
+``max_gap=0`` accepts no missing value at all.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+
+from ._arrays import count
+from .errors import FileFormatError, ValidationError
+from .motion import Motion
+
+__all__ = ["read_wide", "read_long", "read_npy", "fill_gaps"]
+
+DEFAULT_MAX_GAP = 10
+
+
+def _dt(dt, fps) -> float:
+    if (dt is None) == (fps is None):
+        raise ValidationError("give the frame rate as exactly one of dt= (seconds per frame) or fps= (frames per second)")
+    value, name = (dt, "dt") if dt is not None else (fps, "fps")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+        raise ValidationError(f"{name} must be a number > 0; got {value!r}")
+    return float(dt) if dt is not None else 1.0 / float(fps)
+
+
+def _runs(missing: np.ndarray) -> list[tuple[int, int]]:
+    """(start, stop) of each run of True in a 1-D boolean array."""
+    edges = np.diff(np.concatenate([[0], missing.astype(np.int8), [0]]))
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)))
+
+
+def fill_gaps(positions, *, max_gap: int = DEFAULT_MAX_GAP, source: str = "positions", agent_names=None,
+              frame_numbers=None) -> np.ndarray:
+    """Fill missing (NaN) positions of a (T, N, D) array by the module's policy; returns a copy.
+
+    An agent is missing at a frame if any of its coordinates is NaN. Raises ValidationError,
+    naming `source`, the agents and the frames, for runs longer than `max_gap` frames or an agent
+    that is never seen. `agent_names` and `frame_numbers` are how the message names them
+    (default: their indices).
+    """
+    max_gap = count(max_gap, field="max_gap", minimum=0)
+    filled = np.array(positions, dtype=np.float64)
+    if filled.ndim != 3:
+        raise ValidationError(f"{source}: positions must have shape (T, N, D); got {filled.shape}")
+    missing = np.isnan(filled).any(axis=2)
+    if np.isinf(filled).any():
+        raise ValidationError(f"{source}: positions hold infinite values")
+    too_long = []
+    frames = np.arange(filled.shape[0])
+    names = list(range(filled.shape[1])) if agent_names is None else [_plain(n) for n in agent_names]
+    numbers = frames if frame_numbers is None else [_plain(n) for n in frame_numbers]
+    for agent in np.flatnonzero(missing.any(axis=0)):
+        gaps = _runs(missing[:, agent])
+        known = ~missing[:, agent]
+        if not known.any():
+            too_long.append(f"agent {names[agent]}: never seen")
+            continue
+        too_long += [f"agent {names[agent]}: frames {numbers[a]}..{numbers[b - 1]}" for a, b in gaps if b - a > max_gap]
+        for axis in range(filled.shape[2]):
+            column = filled[:, agent, axis]
+            # np.interp holds the end values outside the known frames: the nearest position.
+            column[~known] = np.interp(frames[~known], frames[known], column[known])
+    if too_long:
+        shown = "; ".join(too_long[:8]) + (f"; and {len(too_long) - 8} more" if len(too_long) > 8 else "")
+        raise ValidationError(
+            f"{source}: missing positions longer than max_gap={max_gap} frames ({shown}); raise max_gap, or select "
+            "agents and frames where every agent is seen"
+        )
+    return filled
+
+
+def _plain(value):
+    return int(value) if float(value).is_integer() else float(value)
+
+
+def _motion(positions, dt, max_gap, source, *, frames=None, agents=None, agent_names=None, frame_numbers=None) -> Motion:
+    positions = np.asarray(positions, dtype=np.float64)
+    agent_names = np.arange(positions.shape[1]) if agent_names is None else np.asarray(agent_names)
+    frame_numbers = np.arange(positions.shape[0]) if frame_numbers is None else np.asarray(frame_numbers)
+    if agents is not None:
+        positions, agent_names = positions[:, list(agents)], agent_names[list(agents)]
+    if frames is not None:
+        positions, frame_numbers = positions[frames], frame_numbers[frames]
+    positions = fill_gaps(positions, max_gap=max_gap, source=source, agent_names=agent_names, frame_numbers=frame_numbers)
+    try:
+        return Motion(positions=positions, dt=dt)
+    except ValidationError as exc:
+        raise ValidationError(f"{source}: {exc}") from None
+
+
+def _table(path: Path, delimiter) -> tuple[np.ndarray, int]:
+    """The numeric rows of a delimited text file (header lines skipped) and the first data line."""
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    text = path.read_text(errors="replace").splitlines()
+    lines = [(number, line) for number, line in enumerate(text, 1) if line.strip() and not line.lstrip().startswith("#")]
+    if not lines:
+        raise FileFormatError(f"{path}: no data rows")
+    if delimiter is None:
+        sample = lines[0][1]
+        delimiter = "\t" if "\t" in sample else "," if "," in sample else None
+    rows, first = [], None
+    for number, line in lines:
+        fields = next(csv.reader([line], delimiter=delimiter)) if delimiter else line.split()
+        try:
+            rows.append([float(f) if f.strip() else math.nan for f in fields])
+        except ValueError:
+            if number == lines[0][0]:
+                continue  # a header line
+            raise FileFormatError(f"{path}, line {number}: not all fields are numbers: {line[:80]!r}") from None
+        first = first or number
+        if len(rows[-1]) != len(rows[0]):
+            raise FileFormatError(f"{path}, line {number}: {len(rows[-1])} fields where line {first} has {len(rows[0])}")
+    if not rows:
+        raise FileFormatError(f"{path}: no numeric rows")
+    return np.array(rows), first
+
+
+def _frame_index(path, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Row -> frame slot, and the frame number of every slot, for frame numbers on a regular grid
+    (gaps in it become missing frames)."""
+    if not np.all(np.isfinite(frames)) or not np.all(frames == np.round(frames)):
+        raise FileFormatError(f"{path}: the frame column must hold whole numbers")
+    unique = np.unique(frames.astype(np.int64))
+    step = int(np.gcd.reduce(np.diff(unique))) if len(unique) > 1 else 1
+    return (frames.astype(np.int64) - unique[0]) // step, np.arange(unique[0], unique[-1] + 1, step)
+
+
+def read_wide(path, *, dt=None, fps=None, dims: int = 2, delimiter=None, max_gap: int = DEFAULT_MAX_GAP,
+              agents=None) -> Motion:
+    """Read a wide table: one row per frame, ``frame, x1, y1, [z1,] x2, y2, ...``.
+
+    A header line is skipped. `agents` selects agents (0-based) before the missing-value policy.
+    Frame numbers may step by any constant; frames absent from the grid count as missing.
+    """
+    path = Path(path)
+    dt = _dt(dt, fps)
+    if dims not in (2, 3):
+        raise ValidationError(f"dims must be 2 or 3; got {dims!r}")
+    table, _ = _table(path, delimiter)
+    columns = table.shape[1] - 1
+    if columns < dims or columns % dims:
+        raise FileFormatError(f"{path}: {columns} coordinate columns after the frame column is not a multiple of dims={dims}")
+    slots, numbers = _frame_index(path, table[:, 0])
+    positions = np.full((len(numbers), columns // dims, dims), np.nan)
+    positions[slots] = table[:, 1:].reshape(len(table), -1, dims)
+    return _motion(positions, dt, max_gap, str(path), agents=agents, frame_numbers=numbers)
+
+
+def read_long(path, *, dt=None, fps=None, dims: int = 2, delimiter=None, max_gap: int = DEFAULT_MAX_GAP,
+              agents=None, frames=None) -> Motion:
+    """Read a long table: one row per agent and frame, ``frame, agent, x, y[, z]``.
+
+    Agents are ordered by id; `agents` selects ids (as in the file), `frames` a slice of frame
+    slots, both before the missing-value policy (so a window where a crowd's members are all
+    present can be read from a scene where people come and go).
+    """
+    path = Path(path)
+    dt = _dt(dt, fps)
+    if dims not in (2, 3):
+        raise ValidationError(f"dims must be 2 or 3; got {dims!r}")
+    table, _ = _table(path, delimiter)
+    if table.shape[1] != 2 + dims:
+        raise FileFormatError(f"{path}: a long table in {dims}D has {2 + dims} columns (frame, agent, coordinates); found {table.shape[1]}")
+    slots, numbers = _frame_index(path, table[:, 0])
+    ids = np.unique(table[:, 1])
+    if agents is not None:
+        wanted = np.asarray(agents, dtype=np.float64)
+        unknown = sorted(set(wanted.tolist()) - set(ids.tolist()))
+        if unknown:
+            raise ValidationError(f"{path}: no agents with ids {unknown[:8]}")
+        ids = wanted
+    column = {agent: i for i, agent in enumerate(ids.tolist())}
+    keep = np.array([agent in column for agent in table[:, 1].tolist()])
+    positions = np.full((len(numbers), len(ids), dims), np.nan)
+    positions[slots[keep], [column[a] for a in table[keep, 1].tolist()]] = table[keep, 2:]
+    return _motion(positions, dt, max_gap, str(path), frames=frames, agent_names=ids, frame_numbers=numbers)
+
+
+def read_npy(path, *, dt=None, fps=None, max_gap: int = DEFAULT_MAX_GAP, agents=None) -> Motion:
+    """Read a (T, N, D) float array saved with ``numpy.save`` (never pickled objects)."""
+    path = Path(path)
+    dt = _dt(dt, fps)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such file")
+    try:
+        array = np.load(path, allow_pickle=False)
+    except (ValueError, OSError, EOFError) as exc:
+        raise FileFormatError(f"{path}: not a readable .npy array: {exc}") from None
+    if not isinstance(array, np.ndarray) or array.ndim != 3 or array.shape[2] not in (2, 3) or array.dtype.kind not in "fiu":
+        raise FileFormatError(f"{path}: expected a numeric (T, N, D) array with D in {{2, 3}}; got {getattr(array, 'shape', '?')}")
+    return _motion(array, dt, max_gap, str(path), agents=agents)
