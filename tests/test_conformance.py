@@ -1,9 +1,15 @@
-"""Every installed behavior model and metric, built-in or third-party, goes through the conformance kit."""
+"""Every installed behavior, metric, builder and walk, built-in or third-party, goes through the conformance kit."""
 
 import flockkit
 from flockkit.testing import parametrize_with_checks
 
-COMPONENTS = [(kind, flockkit.get(kind, name)) for kind in ("behavior", "metric") for name in flockkit.available(kind)]
+# Components that need parameters get ones the kit's inputs can meet (its graph is 2D, near the origin).
+PARAMS = {("walk", "region"): {"region": flockkit.Ball(center=[0.0, 0.0], radius=60.0)}}
+COMPONENTS = [
+    (kind, flockkit.get(kind, name, **PARAMS.get((kind, name), {})))
+    for kind in ("behavior", "metric", "builder", "walk")
+    for name in flockkit.available(kind)
+]
 
 
 @parametrize_with_checks(COMPONENTS)

@@ -24,7 +24,7 @@ import functools
 
 from ..interfaces import PROTOCOLS
 from ..registry import interface_problems
-from . import behavior, metric, strategies
+from . import behavior, builder, metric, strategies, walk
 
 __all__ = ["check_plugin", "parametrize_with_checks", "checks_for", "check_interface", "strategies"]
 
@@ -37,7 +37,12 @@ def check_interface(name, component, *, kind):
     )
 
 
-_KIND_CHECKS = {"behavior": behavior.CHECKS, "metric": metric.CHECKS}
+_KIND_CHECKS = {
+    "behavior": behavior.CHECKS,
+    "metric": metric.CHECKS,
+    "builder": builder.CHECKS,
+    "walk": walk.CHECKS,
+}
 
 
 def checks_for(kind: str) -> tuple:

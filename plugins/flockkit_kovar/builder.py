@@ -9,8 +9,8 @@
 Threshold. Given `threshold` it is absolute. Otherwise it is adaptive: it starts at
 `relative_threshold` times the group's mean squared radius (its mean squared distance to the center
 of mass, averaged over candidates), so it means the same for any units and group size, and
-doubles until at least `min_transitions` transitions qualify (up to the mean squared radius
-itself). With `per_second`, the paper's rule is used instead: the lowest
+doubles until at least `min_transitions` transitions survive the trimming of dead ends (up to the
+mean squared radius itself). With `per_second`, the paper's rule is used instead: the lowest
 ``ceil(per_second * duration)`` local minima, whatever their values.
 
 Pruning. With a threshold (absolute or adaptive) and a metric offering ``lower_bound``, E is only
@@ -68,7 +68,7 @@ class Kovar:
     relative_threshold : float
         Adaptive start, as a fraction of the mean squared group radius.
     min_transitions : int
-        The adaptive threshold doubles until this many transitions qualify.
+        The adaptive threshold doubles until this many transitions survive dead-end trimming.
     per_second : float, optional
         Use the paper's rule instead: the lowest ceil(per_second * duration) local minima.
     blend_time : float
@@ -122,10 +122,10 @@ class Kovar:
             while True:
                 matrix.fill(matrix.lower_bounds() <= threshold if prune else np.ones_like(far))
                 chosen = [ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= threshold]
-                if self.threshold is not None or len(chosen) >= self.min_transitions or threshold >= spread:
+                if self.threshold is not None or threshold >= spread or _kept(motion, frames, chosen, matrix, blend) >= self.min_transitions:
                     break
                 threshold = min(2 * threshold, spread)
-        transitions = [(int(frames[i]), int(frames[j]), matrix.alignment(i, j), blend) for i, j in sorted(chosen)]
+        transitions = _transitions(frames, chosen, matrix, blend)
         params = {
             "candidate_interval": self.candidate_interval, "stride": stride, "min_gap": self.min_gap,
             "threshold": threshold, "threshold_rule": "per_second" if self.per_second else ("absolute" if self.threshold else "adaptive"),
@@ -133,6 +133,20 @@ class Kovar:
             "evaluated": matrix.evaluated, "prune": self.prune,
         }
         return flockkit.MotionGraph.assemble(motion, transitions, params=params, provenance={"builder": "kovar"})
+
+
+def _transitions(frames, chosen, matrix, blend):
+    return [(int(frames[i]), int(frames[j]), matrix.alignment(i, j), blend) for i, j in sorted(chosen)]
+
+
+def _kept(motion, frames, chosen, matrix, blend) -> int:
+    """How many of the chosen transitions survive assembly (dead-end trimming)."""
+    if not chosen:
+        return 0
+    try:
+        return len(flockkit.MotionGraph.assemble(motion, _transitions(frames, chosen, matrix, blend)).transitions)
+    except ValidationError:
+        return 0
 
 
 class _Matrix:

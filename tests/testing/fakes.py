@@ -264,3 +264,105 @@ BROKEN_METRICS = {
     "check_rejects_mismatched_sizes": Truncates,
 }
 BROKEN_BY_KIND = {"behavior": BROKEN, "metric": BROKEN_METRICS}
+
+
+# -- builders: the built-in kovar is the correct base ---------------------------------------
+
+import attrs  # noqa: E402
+
+from flockkit_kovar import Kovar  # noqa: E402
+from flockkit_walks import RandomWalk  # noqa: E402
+
+
+class _KovarBased:
+    def __init__(self):
+        self.inner = Kovar()
+
+    def build(self, motion, metric, rng):
+        return self.inner.build(motion, metric, rng)
+
+
+class NoBuild:
+    def make(self, motion, metric, rng):
+        return None
+
+
+class ReturnsNodes(_KovarBased):
+    def build(self, motion, metric, rng):
+        return super().build(motion, metric, rng).nodes
+
+
+class DeadEnds(_KovarBased):
+    def build(self, motion, metric, rng):
+        graph = super().build(motion, metric, rng)
+        last = len(graph.nodes) - 1
+        return attrs.evolve(graph, transitions=[t for t in graph.transitions if t.source != last])
+
+
+class OverclaimsAlignment(_KovarBased):
+    def build(self, motion, metric, rng):
+        graph = super().build(motion, metric, rng)
+        return attrs.evolve(graph, transitions=[attrs.evolve(t, alignment=_Wrapped._with(t.alignment, distance=0.0)) for t in graph.transitions])
+
+
+class RandomSubset(_KovarBased):
+    def build(self, motion, metric, rng):
+        graph = super().build(motion, metric, rng)
+        keep = np.random.default_rng().random(len(graph.transitions)) < 0.5
+        return attrs.evolve(graph, transitions=[t for t, k in zip(graph.transitions, keep) if k] or graph.transitions[:1])
+
+
+class MutatesMotion(_KovarBased):
+    def build(self, motion, metric, rng):
+        motion.positions.setflags(write=True)
+        motion.positions[0] += 1.0
+        return super().build(motion, metric, rng)
+
+
+class AcceptsArrays(_KovarBased):
+    def build(self, motion, metric, rng):
+        if not isinstance(motion, flockkit.Motion):
+            motion = flockkit.simulate(n_agents=6, steps=120, seed=11)
+        return super().build(motion, metric, rng)
+
+
+BROKEN_BUILDERS = {
+    "check_interface": NoBuild,
+    "check_build_returns_graph": ReturnsNodes,
+    "check_strongly_connected": DeadEnds,
+    "check_transitions_align": OverclaimsAlignment,
+    "check_deterministic": RandomSubset,
+    "check_inputs_unchanged": MutatesMotion,
+    "check_rejects_bad_motion": AcceptsArrays,
+}
+
+
+# -- walks: the built-in random walk is the correct base ------------------------------------
+
+class NoWalk:
+    def stroll(self, graph, rng, duration):
+        return None
+
+
+class HalfWalk:
+    def walk(self, graph, rng, duration):
+        return RandomWalk(start=0).walk(graph, rng, max(duration / 2, 0.1)) if duration > 0 else RandomWalk().walk(graph, rng, duration)
+
+
+class UnseededWalk:
+    def walk(self, graph, rng, duration):
+        return RandomWalk().walk(graph, np.random.default_rng(), duration)
+
+
+class ClampsDuration:
+    def walk(self, graph, rng, duration):
+        return RandomWalk().walk(graph, rng, max(duration, 1.0))
+
+
+BROKEN_WALKS = {
+    "check_interface": NoWalk,
+    "check_walk_covers_duration": HalfWalk,
+    "check_deterministic": UnseededWalk,
+    "check_rejects_bad_duration": ClampsDuration,
+}
+BROKEN_BY_KIND.update({"builder": BROKEN_BUILDERS, "walk": BROKEN_WALKS})
