@@ -166,6 +166,8 @@ class MotionGraph:
                 raise ValidationError(f"MotionGraph.clips[{index}] must join node {index} to node {index + 1} by their frames")
         if len(self.clips) != k - 1:
             raise ValidationError(f"MotionGraph needs {k - 1} clips for {k} nodes; got {len(self.clips)}")
+        if not self.transitions:
+            raise ValidationError("a MotionGraph needs at least one transition; without one there is nothing to walk")
         n, d = self.motion.n_agents, self.motion.dims
         for index, transition in enumerate(self.transitions):
             field = f"MotionGraph.transitions[{index}]"

@@ -126,6 +126,8 @@ class Kovar:
                     break
                 threshold = min(2 * threshold, spread)
         transitions = _transitions(frames, chosen, matrix, blend)
+        if _kept(motion, frames, chosen, matrix, blend) == 0:
+            raise ValidationError(self._no_transition_message(motion, frames, far, matrix, blend, threshold))
         params = {
             "candidate_interval": self.candidate_interval, "stride": stride, "min_gap": self.min_gap,
             "threshold": threshold, "threshold_rule": "per_second" if self.per_second else ("absolute" if self.threshold else "adaptive"),
@@ -133,6 +135,24 @@ class Kovar:
             "evaluated": matrix.evaluated, "prune": self.prune,
         }
         return flockkit.MotionGraph.assemble(motion, transitions, params=params, provenance={"builder": "kovar"})
+
+
+    def _no_transition_message(self, motion, frames, far, matrix, blend, threshold) -> str:
+        """Say that no transition is left, with the smallest cost seen and a threshold that works."""
+        matrix.fill(np.ones_like(far))
+        minima = sorted(_local_minima(matrix.values, far), key=lambda ij: matrix.values[ij])
+        smallest = f"{matrix.values[minima[0]]:.4g}" if minima else "none (no local minimum at least min_gap apart)"
+        for count in range(1, len(minima) + 1):
+            if _kept(motion, frames, minima[:count], matrix, blend):
+                working = matrix.values[minima[count - 1]]
+                return (
+                    f"kovar: threshold {threshold:.4g} leaves no transition; the smallest transition cost seen is "
+                    f"{smallest}; threshold={float(working)!r} would give a graph"
+                )
+        return (
+            f"kovar: no threshold gives a walkable graph: the smallest transition cost seen is {smallest}, and no "
+            "set of transitions forms a loop; record longer motion, or lower min_gap or blend_time"
+        )
 
 
 def _transitions(frames, chosen, matrix, blend):

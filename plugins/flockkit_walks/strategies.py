@@ -15,6 +15,11 @@ import flockkit
 from flockkit.errors import ValidationError
 
 
+def _check_graph(graph) -> None:
+    if not isinstance(graph, flockkit.MotionGraph):
+        raise ValidationError(f"a walk needs a flockkit.MotionGraph; got {type(graph).__name__}")
+
+
 def _check_duration(duration) -> float:
     if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not math.isfinite(duration) or duration <= 0:
         raise ValidationError(f"walk duration must be a number of seconds > 0; got {duration!r}")
@@ -45,6 +50,7 @@ class RandomWalk:
     start: int | None = attrs.field(default=None, validator=_optional_start)
 
     def walk(self, graph: flockkit.MotionGraph, rng: np.random.Generator, duration: float) -> flockkit.Walk:
+        _check_graph(graph)
         needed = math.ceil(_check_duration(duration) / graph.motion.dt)
         node = _start_node(graph, self.start, rng)
         start, since, played, edges = node, math.inf, 0, []
@@ -109,6 +115,7 @@ class RegionWalk:
             raise ValidationError(f"walk parameter budget must be an integer >= 1; got {self.budget!r}")
 
     def walk(self, graph: flockkit.MotionGraph, rng: np.random.Generator, duration: float) -> flockkit.Walk:
+        _check_graph(graph)
         needed = math.ceil(_check_duration(duration) / graph.motion.dt)
         if self.region.dims != graph.motion.dims:
             raise ValidationError(f"region is {self.region.dims}D but the graph's motion is {graph.motion.dims}D")

@@ -74,6 +74,22 @@ def test_save_load_round_trip(graph, tmp_path):
     assert loaded == graph and loaded.stats() == graph.stats()
     with pytest.raises(FileFormatError, match="'motion'"):
         flockkit.MotionGraph.load(_motion_file(tmp_path))
+    truncated = tmp_path / "truncated.npz"
+    truncated.write_bytes(path.read_bytes()[: len(path.read_bytes()) // 2])
+    with pytest.raises(FileFormatError, match="truncated.npz"):
+        flockkit.MotionGraph.load(truncated)
+    corrupt = tmp_path / "corrupt.npz"
+    with np.load(path) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    arrays["transition_nodes"] = arrays["transition_nodes"] + 10_000  # nodes that do not exist
+    np.savez(corrupt, **arrays)
+    with pytest.raises(FileFormatError, match="invalid motion graph"):
+        flockkit.MotionGraph.load(corrupt)
+
+
+def test_a_graph_needs_a_transition(recording):
+    with pytest.raises(ValidationError, match="at least one transition"):
+        flockkit.MotionGraph(motion=recording, nodes=[0], clips=[], transitions=[])
 
 
 def _motion_file(tmp_path):
@@ -87,8 +103,11 @@ def test_paper_rule_and_absolute_threshold(recording):
     assert per_second.params["threshold_rule"] == "per_second"
     minima = int(np.ceil(0.2 * recording.duration))
     assert 1 <= len(per_second.transitions) <= 2 * minima  # both directions of each chosen minimum
-    with pytest.raises(ValidationError, match="no transitions"):
+    with pytest.raises(ValidationError, match="leaves no transition") as info:
         flockkit.get("builder", "kovar", threshold=1e-12).build(recording, METRIC, np.random.default_rng(0))
+    working = float(str(info.value).split("threshold=")[1].split()[0])
+    assert "smallest transition cost seen is" in str(info.value)
+    assert flockkit.get("builder", "kovar", threshold=working).build(recording, METRIC, np.random.default_rng(0)).transitions
 
 
 def test_parallel_build_is_identical(recording, graph):
