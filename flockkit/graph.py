@@ -91,10 +91,19 @@ class Walk:
     edges: tuple = attrs.field(converter=lambda edges: tuple(_edge(e) for e in edges))
     rotation: np.ndarray = attrs.field(default=None)
     translation: np.ndarray = attrs.field(default=None)
+    _is_transition: np.ndarray = attrs.field(init=False, repr=False, eq=False)
+    _index: np.ndarray = attrs.field(init=False, repr=False, eq=False)
 
     def __attrs_post_init__(self):
         if self.start < 0:
             raise ValidationError(f"Walk.start must be a node index >= 0; got {self.start}")
+        object.__setattr__(self, "_is_transition", np.array([kind == "transition" for kind, _ in self.edges], dtype=bool))
+        object.__setattr__(self, "_index", np.array([index for _, index in self.edges], dtype=np.int64))
+
+    @property
+    def edge_arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """(is_transition, index) per edge, as arrays."""
+        return self._is_transition, self._index
 
     def pose(self, dims: int) -> tuple[np.ndarray, np.ndarray]:
         """(rotation, translation) of the start pose, identity where not given."""
@@ -132,6 +141,36 @@ def _thaw(value):
 
 
 @attrs.frozen(kw_only=True, eq=False)
+class EdgeTables:
+    """A MotionGraph's edges as arrays: clip k and transition k by index."""
+
+    clip_start: np.ndarray
+    clip_stop: np.ndarray
+    transition_source: np.ndarray
+    transition_target: np.ndarray
+    transition_start: np.ndarray
+    transition_blend: np.ndarray
+    rotation: np.ndarray
+    translation: np.ndarray
+    assignment: np.ndarray
+
+    @classmethod
+    def of(cls, graph) -> EdgeTables:
+        t = graph.transitions
+        return cls(
+            clip_start=np.array([c.start for c in graph.clips], dtype=np.int64),
+            clip_stop=np.array([c.stop for c in graph.clips], dtype=np.int64),
+            transition_source=np.array([x.source for x in t], dtype=np.int64),
+            transition_target=np.array([x.target for x in t], dtype=np.int64),
+            transition_start=np.array([x.start for x in t], dtype=np.int64),
+            transition_blend=np.array([x.blend for x in t], dtype=np.int64),
+            rotation=np.array([x.alignment.rotation for x in t]),
+            translation=np.array([x.alignment.translation for x in t]),
+            assignment=np.array([x.alignment.assignment for x in t]),
+        )
+
+
+@attrs.frozen(kw_only=True, eq=False)
 class MotionGraph:
     """A motion graph over a source Motion.
 
@@ -156,8 +195,18 @@ class MotionGraph:
     transitions: tuple = attrs.field(converter=tuple)
     params: Mapping = attrs.field(factory=dict, converter=lambda v: _frozen_json(v, "MotionGraph.params"))
     provenance: Mapping = attrs.field(factory=dict, converter=lambda v: _frozen_json(v, "MotionGraph.provenance"))
+    _tables: EdgeTables = attrs.field(init=False, repr=False, eq=False)
 
     def __attrs_post_init__(self):
+        self._validate()
+        object.__setattr__(self, "_tables", EdgeTables.of(self))
+
+    @property
+    def tables(self) -> EdgeTables:
+        """The edges as arrays, for vectorized walking and playback."""
+        return self._tables
+
+    def _validate(self):
         k, frames = len(self.nodes), self.motion.n_frames
         if k < 1 or self.nodes.ndim != 1 or np.any(np.diff(self.nodes) <= 0) or self.nodes[0] < 0 or self.nodes[-1] >= frames:
             raise ValidationError(f"MotionGraph.nodes must be increasing source frames in 0..{frames - 1}; got {self.nodes}")

@@ -28,59 +28,112 @@ def _smoothstep(u: np.ndarray) -> np.ndarray:
 
 
 def _plan(graph: MotionGraph, walk: Walk):
-    """Segments (frames, rotation, translation, correspondence) and blends (output start, old
-    segment) of `walk`, checked against `graph`."""
+    """Per output frame: its source frame and its segment; per segment (a stretch between
+    transitions): rotation, translation and correspondence; per transition: where its blend starts
+    in the output, its source frame, the segment it leaves and its blend length."""
     if not isinstance(walk, Walk):
         raise ValidationError(f"synthesize needs a flockkit.Walk; got {type(walk).__name__}")
     if not 0 <= walk.start < len(graph.nodes):
         raise ValidationError(f"Walk.start {walk.start} is not a node of this graph (0..{len(graph.nodes) - 1})")
-    rotation, translation = walk.pose(graph.motion.dims)
-    mapping = np.arange(graph.motion.n_agents)
-    node, since, length = walk.start, np.inf, 0
-    segments, blends = [], []
-    for position, (kind, index) in enumerate(walk.edges):
-        edges = graph.clips if kind == "clip" else graph.transitions
-        if index >= len(edges) or edges[index].source != node:
-            raise ValidationError(f"Walk.edges[{position}] = {(kind, index)!r} does not leave node {node}")
-        edge = edges[index]
-        if kind == "clip":
-            frames = np.arange(edge.start, edge.stop)
-            segments.append((frames, rotation, translation, mapping))
-            since += len(frames)
-            length += len(frames)
-        else:
-            if since < edge.blend:
-                raise ValidationError(
-                    f"Walk.edges[{position}] takes a transition {since} frames after the previous one; "
-                    f"its blend needs {edge.blend}"
-                )
-            old = (np.arange(edge.start, edge.start + edge.blend), rotation, translation, mapping)
-            blends.append((length, old))
-            a = edge.alignment
-            rotation, translation = rotation @ a.rotation, rotation @ a.translation + translation
-            mapping = a.assignment[mapping]
-            since = 0
-        node = edge.target
-    segments.append((np.array([graph.nodes[node]]), rotation, translation, mapping))
-    return segments, blends
+    tables = graph.tables
+    is_transition, index = walk.edge_arrays
+    counts = np.where(is_transition, len(graph.transitions), len(graph.clips))
+    if np.any(index >= counts):
+        bad = int(np.argmax(index >= counts))
+        raise ValidationError(f"Walk.edges[{bad}] = {walk.edges[bad]!r} is not an edge of this graph")
+    clip_index = np.where(is_transition, 0, index)
+    transition_index = np.where(is_transition, index, 0)
+    sources = np.where(is_transition, tables.transition_source[transition_index], clip_index)
+    targets = np.where(is_transition, tables.transition_target[transition_index], clip_index + 1)
+    reached = np.concatenate([[walk.start], targets[:-1]])
+    if np.any(sources != reached):
+        bad = int(np.argmax(sources != reached))
+        raise ValidationError(f"Walk.edges[{bad}] = {walk.edges[bad]!r} does not leave node {int(reached[bad])}")
+    # A graph of one node (a transition looping on it) has no clips at all.
+    clip_start = tables.clip_start[clip_index] if len(graph.clips) else np.zeros(len(index), dtype=np.int64)
+    played = np.where(is_transition, 0, tables.clip_stop[clip_index] - clip_start if len(graph.clips) else 0)
+    before = np.cumsum(played) - played  # output frames played before each edge
+    segment = np.cumsum(is_transition) - is_transition  # segment each edge starts in
+    at = np.flatnonzero(is_transition)
+    taken = transition_index[at]
+    blend = tables.transition_blend[taken]
+    since = np.diff(np.concatenate([[-np.inf], before[at]]))  # clip frames since the previous transition
+    if np.any(since < blend):
+        bad = int(at[np.argmax(since < blend)])
+        raise ValidationError(
+            f"Walk.edges[{bad}] takes a transition {int(since[np.argmax(since < blend)])} frames after the previous one; "
+            f"its blend needs {int(blend[np.argmax(since < blend)])}"
+        )
+    rotations, translations, mappings = _compose(walk, tables, taken, graph.motion.n_agents, graph.motion.dims)
+    # A segment (the stretch between two transitions) starts at a node and plays consecutive
+    # clips, so it is one slice of the source from that node's frame.
+    output_start = np.append(0, before[at])
+    length = np.diff(np.append(output_start, played.sum() + 1))  # the last one also plays the final frame
+    source_start = graph.nodes[np.append(walk.start, tables.transition_target[taken])]
+    blends = (before[at], tables.transition_start[taken], segment[at], blend)
+    return (output_start, source_start, length), rotations, translations, mappings, blends
 
 
-def _place(source: np.ndarray, segment) -> np.ndarray:
-    frames, rotation, translation, mapping = segment
-    return source[frames][:, mapping] @ rotation.T + translation
+def _compose(walk, tables, taken, n_agents, dims):
+    """Placement and correspondence of each segment: the start pose composed with the
+    transitions taken, in order (M' = assignment[M])."""
+    rotation, translation = walk.pose(dims)
+    k = len(taken)
+    mappings = np.empty((k + 1, n_agents), dtype=np.int64)
+    mappings[0] = np.arange(n_agents)
+    for step, transition in enumerate(taken, 1):
+        mappings[step] = tables.assignment[transition][mappings[step - 1]]
+    if dims == 2:
+        # Plane rotations compose by adding angles: no sequential matrix products.
+        angles = np.arctan2(tables.rotation[taken, 1, 0], tables.rotation[taken, 0, 0])
+        total = np.arctan2(rotation[1, 0], rotation[0, 0]) + np.concatenate([[0.0], np.cumsum(angles)])
+        cos, sin = np.cos(total), np.sin(total)
+        rotations = np.stack([np.stack([cos, -sin], axis=1), np.stack([sin, cos], axis=1)], axis=1)
+    else:
+        rotations = np.empty((k + 1, 3, 3))
+        rotations[0] = rotation
+        for step, transition in enumerate(taken, 1):
+            rotations[step] = rotations[step - 1] @ tables.rotation[transition]
+    steps = np.einsum("kij,kj->ki", rotations[:-1], tables.translation[taken]) if k else np.zeros((0, dims))
+    translations = translation + np.concatenate([np.zeros((1, dims)), np.cumsum(steps, axis=0)])
+    return rotations, translations, mappings
+
+
+def _place(source, frames, segments, rotations, translations, mappings) -> np.ndarray:
+    """Source frames placed in the world: a flat gather, then the rotation component by component."""
+    t, n, d = source.shape
+    flat = source.reshape(t * n, d)
+    index = np.take(mappings, segments, axis=0)
+    index += (frames * n)[:, None]
+    gathered = np.take(flat, index.ravel(), axis=0).reshape(len(frames), n, d)  # take: much faster than [ ]
+    rotation = rotations[segments][:, None]  # (F, 1, D, D)
+    shift = translations[segments][:, None]  # (F, 1, D)
+    placed = np.empty_like(gathered)
+    for row in range(d):
+        placed[..., row] = shift[..., row] + sum(gathered[..., col] * rotation[..., row, col] for col in range(d))
+    return placed
+
+
+def _runs(starts, lengths) -> np.ndarray:
+    """starts[k], starts[k] + 1, ... (lengths[k] numbers) for every k, concatenated."""
+    lengths = np.asarray(lengths)
+    offsets = np.cumsum(lengths) - lengths
+    return np.arange(lengths.sum()) + np.repeat(np.asarray(starts) - offsets, lengths)
 
 
 def _positions(graph: MotionGraph, walk: Walk) -> np.ndarray:
     source = graph.motion.positions
-    segments, blends = _plan(graph, walk)
-    positions = np.concatenate([_place(source, segment) for segment in segments], axis=0)
-    for start, old in blends:
-        count = min(len(old[0]), len(positions) - start)
-        if count <= 0:
-            continue
-        weight = _smoothstep(np.arange(1, count + 1) / (len(old[0]) + 1))[:, None, None]
-        old_frames = (old[0][:count], *old[1:])
-        positions[start : start + count] = (1 - weight) * _place(source, old_frames) + weight * positions[start : start + count]
+    (output_start, source_start, length), rotations, translations, mappings, blends = _plan(graph, walk)
+    segment = np.repeat(np.arange(len(length)), length)
+    positions = _place(source, _runs(source_start, length), segment, rotations, translations, mappings)
+    out, first, old_segment, blend = blends
+    if len(out):
+        count = np.minimum(blend, len(positions) - out)
+        within = _runs(np.ones_like(count), count)  # 1..count inside each blend
+        weight = _smoothstep(within / np.repeat(blend + 1, count))[:, None, None]
+        old = _place(source, _runs(first, count), np.repeat(old_segment, count), rotations, translations, mappings)
+        rows = _runs(out, count)
+        positions[rows] = (1 - weight) * old + weight * positions[rows]
     return positions
 
 
