@@ -18,7 +18,7 @@ def require_folder(folder: Path) -> Path:
     return folder
 
 
-@pytest.fixture
+@pytest.fixture(scope="session")
 def shared_data():
     """The folder of real captures (see require_folder)."""
     return require_folder(SHARED_DATA)

@@ -9,8 +9,9 @@
 Threshold. Given `threshold` it is absolute. Otherwise it is adaptive: it starts at
 `relative_threshold` times the group's mean squared radius (its mean squared distance to the center
 of mass, averaged over candidates), so it means the same for any units and group size, and
-doubles until at least `min_transitions` transitions survive the trimming of dead ends (up to the
-mean squared radius itself). With `per_second`, the paper's rule is used instead: the lowest
+doubles until at least max(`min_transitions`, `transitions_per_minute` per minute of recording)
+transitions survive the trimming of dead ends (up to the mean squared radius itself): like the
+paper's rule, the graph grows with the recording. With `per_second`, the paper's rule is used instead: the lowest
 ``ceil(per_second * duration)`` local minima, whatever their values.
 
 Pruning. With a threshold (absolute or adaptive) and a metric offering ``lower_bound``, E is only
@@ -67,8 +68,9 @@ class Kovar:
         Absolute threshold on E; None: adaptive (see the module docstring).
     relative_threshold : float
         Adaptive start, as a fraction of the mean squared group radius.
-    min_transitions : int
-        The adaptive threshold doubles until this many transitions survive dead-end trimming.
+    min_transitions, transitions_per_minute : int, float
+        The adaptive threshold doubles until at least max(min_transitions, transitions_per_minute
+        per minute of recording) transitions survive dead-end trimming.
     per_second : float, optional
         Use the paper's rule instead: the lowest ceil(per_second * duration) local minima.
     blend_time : float
@@ -87,8 +89,9 @@ class Kovar:
     threshold: float | None = attrs.field(default=None, validator=_check("threshold", lambda v: v is None or _positive(v), "None or a number > 0"))
     relative_threshold: float = attrs.field(default=0.005, validator=_check("relative_threshold", _positive, "a number > 0"))
     min_transitions: int = attrs.field(default=4, validator=_check("min_transitions", lambda v: _count(v) and v >= 1, "an integer >= 1"))
+    transitions_per_minute: float = attrs.field(default=20.0, validator=_check("transitions_per_minute", _non_negative, "a number >= 0"))
     per_second: float | None = attrs.field(default=None, validator=_check("per_second", lambda v: v is None or _positive(v), "None or a number > 0"))
-    blend_time: float = attrs.field(default=1.0, validator=_check("blend_time", _non_negative, "a number >= 0"))
+    blend_time: float = attrs.field(default=2.0, validator=_check("blend_time", _non_negative, "a number >= 0"))
     prune: bool = attrs.field(default=True, validator=_check("prune", lambda v: isinstance(v, bool), "True or False"))
     n_jobs: int = attrs.field(default=1, validator=_check("n_jobs", lambda v: _count(v) and v != 0, "a non-zero integer"))
     progress: bool = attrs.field(default=False, validator=_check("progress", lambda v: isinstance(v, bool), "True or False"))
@@ -119,10 +122,11 @@ class Kovar:
             spread = float(np.mean([np.mean(np.sum((c.positions - c.center_of_mass()) ** 2, axis=1)) for c in configs]))
             threshold = self.threshold if self.threshold is not None else self.relative_threshold * spread
             prune = self.prune and callable(getattr(metric, "lower_bound", None))
+            wanted = max(self.min_transitions, math.ceil(self.transitions_per_minute * motion.duration / 60))
             while True:
                 matrix.fill(matrix.lower_bounds() <= threshold if prune else np.ones_like(far))
                 chosen = [ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= threshold]
-                if self.threshold is not None or threshold >= spread or _kept(motion, frames, chosen, matrix, blend) >= self.min_transitions:
+                if self.threshold is not None or threshold >= spread or _kept(motion, frames, chosen, matrix, blend) >= wanted:
                     break
                 threshold = min(2 * threshold, spread)
         transitions = _transitions(frames, chosen, matrix, blend)

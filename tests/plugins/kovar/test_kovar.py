@@ -34,13 +34,12 @@ def test_pruning_gives_the_identical_graph(recording, graph):
 
 
 def test_pruning_identical_with_an_absolute_threshold(recording, graph):
-    threshold = float(np.median([t.alignment.distance for t in graph.transitions]))
+    threshold = min(t.alignment.distance for t in graph.transitions)
     pruned, full = (
         flockkit.get("builder", "kovar", threshold=threshold, prune=prune).build(recording, METRIC, np.random.default_rng(0))
         for prune in (True, False)
     )
     assert structure(pruned) == structure(full)
-    assert pruned.params["evaluated"] < full.params["evaluated"]  # the lower bound did skip work
 
 
 def test_graph_is_strongly_connected_and_consistent(recording, graph):
@@ -51,7 +50,7 @@ def test_graph_is_strongly_connected_and_consistent(recording, graph):
     for t in graph.transitions:
         assert abs(t.end - t.start) >= 10  # min_gap 1 s at dt 0.1
         a, b = recording.configuration(t.start), recording.configuration(t.end)
-        assert t.alignment.residual(a, b) == pytest.approx(t.alignment.distance, rel=1e-6, abs=1e-9)
+        assert t.alignment.residual(a, b) <= t.alignment.distance * (1 + 1e-9)  # positions, plus the velocity term
         assert t.alignment.distance <= graph.params["threshold"]
 
 
@@ -115,10 +114,13 @@ def test_parallel_build_is_identical(recording, graph):
     assert parallel == graph
 
 
-def test_sticklebacks_default_graph(shared_data):
+def test_sticklebacks_default_graph_and_pruning(shared_data):
     graph = flockkit.get("builder", "kovar").build(fish(shared_data), METRIC, np.random.default_rng(0))
     assert graph.stats()["transitions"] >= 3
     assert nx.is_strongly_connected(graph.to_networkx())
+    full = flockkit.get("builder", "kovar", prune=False).build(fish(shared_data), METRIC, np.random.default_rng(0))
+    assert structure(full) == structure(graph)
+    assert graph.params["evaluated"] < full.params["evaluated"] / 2  # the lower bound skipped most cells
 
 
 @pytest.mark.parametrize(
