@@ -9,9 +9,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..convenience import simulate
-from ..errors import ValidationError
 from ..graph import MotionGraph
 from ..registry import get
+from ._expect import expect_validation_error
 
 
 def _recording():
@@ -85,13 +85,10 @@ def check_inputs_unchanged(name, builder):
 
 def check_rejects_bad_motion(name, builder):
     """Something that is not a Motion raises flockkit.errors.ValidationError."""
-    try:
-        builder.build(np.zeros((10, 3, 2)), get("metric", "icp-hungarian"), np.random.default_rng(0))
-    except ValidationError:
-        return
-    except Exception as exc:  # noqa: BLE001 - the wrong error type is the failure we report
-        raise AssertionError(f"{name}.build(array) raised {type(exc).__name__}, not ValidationError") from exc
-    raise AssertionError(f"{name}.build(array) raised nothing; expected ValidationError")
+    expect_validation_error(
+        lambda: builder.build(np.zeros((10, 3, 2)), get("metric", "icp-hungarian"), np.random.default_rng(0)),
+        f"{name}.build(array)",
+    )
 
 
 CHECKS = (
