@@ -76,7 +76,8 @@ class ConfigurationMetric(Protocol):
         of agents.
 
     Optional: ``lower_bound(a, b)`` (a proven lower bound on ``compare(a, b).distance``, cheaper
-    than `compare`) and ``pairwise(configurations)`` (a batched distance matrix).
+    than `compare`), ``pairwise_lower_bound(configurations)`` (that bound for every pair, (K, K))
+    and ``pairwise(configurations)`` (a batched distance matrix).
     """
 
     def compare(self, a: Configuration, b: Configuration): ...

@@ -102,6 +102,24 @@ def check_lower_bound(name, metric):
         )
 
 
+def check_pairwise_lower_bound(name, metric):
+    """pairwise_lower_bound, where offered, is lower_bound for every pair."""
+    if not callable(getattr(metric, "pairwise_lower_bound", None)):
+        return
+    configs = [c for c in _configurations() if c.n_agents == 6 and c.dims == 2]
+    rng = np.random.default_rng(SEED + 6)
+    configs += [random_flock(n_agents=6, dims=2, rng=rng).configuration() for _ in range(3)]
+    matrix = np.asarray(metric.pairwise_lower_bound(configs))
+    assert matrix.shape == (len(configs),) * 2, f"{name}.pairwise_lower_bound returned shape {matrix.shape}"
+    for i, a in enumerate(configs):
+        for j, b in enumerate(configs):
+            if i != j:
+                expected = float(metric.lower_bound(a, b)) if callable(getattr(metric, "lower_bound", None)) else metric.compare(a, b).distance
+                assert matrix[i, j] <= expected * (1 + 1e-9) + 1e-12, (
+                    f"{name}.pairwise_lower_bound[{i}, {j}] = {matrix[i, j]} exceeds the pair's bound {expected}"
+                )
+
+
 def check_pairwise(name, metric):
     """pairwise(configurations), where offered, is a symmetric (K, K) matrix of compare distances."""
     if not callable(getattr(metric, "pairwise", None)):
@@ -151,6 +169,7 @@ CHECKS = (
     check_rigid_and_permutation_invariant,
     check_distance_covers_alignment,
     check_lower_bound,
+    check_pairwise_lower_bound,
     check_pairwise,
     check_deterministic,
     check_inputs_unchanged,

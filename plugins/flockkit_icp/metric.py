@@ -124,6 +124,18 @@ class IcpHungarian:
             bound += self.velocity_weight * _sorted_gap(np.linalg.norm(a.velocities, axis=1), np.linalg.norm(b.velocities, axis=1))
         return bound
 
+    def pairwise_lower_bound(self, configurations) -> np.ndarray:
+        """``lower_bound`` for every pair at once, (K, K): the sorted-radii (and speeds) bound is a
+        squared distance between sorted vectors, so one ``cdist`` computes it all."""
+        configurations = list(configurations)
+        radii = np.array([np.sort(np.linalg.norm(c.positions - c.center_of_mass(), axis=1)) for c in configurations])
+        n = radii.shape[1]
+        bounds = cdist(radii, radii, "sqeuclidean") / n
+        if self.velocity_weight:
+            speeds = np.array([np.sort(np.linalg.norm(c.velocities, axis=1)) for c in configurations])
+            bounds += self.velocity_weight * cdist(speeds, speeds, "sqeuclidean") / n
+        return bounds
+
     def pairwise(self, configurations) -> np.ndarray:
         """Distance matrix (K, K): entry (i, j) = compare(configurations[i], configurations[j]).distance
         for i < j, mirrored below the diagonal; zero on it."""

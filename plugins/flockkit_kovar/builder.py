@@ -189,11 +189,15 @@ class _Matrix:
 
     def lower_bounds(self) -> np.ndarray:
         if self._bounds is None:
-            k = len(self.configs)
-            self._bounds = np.zeros((k, k))
-            for i in range(k):
-                for j in range(i + 1, k):
-                    self._bounds[i, j] = self._bounds[j, i] = self.metric.lower_bound(self.configs[i], self.configs[j])
+            batched = getattr(self.metric, "pairwise_lower_bound", None)
+            if callable(batched):
+                self._bounds = np.asarray(batched(self.configs), dtype=np.float64)
+            else:
+                k = len(self.configs)
+                self._bounds = np.zeros((k, k))
+                for i in range(k):
+                    for j in range(i + 1, k):
+                        self._bounds[i, j] = self._bounds[j, i] = self.metric.lower_bound(self.configs[i], self.configs[j])
         return self._bounds
 
     def fill(self, wanted: np.ndarray) -> None:

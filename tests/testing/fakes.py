@@ -174,6 +174,9 @@ class _Wrapped:
     def pairwise(self, configurations):
         return self.inner.pairwise(configurations)
 
+    def pairwise_lower_bound(self, configurations):
+        return self.inner.pairwise_lower_bound(configurations)
+
     @staticmethod
     def _with(found, **changes):
         fields = dict(distance=found.distance, assignment=found.assignment, rotation=found.rotation, translation=found.translation)
@@ -225,6 +228,11 @@ class LooseBound(_Wrapped):
         return 2 * self.inner.compare(a, b).distance + 1.0
 
 
+class LoosePairwiseBound(_Wrapped):
+    def pairwise_lower_bound(self, configurations):
+        return np.asarray(self.inner.pairwise_lower_bound(configurations)) * 3 + 1.0
+
+
 class WrongPairwise(_Wrapped):
     def pairwise(self, configurations):
         matrix = np.asarray(self.inner.pairwise(configurations))
@@ -258,6 +266,7 @@ BROKEN_METRICS = {
     "check_rigid_and_permutation_invariant": IgnoresRotation,
     "check_distance_covers_alignment": UnderReports,
     "check_lower_bound": LooseBound,
+    "check_pairwise_lower_bound": LoosePairwiseBound,
     "check_pairwise": WrongPairwise,
     "check_deterministic": Jittery,
     "check_inputs_unchanged": MutatesConfiguration,

@@ -109,3 +109,13 @@ def test_real_fish_frames_match_better_when_close_in_time(shared_data):
 def test_bad_parameters(params, name):
     with pytest.raises(ValidationError, match=name):
         flockkit.get("metric", "icp-hungarian", **params)
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.lists(fst.configurations(min_agents=4, max_agents=4, dims=2), min_size=2, max_size=5), st.floats(0, 2))
+def test_batched_lower_bound_equals_the_pairwise_one(configs, weight):
+    metric = IcpHungarian(velocity_weight=weight)
+    matrix = metric.pairwise_lower_bound(configs)
+    for i, a in enumerate(configs):
+        for j, b in enumerate(configs):
+            assert matrix[i, j] == pytest.approx(metric.lower_bound(a, b), rel=1e-9, abs=1e-9)
