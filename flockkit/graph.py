@@ -267,12 +267,12 @@ class MotionGraph:
             if not transitions:
                 raise ValidationError("the transitions form no loop through the recording; nothing can be walked")
         renumber = {int(f): i for i, f in enumerate(nodes)}
-        clips = [Clip(source=i, target=i + 1, start=int(nodes[i]), stop=int(nodes[i + 1])) for i in range(len(nodes) - 1)]
         kept_transitions = [
             Transition(source=renumber[s], target=renumber[e], start=int(s), end=int(e), alignment=a, blend=int(b))
             for s, e, a, b in transitions
         ]
-        return cls(motion=motion, nodes=nodes, clips=clips, transitions=kept_transitions, params=params, provenance=provenance)
+        return cls(motion=motion, nodes=nodes, clips=_clips(nodes), transitions=kept_transitions, params=params,
+                   provenance=provenance)
 
     # -- queries ----------------------------------------------------------------------------
 
@@ -354,19 +354,17 @@ class MotionGraph:
 
     def save(self, path) -> None:
         """Write the graph and its source motion to one .npz with JSON metadata (atomic)."""
-        t = self.transitions
-        n, d = self.motion.n_agents, self.motion.dims
+        tables = self.tables
         arrays = {
-            "positions": self.motion.positions,
+            **self.motion._to_arrays(),
             "nodes": self.nodes,
-            "transition_nodes": np.array([(x.source, x.target) for x in t], dtype=np.int64).reshape(-1, 2),
-            "transition_blend": np.array([x.blend for x in t], dtype=np.int64),
-            "transition_distance": np.array([x.alignment.distance for x in t], dtype=np.float64),
-            "transition_assignment": np.array([x.alignment.assignment for x in t], dtype=np.int64).reshape(-1, n),
-            "transition_rotation": np.array([x.alignment.rotation for x in t]).reshape(-1, d, d),
-            "transition_translation": np.array([x.alignment.translation for x in t]).reshape(-1, d),
+            "transition_nodes": np.stack([tables.transition_source, tables.transition_target], axis=1),
+            "transition_blend": tables.transition_blend,
+            "transition_distance": np.array([t.alignment.distance for t in self.transitions]),
+            "transition_assignment": tables.assignment,
+            "transition_rotation": tables.rotation,
+            "transition_translation": tables.translation,
         }
-        arrays.update({f"channel.{name}": array for name, array in self.motion.channels.items()})
         metadata = {"dt": self.motion.dt, "params": _thaw(self.params), "provenance": _thaw(self.provenance)}
         _npzfile.write(path, kind="graph", version=GRAPH_FORMAT_VERSION, arrays=arrays, metadata=metadata)
 
@@ -375,13 +373,8 @@ class MotionGraph:
         """Read a graph written by :meth:`save`; FileFormatError naming the file if it is not one."""
         arrays, header = _npzfile.read(path, kind="graph", versions=(GRAPH_FORMAT_VERSION,))
         try:
-            motion = Motion(
-                positions=arrays["positions"],
-                dt=header["dt"],
-                channels={k.removeprefix("channel."): v for k, v in arrays.items() if k.startswith("channel.")},
-            )
+            motion = Motion._from_arrays(arrays, header["dt"])
             nodes = arrays["nodes"]
-            clips = [Clip(source=i, target=i + 1, start=int(nodes[i]), stop=int(nodes[i + 1])) for i in range(len(nodes) - 1)]
             transitions = [
                 Transition(
                     source=int(s), target=int(e), start=int(nodes[s]), end=int(nodes[e]), blend=int(blend),
@@ -392,10 +385,15 @@ class MotionGraph:
                     arrays["transition_assignment"], arrays["transition_rotation"], arrays["transition_translation"],
                 )
             ]
-            return cls(motion=motion, nodes=nodes, clips=clips, transitions=transitions,
+            return cls(motion=motion, nodes=nodes, clips=_clips(nodes), transitions=transitions,
                        params=header.get("params"), provenance=header.get("provenance"))
         except (KeyError, IndexError, TypeError, ValidationError) as exc:
             raise FileFormatError(f"{path}: invalid motion graph: {type(exc).__name__}: {exc}") from None
+
+
+def _clips(nodes) -> list[Clip]:
+    """Clip k joins node k to node k + 1, playing the frames between them."""
+    return [Clip(source=i, target=i + 1, start=int(nodes[i]), stop=int(nodes[i + 1])) for i in range(len(nodes) - 1)]
 
 
 def _strongly_connected_frames(transitions) -> np.ndarray:

@@ -405,11 +405,19 @@ class Motion:
             channels={name: array[frames] for name, array in self.channels.items()},
         )
 
+    def _to_arrays(self) -> dict[str, np.ndarray]:
+        """Positions and channels as the named arrays of a flockkit file (motion and graph files)."""
+        return {"positions": self.positions, **{f"channel.{name}": array for name, array in self.channels.items()}}
+
+    @classmethod
+    def _from_arrays(cls, arrays: Mapping[str, np.ndarray], dt) -> Motion:
+        """The inverse of :meth:`_to_arrays`; KeyError if positions are missing, ValidationError if invalid."""
+        channels = {name.removeprefix("channel."): a for name, a in arrays.items() if name.startswith("channel.")}
+        return cls(positions=arrays["positions"], dt=dt, channels=channels)
+
     def save(self, path) -> None:
         """Write the motion to `path` (.npz of plain arrays with JSON metadata; atomic)."""
-        arrays = {"positions": self.positions}
-        arrays.update({f"channel.{name}": array for name, array in self.channels.items()})
-        _npzfile.write(path, kind="motion", version=MOTION_FORMAT_VERSION, arrays=arrays, metadata={"dt": self.dt})
+        _npzfile.write(path, kind="motion", version=MOTION_FORMAT_VERSION, arrays=self._to_arrays(), metadata={"dt": self.dt})
 
     @classmethod
     def load(cls, path) -> Motion:
@@ -417,8 +425,7 @@ class Motion:
         arrays, header = _npzfile.read(path, kind="motion", versions=(MOTION_FORMAT_VERSION,))
         if "positions" not in arrays:
             raise FileFormatError(f"{path}: motion file has no 'positions' array")
-        channels = {name.removeprefix("channel."): a for name, a in arrays.items() if name.startswith("channel.")}
         try:
-            return cls(positions=arrays["positions"], dt=header.get("dt"), channels=channels)
+            return cls._from_arrays(arrays, header.get("dt"))
         except ValidationError as exc:
             raise FileFormatError(f"{path}: invalid motion: {exc}") from None

@@ -9,7 +9,8 @@ the placement with A, so world positions continue, and maps the correspondence t
 transition's `blend` frames the old motion (source frames s, s + 1, ...) is blended into the new
 one with a smoothstep weight, so there is no jump in position or velocity.
 
-Per frame the work is array gathers; Python loops run over segments, never over agents.
+All frames are placed at once (one flat gather and a rotation applied component by component);
+the only Python loop composes placements, one step per transition taken.
 """
 
 from __future__ import annotations
@@ -28,9 +29,10 @@ def _smoothstep(u: np.ndarray) -> np.ndarray:
 
 
 def _plan(graph: MotionGraph, walk: Walk):
-    """Per output frame: its source frame and its segment; per segment (a stretch between
-    transitions): rotation, translation and correspondence; per transition: where its blend starts
-    in the output, its source frame, the segment it leaves and its blend length."""
+    """Check `walk` against `graph` and lay it out: per segment (a stretch between transitions) its
+    output start, source start and length, and its rotation, translation and correspondence; per
+    transition taken, where its blend starts in the output, its source frame, the segment it leaves
+    and its blend length."""
     if not isinstance(walk, Walk):
         raise ValidationError(f"synthesize needs a flockkit.Walk; got {type(walk).__name__}")
     if not 0 <= walk.start < len(graph.nodes):

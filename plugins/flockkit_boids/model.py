@@ -272,7 +272,7 @@ class Boids:
         gain = self.acceleration * dt / self._weight_sum
         return ((after - before) / gain - self._steering(x[t], before, 1.0)) / self.wander_weight
 
-    def _neighbor_pairs(self, x) -> _Pairs:
+    def _neighbor_pairs(self, x) -> _DensePairs | _SparsePairs:
         """Candidate neighbors within perception_radius: every (i, j) of a dense N x N table for
         small flocks, a cKDTree pair list (memory linear in N) above `kdtree_above` agents."""
         if len(x) > self.kdtree_above:

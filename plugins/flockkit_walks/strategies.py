@@ -135,7 +135,7 @@ class RegionWalk:
             while options:
                 edge = options.pop()
                 tries += 1
-                if search.keeps_inside(edge, node, since, rotation, translation, rng):
+                if search.keeps_inside(edge, since, rotation, translation, rng):
                     break
             else:
                 stack.pop()
@@ -176,7 +176,7 @@ class _Search:
     def __init__(self, graph, region, com, horizon, budget):
         self.graph, self.region, self.com, self.horizon, self.budget = graph, region, com, horizon, budget
 
-    def keeps_inside(self, edge, node, since, rotation, translation, rng) -> bool:
+    def keeps_inside(self, edge, since, rotation, translation, rng) -> bool:
         self.left = self.budget
         return self._path(edge, since, rotation, translation, 0, rng)
 
