@@ -75,9 +75,18 @@ class ConfigurationMetric(Protocol):
         the search, zero for identical configurations, invariant to rigid motion and to the order
         of agents.
 
-    Optional: ``lower_bound(a, b)`` (a proven lower bound on ``compare(a, b).distance``, cheaper
-    than `compare`), ``pairwise_lower_bound(configurations)`` (that bound for every pair, (K, K))
-    and ``pairwise(configurations)`` (a batched distance matrix).
+    Optional, used by graph builders to go faster:
+
+    ``lower_bound(a, b)``
+        A proven lower bound on ``compare(a, b).distance``, much cheaper than `compare`.
+    ``pairs_within(configurations, threshold)``
+        Integer array (P, 2) of pairs (i, j), i < j, each once, including every pair whose
+        ``compare`` distance is at most `threshold` (pairs left out are proven farther apart).
+        It may take ``rows=(start, stop)``: then only the pairs with start <= i < stop, so that
+        a builder can share the job among workers.
+    ``pairwise(configurations, pairs=None)``
+        Distances (P,) of ``compare(configurations[i], configurations[j])`` for each row (i, j) of
+        `pairs`; without `pairs`, every i < j in row-major order (``scipy`` ``pdist`` order).
     """
 
     def compare(self, a: Configuration, b: Configuration): ...

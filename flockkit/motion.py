@@ -166,7 +166,8 @@ def _heading_axes(mean_velocity: np.ndarray, mean_speed: float, up) -> np.ndarra
     d = mean_velocity.shape[0]
     norm = float(np.linalg.norm(mean_velocity))
     if norm > 0 and norm > _DEGENERATE * mean_speed:
-        x = mean_velocity / norm
+        x = mean_velocity / np.max(np.abs(mean_velocity))  # rescaled first: tiny norms lose precision
+        x = x / np.linalg.norm(x)
     else:
         x = np.eye(d)[0]
     if d == 2:

@@ -7,6 +7,8 @@ reproducible; rigid copies are made with rotations in general position.
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 
 from ..convenience import random_flock
@@ -102,39 +104,53 @@ def check_lower_bound(name, metric):
         )
 
 
-def check_pairwise_lower_bound(name, metric):
-    """pairwise_lower_bound, where offered, is lower_bound for every pair."""
-    if not callable(getattr(metric, "pairwise_lower_bound", None)):
+def _close_configurations() -> list[Configuration]:
+    """Configurations of one simulated flock a few steps apart: some pairs are close, some not."""
+    from ..convenience import simulate
+
+    motion = simulate(n_agents=6, steps=60, seed=SEED)
+    return [motion.configuration(t) for t in range(0, 60, 4)]
+
+
+def check_pairs_within(name, metric):
+    """pairs_within(configurations, threshold), where offered, lists every pair i < j whose
+    compare distance is at most the threshold, each once."""
+    if not callable(getattr(metric, "pairs_within", None)):
         return
-    configs = [c for c in _configurations() if c.n_agents == 6 and c.dims == 2]
-    rng = np.random.default_rng(SEED + 6)
-    configs += [random_flock(n_agents=6, dims=2, rng=rng).configuration() for _ in range(3)]
-    matrix = np.asarray(metric.pairwise_lower_bound(configs))
-    assert matrix.shape == (len(configs),) * 2, f"{name}.pairwise_lower_bound returned shape {matrix.shape}"
-    for i, a in enumerate(configs):
-        for j, b in enumerate(configs):
-            if i != j:
-                expected = float(metric.lower_bound(a, b)) if callable(getattr(metric, "lower_bound", None)) else metric.compare(a, b).distance
-                assert matrix[i, j] <= expected * (1 + 1e-9) + 1e-12, (
-                    f"{name}.pairwise_lower_bound[{i}, {j}] = {matrix[i, j]} exceeds the pair's bound {expected}"
-                )
+    configs = _close_configurations()
+    pairs = np.column_stack(np.triu_indices(len(configs), 1))
+    distances = np.array([metric.compare(configs[i], configs[j]).distance for i, j in pairs])
+    for threshold in np.quantile(distances, [0.1, 0.5]):
+        listed = np.asarray(metric.pairs_within(configs, float(threshold)))
+        assert listed.ndim == 2 and listed.shape[1] == 2, f"{name}.pairs_within returned shape {listed.shape}; expected (P, 2)"
+        listed_set = {(int(i), int(j)) for i, j in listed}
+        assert len(listed_set) == len(listed) and all(i < j for i, j in listed_set), (
+            f"{name}.pairs_within must list pairs (i, j) with i < j, each once"
+        )
+        missing = [(int(i), int(j)) for (i, j), d in zip(pairs, distances) if d <= threshold and (i, j) not in listed_set]
+        assert not missing, f"{name}.pairs_within(threshold={threshold:.4g}) leaves out {missing[:3]} although compare finds them within it"
+        if "rows" in inspect.signature(metric.pairs_within).parameters:
+            split = len(configs) // 3
+            parts = [np.asarray(metric.pairs_within(configs, float(threshold), rows=rows)).reshape(-1, 2) for rows in ((0, split), (split, len(configs)))]
+            assert {(int(i), int(j)) for part in parts for i, j in part} == listed_set and all(
+                start <= i < stop for part, (start, stop) in zip(parts, ((0, split), (split, len(configs)))) for i, _ in part
+            ), f"{name}.pairs_within(rows=...) over two row ranges does not give the same pairs as without rows"
 
 
 def check_pairwise(name, metric):
-    """pairwise(configurations), where offered, is a symmetric (K, K) matrix of compare distances."""
+    """pairwise(configurations, pairs), where offered, gives compare's distances: for the listed
+    pairs, and without `pairs` for every i < j in row-major (pdist) order."""
     if not callable(getattr(metric, "pairwise", None)):
         return
     rng = np.random.default_rng(SEED + 4)
     configs = [random_flock(n_agents=6, dims=2, rng=rng).configuration() for _ in range(4)]
-    matrix = np.asarray(metric.pairwise(configs))
-    assert matrix.shape == (4, 4), f"{name}.pairwise returned shape {matrix.shape}; expected (4, 4)"
-    assert np.allclose(matrix, matrix.T) and np.allclose(np.diag(matrix), 0), f"{name}.pairwise is not symmetric with a zero diagonal"
-    for i in range(4):
-        for j in range(i + 1, 4):
+    pairs = np.array([[2, 0], [1, 3], [0, 1]])
+    for given, expected_pairs in ((pairs, pairs), (None, np.column_stack(np.triu_indices(4, 1)))):
+        found = np.asarray(metric.pairwise(configs) if given is None else metric.pairwise(configs, given))
+        assert found.shape == (len(expected_pairs),), f"{name}.pairwise returned shape {found.shape}; expected ({len(expected_pairs)},)"
+        for (i, j), value in zip(expected_pairs, found):
             expected = metric.compare(configs[i], configs[j]).distance
-            assert np.isclose(matrix[i, j], expected, rtol=1e-9, atol=1e-12), (
-                f"{name}.pairwise[{i}, {j}] = {matrix[i, j]} but compare gives {expected}"
-            )
+            assert np.isclose(value, expected, rtol=1e-9, atol=1e-12), f"{name}.pairwise gives {value} for pair ({i}, {j}) but compare gives {expected}"
 
 
 def check_deterministic(name, metric):
@@ -169,7 +185,7 @@ CHECKS = (
     check_rigid_and_permutation_invariant,
     check_distance_covers_alignment,
     check_lower_bound,
-    check_pairwise_lower_bound,
+    check_pairs_within,
     check_pairwise,
     check_deterministic,
     check_inputs_unchanged,

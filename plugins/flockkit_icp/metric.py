@@ -9,7 +9,19 @@ works on centered positions and alternates the optimal assignment for the curren
 (`scipy.optimize.linear_sum_assignment`) with the optimal rotation for the current assignment
 (Kabsch, proper rotations only) until the distance stops decreasing. Because that only finds a
 local minimum, it starts from several rotations and keeps the best: the configuration-space
-alignment (section 4.1), the same turned by pi, and the principal-axes alignments.
+alignment (section 4.1), the same turned by pi, and the principal-axes alignments. The search runs
+on many pairs at once (`pairwise`); `compare` is the one-pair case of the same code, so both give
+bit-identical distances.
+
+Bounds. With V the mean velocity and d_i = v_i - V the deviations, the velocity term splits
+exactly into w |V_a - R V_b|^2 + (w/N) sum_i |d_i - R d'_M(i)|^2 (the deviations sum to zero).
+`lower_bound` drops the rotation: sorted distances to the center of mass, sorted deviation
+speeds and the difference of mean speeds. `pairs_within` (2D) keeps it: over an interval of
+angles every entry of the assignment cost has a closed-form minimum, so max(mean of row minima,
+mean of column minima) plus the interval's minimum of the mean-velocity term bounds E for every
+rotation in the interval. Intervals whose bound exceeds the threshold are dropped and the others
+halved (branch and bound) four times; on the last, narrow intervals the optimal assignment of the
+entries' minima replaces the row and column minima. A pair is listed when an interval survives.
 """
 
 from __future__ import annotations
@@ -19,34 +31,13 @@ import math
 import attrs
 import numpy as np
 from scipy.optimize import linear_sum_assignment
-from scipy.spatial.distance import cdist
 
 import flockkit
 from flockkit.errors import ValidationError
 
-
-def _kabsch(source: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """The proper rotation R minimizing sum |target_i - R source_i|^2 (rows are points)."""
-    u, _, vt = np.linalg.svd(source.T @ target)
-    signs = np.ones(source.shape[1])
-    signs[-1] = np.sign(np.linalg.det(vt.T @ u.T)) or 1.0
-    return vt.T @ np.diag(signs) @ u.T
-
-
-def _principal_axes(points: np.ndarray) -> np.ndarray:
-    """Rows: principal directions of centered points, largest spread first, as a proper rotation."""
-    _, vectors = np.linalg.eigh(points.T @ points)
-    axes = vectors[:, ::-1].T
-    if np.linalg.det(axes) < 0:
-        axes[-1] *= -1
-    return axes
-
-
-def _half_turns(d: int) -> list[np.ndarray]:
-    """The identity and the rotations by pi about each coordinate axis (in 2D: about the origin)."""
-    if d == 2:
-        return [np.eye(2), -np.eye(2)]
-    return [np.eye(3)] + [np.diag(np.where(np.arange(3) == k, 1.0, -1.0)) for k in range(3)]
+_CHUNK = 256  # pairs searched together: bounds the (pairs x starts x N x N) cost array
+_BOUND_CHUNK = 2048  # pairs bounded together
+_BLOCK = 1  # pairs_within certifies blocks of (2 * _BLOCK + 1)^2 neighboring pairs at once
 
 
 def _positive(name):
@@ -95,19 +86,27 @@ class IcpHungarian:
     def compare(self, a: flockkit.Configuration, b: flockkit.Configuration) -> flockkit.Alignment:
         """The alignment of `b` onto `a` with the smallest distance found (see the module docstring)."""
         self._check_pair(a, b)
-        ca, cb = a.center_of_mass(), b.center_of_mass()
-        pa, pb = a.positions - ca, b.positions - cb
-        w = self.velocity_weight
-        va, vb = a.velocities, b.velocities
-        best = None
-        for rotation in self._starts(a, b, pa, pb):
-            found = self._descend(pa, pb, va, vb, w, rotation)
-            if best is None or found[0] < best[0]:
-                best = found
-        distance, assignment, rotation = best
+        prepared = _Prepared([a, b], self.up)
+        distance, assignment, rotation = self._search(prepared, np.array([0]), np.array([1]))
+        rotation = rotation[0]
         return flockkit.Alignment(
-            distance=max(distance, 0.0), assignment=assignment, rotation=rotation, translation=ca - rotation @ cb
+            distance=max(float(distance[0]), 0.0), assignment=assignment[0], rotation=rotation,
+            translation=prepared.com[0] - rotation @ prepared.com[1],
         )
+
+    def pairwise(self, configurations, pairs=None) -> np.ndarray:
+        """Distances for many pairs at once, shape (P,): ``compare(c[i], c[j]).distance`` for each
+        row (i, j) of `pairs` (shape (P, 2)). Without `pairs`, every i < j in row-major order, the
+        condensed form of ``scipy.spatial.distance.pdist`` (``squareform`` makes the matrix)."""
+        configurations = self._check_many(configurations)
+        k = len(configurations)
+        pairs = np.column_stack(np.triu_indices(k, 1)) if pairs is None else _checked_pairs(pairs, k)
+        prepared = _Prepared(configurations, self.up)
+        distances = np.empty(len(pairs))
+        for start in range(0, len(pairs), _CHUNK):
+            chunk = pairs[start : start + _CHUNK]
+            distances[start : start + _CHUNK] = self._search(prepared, chunk[:, 0], chunk[:, 1])[0]
+        return np.maximum(distances, 0.0)
 
     def lower_bound(self, a: flockkit.Configuration, b: flockkit.Configuration) -> float:
         """A proven lower bound on ``compare(a, b).distance``, in O(N log N).
@@ -115,37 +114,89 @@ class IcpHungarian:
         Rotations keep each agent's distance to the center of mass, and centers of mass always
         correspond, so |a_i - R b_j - t| >= | |a_i - ca| - |b_j - cb| |; the best one-to-one
         matching of those radii (rearrangement inequality) is the sorted one. The velocity term
-        is bounded the same way with speeds.
+        is bounded the same way with the deviation speeds, plus the mean speeds' difference.
         """
         self._check_pair(a, b)
-        bound = _sorted_gap(np.linalg.norm(a.positions - a.center_of_mass(), axis=1),
-                            np.linalg.norm(b.positions - b.center_of_mass(), axis=1))
-        if self.velocity_weight:
-            bound += self.velocity_weight * _sorted_gap(np.linalg.norm(a.velocities, axis=1), np.linalg.norm(b.velocities, axis=1))
-        return bound
+        prepared = _Prepared([a, b], self.up)
+        return float(self._rotation_free_bound(prepared, np.array([0]), np.array([1]))[0])
 
-    def pairwise_lower_bound(self, configurations) -> np.ndarray:
-        """``lower_bound`` for every pair at once, (K, K): the sorted-radii (and speeds) bound is a
-        squared distance between sorted vectors, so one ``cdist`` computes it all."""
-        configurations = list(configurations)
-        radii = np.array([np.sort(np.linalg.norm(c.positions - c.center_of_mass(), axis=1)) for c in configurations])
-        n = radii.shape[1]
-        bounds = cdist(radii, radii, "sqeuclidean") / n
-        if self.velocity_weight:
-            speeds = np.array([np.sort(np.linalg.norm(c.velocities, axis=1)) for c in configurations])
-            bounds += self.velocity_weight * cdist(speeds, speeds, "sqeuclidean") / n
-        return bounds
+    def pairs_within(self, configurations, threshold: float, *, rows=None) -> np.ndarray:
+        """Every pair (i, j), i < j, whose distance may be at most `threshold`, shape (P, 2), sorted:
+        pairs left out are proven farther apart (see the module docstring). `rows` = (start, stop)
+        keeps the pairs with start <= i < stop, so that workers can share the job.
 
-    def pairwise(self, configurations) -> np.ndarray:
-        """Distance matrix (K, K): entry (i, j) = compare(configurations[i], configurations[j]).distance
-        for i < j, mirrored below the diagonal; zero on it."""
-        configurations = list(configurations)
+        Neighboring configurations of a recording are close, which saves most of the work: the
+        metric (its exact minimum) obeys the triangle inequality, so if the bound between
+        configurations p and q exceeds (sqrt(threshold) + r_p + r_q)^2, where r_p bounds the
+        distance from p to each configuration within `_BLOCK` places of it (the identity
+        assignment, best rotation), no pair of those two blocks can be within the threshold."""
+        configurations = self._check_many(configurations)
+        if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not threshold >= 0:
+            raise ValidationError(f"icp-hungarian.pairs_within: threshold must be a number >= 0; got {threshold!r}")
         k = len(configurations)
-        matrix = np.zeros((k, k))
-        for i in range(k):
-            for j in range(i + 1, k):
-                matrix[i, j] = matrix[j, i] = self.compare(configurations[i], configurations[j]).distance
-        return matrix
+        first, stop = (0, k) if rows is None else (int(rows[0]), int(rows[1]))
+        if not 0 <= first <= stop <= k:
+            raise ValidationError(f"icp-hungarian.pairs_within: rows must be (start, stop) with 0 <= start <= stop <= {k}; got {rows!r}")
+        prepared = _Prepared(configurations, self.up)
+        limit = float(threshold)
+        if prepared.dims == 3:
+            i, j = np.triu_indices(k, 1)
+            inside = (i >= first) & (i < stop)
+            return self._filter(prepared, i[inside], j[inside], limit)
+        size = 2 * _BLOCK + 1
+        starts = np.arange(0, k, size)  # blocks of `size` neighbors, the last one maybe shorter
+        centres = np.minimum(starts + _BLOCK, k - 1)
+        reach = self._block_reach(prepared, starts, centres, size)
+        p, q = np.triu_indices(len(starts))
+        mine = (starts[p] + size > first) & (starts[p] < stop)
+        p, q = p[mine], q[mine]
+        widened = (math.sqrt(limit) + reach[p] + reach[q]) ** 2
+        found = []
+        for bp, bq in self._filter(prepared, centres[p], centres[q], widened, blocks=(p, q)):
+            # these two blocks were not ruled out together: look at their pairs one by one
+            row_range = np.arange(max(first, starts[bp]), min(stop, starts[bp] + size))
+            i, j = (x.ravel() for x in np.meshgrid(row_range, np.arange(starts[bq], min(k, starts[bq] + size)), indexing="ij"))
+            found.append((i[i < j], j[i < j]))
+        if not found:
+            return np.zeros((0, 2), dtype=int)
+        i, j = np.concatenate([f[0] for f in found]), np.concatenate([f[1] for f in found])
+        listed = self._filter(prepared, i, j, np.full(len(i), limit))
+        return listed[np.lexsort((listed[:, 1], listed[:, 0]))]
+
+    def _filter(self, prepared, ia, ib, limit, blocks=None) -> np.ndarray:
+        """Rows of (ia, ib) (or of `blocks`) whose pair may be within `limit` (one per pair)."""
+        ia, ib = np.asarray(ia), np.asarray(ib)
+        # rounding must never drop a pair at the limit: allow for it relative to the pair's size
+        limit = limit * (1 + 1e-9) + 1e-9 * (prepared.scale[ia] + prepared.scale[ib] + self.velocity_weight * (prepared.speed_scale[ia] + prepared.speed_scale[ib]))
+        keep = np.zeros(len(ia), dtype=bool)
+        for s in range(0, len(ia), _BOUND_CHUNK):
+            part = slice(s, s + _BOUND_CHUNK)
+            floor = self._rotation_free_bound(prepared, ia[part], ib[part], mean_velocity=False)
+            mean_part = self.velocity_weight * (prepared.mean_speed[ia[part]] - prepared.mean_speed[ib[part]]) ** 2
+            kept = np.flatnonzero(floor + mean_part <= limit[part])
+            if prepared.dims == 2 and len(kept):
+                rounding = 1e-6 * prepared.n_agents * (prepared.scale + self.velocity_weight * prepared.speed_scale)
+                slack = limit[part][kept] + rounding[ia[part][kept]] + rounding[ib[part][kept]]
+                kept = kept[_branch_and_bound(prepared, ia[part][kept], ib[part][kept], self.velocity_weight, slack, floor[kept])]
+            keep[s + kept] = True
+        labels = (ia, ib) if blocks is None else blocks
+        return np.column_stack([labels[0][keep], labels[1][keep]]).astype(int)
+
+    def _block_reach(self, prepared, starts, centres, size) -> np.ndarray:
+        """For each block, an upper bound on the distance from its centre to each of its members."""
+        k, reach = len(prepared.centered), np.zeros(len(centres))
+        for offset in range(size):
+            members = np.minimum(starts + offset, k - 1)
+            reach = np.maximum(reach, self._identity_distance(prepared, centres, members))
+        return reach
+
+    def _identity_distance(self, prepared, ia, ib) -> np.ndarray:
+        """sqrt of the distance with the identity assignment and its best rotation: >= the metric's."""
+        w = self.velocity_weight
+        source = np.concatenate([prepared.centered[ib], math.sqrt(w) * prepared.velocities[ib]], axis=1)
+        target = np.concatenate([prepared.centered[ia], math.sqrt(w) * prepared.velocities[ia]], axis=1)
+        rotation = _kabsch(target, source, target, source, 0.0)
+        return np.sqrt(((target - _rotate(source, rotation)) ** 2).sum(axis=(1, 2)) / prepared.n_agents)
 
     # -- internals -------------------------------------------------------------------------
 
@@ -159,35 +210,222 @@ class IcpHungarian:
                 f"and {b.n_agents} in {b.dims}D"
             )
 
-    def _starts(self, a, b, pa, pb):
-        frame_a, frame_b = a.frame(up=self.up).axes, b.frame(up=self.up).axes
-        axes_a, axes_b = _principal_axes(pa), _principal_axes(pb)
-        for turn in _half_turns(a.dims):
-            yield frame_a.T @ turn @ frame_b  # configuration frames, then turned by pi
-            yield axes_a.T @ turn @ axes_b  # principal axes, every proper sign choice
+    def _check_many(self, configurations) -> list:
+        configurations = list(configurations)
+        for index, config in enumerate(configurations):
+            if not isinstance(config, flockkit.Configuration):
+                raise ValidationError(f"icp-hungarian: configurations[{index}] must be a flockkit.Configuration; got {type(config).__name__}")
+            self._check_pair(configurations[0], config)
+        return configurations
 
-    def _descend(self, pa, pb, va, vb, w, rotation):
-        """Alternate assignment and rotation from `rotation` until the distance stops falling."""
-        n = len(pa)
-        best = (math.inf, None, rotation)
+    def _rotation_free_bound(self, prepared, ia, ib, mean_velocity=True) -> np.ndarray:
+        """lower_bound for the pairs (ia[p], ib[p]) (without the mean velocities' part if asked)."""
+        n, w = prepared.n_agents, self.velocity_weight
+        bound = ((prepared.sorted_radii[ia] - prepared.sorted_radii[ib]) ** 2).sum(axis=1) / n
+        if w:
+            bound += w * ((prepared.sorted_deviation_speeds[ia] - prepared.sorted_deviation_speeds[ib]) ** 2).sum(axis=1) / n
+            if mean_velocity:
+                bound += w * (prepared.mean_speed[ia] - prepared.mean_speed[ib]) ** 2
+        return bound
+
+    def _search(self, prepared, ia, ib):
+        """ICP from every start for pairs (ia[p], ib[p]): (distances, assignments, rotations) of the best."""
+        starts = prepared.starts(ia, ib)  # (P, S, D, D)
+        p, s, d = starts.shape[0], starts.shape[1], prepared.dims
+        pick = lambda array, index: np.repeat(array[index], s, axis=0)  # noqa: E731
+        distance, assignment, rotation = self._descend(
+            pick(prepared.centered, ia), pick(prepared.centered, ib),
+            pick(prepared.velocities, ia), pick(prepared.velocities, ib), starts.reshape(p * s, d, d),
+        )
+        best = np.argmin(distance.reshape(p, s), axis=1)  # the first start wins ties
+        flat = np.arange(p) * s + best
+        return distance[flat], assignment[flat], rotation[flat]
+
+    def _descend(self, pa, pb, va, vb, rotation):
+        """Alternate assignment and rotation from each start until its distance stops falling."""
+        m, n, _ = pa.shape
+        w = self.velocity_weight
+        best = np.full(m, np.inf)
+        best_assignment = np.tile(np.arange(n), (m, 1))
+        best_rotation = rotation.copy()
+        rotation = rotation.copy()
+        active = np.arange(m)
         for _ in range(self.max_iterations):
-            cost = cdist(pa, pb @ rotation.T, "sqeuclidean")
+            cost = _pair_costs(pa[active], _rotate(pb[active], rotation[active]))
             if w:
-                cost += w * cdist(va, vb @ rotation.T, "sqeuclidean")
-            rows, assignment = linear_sum_assignment(cost)
-            distance = float(cost[rows, assignment].sum()) / n
-            improved = distance < best[0]
-            if improved:
-                previous, best = best[0], (distance, assignment, rotation)
-            if not improved or distance >= previous * (1 - self.tolerance):
+                cost += w * _pair_costs(va[active], _rotate(vb[active], rotation[active]))
+            assignment = np.array([linear_sum_assignment(c)[1] for c in cost])
+            distance = np.take_along_axis(cost, assignment[:, :, None], axis=2)[:, :, 0].sum(axis=1) / n
+            previous = best[active]
+            improved = distance < previous
+            better = active[improved]
+            # an unchanged assignment gives back the same rotation: nothing more to gain
+            moved = np.any(assignment != best_assignment[active], axis=1) | ~np.isfinite(previous)
+            best[better], best_assignment[better], best_rotation[better] = distance[improved], assignment[improved], rotation[better]
+            going = improved & moved & (distance < previous * (1 - self.tolerance))
+            active, assignment = active[going], assignment[going]
+            if not len(active):
                 break
-            source, target = pb[assignment], pa
-            if w:
-                source = np.vstack([source, math.sqrt(w) * vb[assignment]])
-                target = np.vstack([target, math.sqrt(w) * va])
-            rotation = _kabsch(source, target)
-        return best
+            rotation[active] = _kabsch(pa[active], _gather(pb[active], assignment), va[active], _gather(vb[active], assignment), w)
+        return best, best_assignment, best_rotation
 
 
-def _sorted_gap(x: np.ndarray, y: np.ndarray) -> float:
-    return float(np.mean((np.sort(x) - np.sort(y)) ** 2))
+class _Prepared:
+    """Per-configuration arrays for a list of same-sized configurations."""
+
+    def __init__(self, configurations, up):
+        positions = np.stack([c.positions for c in configurations])
+        self.n_agents, self.dims = positions.shape[1], positions.shape[2]
+        self.com = positions.mean(axis=1)
+        self.centered = positions - self.com[:, None, :]
+        self.velocities = np.stack([c.velocities for c in configurations])
+        self.frames = np.stack([c.frame(up=up).axes for c in configurations])
+        self.principal = _principal_axes(self.centered)
+        mean_velocity = self.velocities.mean(axis=1)
+        self.deviations = self.velocities - mean_velocity[:, None, :]
+        self.mean_velocity = mean_velocity
+        self.mean_speed = np.linalg.norm(mean_velocity, axis=1)
+        self.sorted_radii = np.sort(np.linalg.norm(self.centered, axis=2), axis=1)
+        self.sorted_deviation_speeds = np.sort(np.linalg.norm(self.deviations, axis=2), axis=1)
+        self.scale = (self.centered**2).sum(axis=(1, 2)) / self.n_agents  # mean squared radius
+        self.speed_scale = (self.velocities**2).sum(axis=(1, 2)) / self.n_agents
+
+    def starts(self, ia, ib) -> np.ndarray:
+        """Start rotations (P, S, D, D): configuration frames then principal axes, for each half turn."""
+        starts = []
+        for turn in _half_turns(self.dims):
+            for axes in (self.frames, self.principal):
+                starts.append(np.transpose(axes[ia], (0, 2, 1)) @ turn @ axes[ib])
+        return np.stack(starts, axis=1)
+
+
+def _principal_axes(points: np.ndarray) -> np.ndarray:
+    """Rows: principal directions of centered point sets (K, N, D), largest spread first, proper."""
+    _, vectors = np.linalg.eigh(np.transpose(points, (0, 2, 1)) @ points)
+    axes = np.transpose(vectors[:, :, ::-1], (0, 2, 1)).copy()
+    axes[np.linalg.det(axes) < 0, -1] *= -1
+    return axes
+
+
+def _half_turns(d: int) -> list[np.ndarray]:
+    """The identity and the rotations by pi about each coordinate axis (in 2D: about the origin)."""
+    if d == 2:
+        return [np.eye(2), -np.eye(2)]
+    return [np.eye(3)] + [np.diag(np.where(np.arange(3) == k, 1.0, -1.0)) for k in range(3)]
+
+
+def _rotate(points, rotation):
+    """points @ rotation.T for stacks (M, N, D) and (M, D, D), elementwise (so a pair's result does
+    not depend on the batch it is in, unlike a BLAS product)."""
+    d = points.shape[2]
+    return np.stack([sum(points[:, :, k] * rotation[:, e, k, None] for k in range(d)) for e in range(d)], axis=2)
+
+
+def _pair_costs(x, y):
+    """Squared distances (M, N, N) between the rows of x (M, N, D) and y (M, N, D)."""
+    cost = np.zeros((x.shape[0], x.shape[1], y.shape[1]))
+    for k in range(x.shape[2]):
+        difference = x[:, :, None, k] - y[:, None, :, k]
+        cost += difference * difference
+    return cost
+
+
+def _gather(points, assignment):
+    return np.take_along_axis(points, assignment[:, :, None], axis=1)
+
+
+def _kabsch(target, source, target_velocities, source_velocities, w):
+    """Proper rotations R (M, D, D) minimizing sum |target - R source|^2 (+ w for velocities)."""
+    cross = (source[:, :, :, None] * target[:, :, None, :]).sum(axis=1)  # sum_i s_i t_i^T
+    if w:
+        cross = cross + w * (source_velocities[:, :, :, None] * target_velocities[:, :, None, :]).sum(axis=1)
+    if target.shape[2] == 2:
+        angle = np.arctan2(cross[:, 0, 1] - cross[:, 1, 0], cross[:, 0, 0] + cross[:, 1, 1])
+        c, s = np.cos(angle), np.sin(angle)
+        return np.stack([np.stack([c, -s], axis=1), np.stack([s, c], axis=1)], axis=1)
+    u, _, vt = np.linalg.svd(cross)
+    v = np.transpose(vt, (0, 2, 1))
+    signs = np.ones((len(cross), 3))
+    flip = np.linalg.det(v @ np.transpose(u, (0, 2, 1))) < 0
+    signs[flip, -1] = -1.0
+    return (v * signs[:, None, :]) @ np.transpose(u, (0, 2, 1))
+
+
+def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=4) -> np.ndarray:
+    """Mask over pairs (ia, ib) (2D): True where some rotation interval keeps the bound <= limit
+    (one limit per pair). `floor` bounds the position and deviation part for every rotation."""
+    n = prepared.n_agents
+    root = math.sqrt(w)
+    # a . R(theta) b = p cos(theta) + q sin(theta), for positions plus root(w) * deviations
+    stacked = np.concatenate([prepared.centered, root * prepared.deviations], axis=2)
+    left, right = stacked[ia], stacked[ib]  # (P, N, 4): x, y, dx, dy
+    turned = right[:, :, [1, 0, 3, 2]] * np.array([-1.0, 1.0, -1.0, 1.0])  # (-y, x, -dy, dx)
+    p_all = left @ np.transpose(right, (0, 2, 1))
+    q_all = left @ np.transpose(turned, (0, 2, 1))  # ay bx - ax by (+ deviations)
+    # each entry |a_i - R b_j|^2 (+ deviations) = a - h cos(theta - phase); float32 halves the
+    # memory traffic, and the limit allows for its rounding (see _filter)
+    a_all = ((left**2).sum(axis=2)[:, :, None] + (right**2).sum(axis=2)[:, None, :]).astype(np.float32)
+    h_all = (2 * np.sqrt(p_all * p_all + q_all * q_all)).astype(np.float32)
+    phase_all = np.arctan2(q_all, p_all).astype(np.float32)
+    # the mean-velocity term w |Va - R Vb|^2 = a0 - 2 h0 cos(theta - phase0)
+    va, vb = prepared.mean_velocity[ia], prepared.mean_velocity[ib]
+    p0, q0 = w * (va[:, 0] * vb[:, 0] + va[:, 1] * vb[:, 1]), w * (va[:, 1] * vb[:, 0] - va[:, 0] * vb[:, 1])
+    a0, h0 = w * ((va**2).sum(axis=1) + (vb**2).sum(axis=1)), np.sqrt(p0 * p0 + q0 * q0)
+    # first intervals: the angles where that term alone stays under the limit, in pieces <= 45 degrees
+    with np.errstate(divide="ignore", invalid="ignore"):
+        cosine = np.where(h0 > 0, (a0 - (limit - floor)) / (2 * h0), -1.0)
+    reach = np.arccos(np.clip(cosine, -1.0, 1.0))
+    reach[cosine > 1] = 0.0
+    pieces = np.where(cosine > 1, 0, np.maximum(1, np.ceil(reach / (math.pi / 8)))).astype(int)
+    pair = np.repeat(np.arange(len(ia)), pieces)
+    half = (reach / np.maximum(pieces, 1))[pair]
+    first = np.cumsum(pieces) - pieces
+    centre = np.arctan2(q0, p0)[pair] - reach[pair] + half * (2 * (np.arange(len(pair)) - first[pair]) + 1)
+    passed = np.zeros(len(ia), dtype=bool)
+    for level in range(levels + 1):
+        c, s = np.cos(centre), np.sin(centre)
+        velocity_term = a0[pair] - 2 * _interval_max(p0[pair] * c + q0[pair] * s, q0[pair] * c - p0[pair] * s, h0[pair], half)
+        entries = _entry_minima(a_all[pair], h_all[pair], phase_all[pair], centre, half)
+        spread = np.maximum(entries.min(axis=2).sum(axis=1), entries.min(axis=1).sum(axis=1)) / n
+        alive = np.maximum(spread, floor[pair]) + velocity_term <= limit[pair]
+        # the optimal assignment of the entries' minima bounds tighter, and costs less than them
+        matched_all = np.full(len(pair), np.inf)
+        matched_all[alive] = [entries[k][linear_sum_assignment(entries[k])].sum() / n for k in np.flatnonzero(alive)]
+        alive &= np.maximum(matched_all, floor[pair]) + velocity_term <= limit[pair]
+        if level == levels:
+            passed[pair[alive]] = True
+            break
+        if level >= 2:  # narrow enough that a bound well under the limit means a pair within it:
+            sure = pair[alive & (np.maximum(matched_all, floor[pair]) + velocity_term <= 0.9 * limit[pair])]
+            passed[sure] = True  # listing a pair is always allowed; stop refining it
+            alive &= ~passed[pair]
+        pair, half = np.repeat(pair[alive], 2), np.repeat(half[alive] / 2, 2)
+        centre = (centre[alive][:, None] + np.array([-1.0, 1.0]) * half[::2, None]).ravel()
+    return passed
+
+
+def _entry_minima(a, h, phase, centre, half):
+    """min over |theta - centre| <= half of a - h cos(theta - phase), for stacks (M, N, N) and
+    intervals (M,): the angle nearest to the phase inside the interval."""
+    gap = phase - centre.astype(np.float32)[:, None, None]
+    np.abs(gap, out=gap)
+    gap %= np.float32(2 * math.pi)
+    np.minimum(gap, np.float32(2 * math.pi) - gap, out=gap)
+    gap -= half.astype(np.float32)[:, None, None]
+    np.maximum(gap, 0, out=gap)
+    np.cos(gap, out=gap)
+    gap *= h
+    return np.subtract(a, gap, out=gap)
+
+
+def _interval_max(p, q, magnitude, half):
+    """max over |delta| <= half (< pi / 2) of p cos(delta) + q sin(delta) (= magnitude cos(delta - phase))."""
+    inside = (p > 0) & (np.abs(q) <= p * np.tan(half))
+    return np.where(inside, magnitude, p * np.cos(half) + np.abs(q) * np.sin(half))
+
+
+def _checked_pairs(pairs, k) -> np.ndarray:
+    pairs = np.asarray(pairs)
+    if pairs.ndim != 2 or pairs.shape[1] != 2 or (pairs.size and (not np.issubdtype(pairs.dtype, np.integer) or pairs.min() < 0 or pairs.max() >= k)):
+        raise ValidationError(f"icp-hungarian.pairwise: pairs must be integer indices into the {k} configurations, shape (P, 2); got shape {pairs.shape}")
+    return pairs.astype(int)

@@ -14,8 +14,9 @@ transitions survive the trimming of dead ends (up to the mean squared radius its
 paper's rule, the graph grows with the recording. With `per_second`, the paper's rule is used instead: the lowest
 ``ceil(per_second * duration)`` local minima, whatever their values.
 
-Pruning. With a threshold (absolute or adaptive) and a metric offering ``lower_bound``, E is only
-computed where the bound is at most the threshold. A cell left out has E > threshold, so it can
+Pruning. With a threshold (absolute or adaptive), E is only computed for the pairs the metric's
+``pairs_within(configurations, threshold)`` lists (or, for a metric with only ``lower_bound``,
+where that bound is at most the threshold). A cell left out has E > threshold, so it can
 neither be a transition nor keep a computed cell under the threshold from being a local minimum:
 ``prune=True`` and ``prune=False`` give the identical graph. The `per_second` rule needs every
 value and never prunes.
@@ -23,6 +24,7 @@ value and never prunes.
 
 from __future__ import annotations
 
+import inspect
 import math
 
 import attrs
@@ -113,7 +115,7 @@ class Kovar:
         matrix = _Matrix(configs, metric, n_jobs=self.n_jobs, progress=self.progress)
         far = np.abs(frames[:, None] - frames[None, :]) >= max(gap, 1)
         if self.per_second is not None:
-            matrix.fill(np.ones_like(far))
+            matrix.fill(matrix.all_pairs())
             count = math.ceil(self.per_second * motion.duration)
             minima = _local_minima(matrix.values, far)
             chosen = sorted(minima, key=lambda ij: (matrix.values[ij], ij))[:count]
@@ -121,10 +123,10 @@ class Kovar:
         else:
             spread = float(np.mean([np.mean(np.sum((c.positions - c.center_of_mass()) ** 2, axis=1)) for c in configs]))
             threshold = self.threshold if self.threshold is not None else self.relative_threshold * spread
-            prune = self.prune and callable(getattr(metric, "lower_bound", None))
+            prune = self.prune and (callable(getattr(metric, "pairs_within", None)) or callable(getattr(metric, "lower_bound", None)))
             wanted = max(self.min_transitions, math.ceil(self.transitions_per_minute * motion.duration / 60))
             while True:
-                matrix.fill(matrix.lower_bounds() <= threshold if prune else np.ones_like(far))
+                matrix.fill(matrix.pairs_within(threshold) if prune else matrix.all_pairs())
                 chosen = [ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= threshold]
                 if self.threshold is not None or threshold >= spread or _kept(motion, frames, chosen, matrix, blend) >= wanted:
                     break
@@ -143,7 +145,7 @@ class Kovar:
 
     def _no_transition_message(self, motion, frames, far, matrix, blend, threshold) -> str:
         """Say that no transition is left, with the smallest cost seen and a threshold that works."""
-        matrix.fill(np.ones_like(far))
+        matrix.fill(matrix.all_pairs())
         minima = sorted(_local_minima(matrix.values, far), key=lambda ij: matrix.values[ij])
         smallest = f"{matrix.values[minima[0]]:.4g}" if minima else "none (no local minimum at least min_gap apart)"
         for count in range(1, len(minima) + 1):
@@ -174,58 +176,100 @@ def _kept(motion, frames, chosen, matrix, blend) -> int:
 
 
 class _Matrix:
-    """The difference matrix, computed lazily, symmetric; cells not computed hold +inf."""
+    """The difference matrix, computed where asked, symmetric; cells not computed hold +inf.
+    Alignments are only kept for the cells that become transitions."""
 
     def __init__(self, configs, metric, *, n_jobs, progress):
         k = len(configs)
         self.configs, self.metric, self.n_jobs, self.progress = configs, metric, n_jobs, progress
         self.values = np.full((k, k), np.inf)
-        self.alignments: dict[tuple[int, int], flockkit.Alignment] = {}
-        self._bounds = None
+        self.computed = np.zeros((k, k), dtype=bool)
+        self._alignments: dict[tuple[int, int], flockkit.Alignment] = {}
 
     @property
     def evaluated(self) -> int:
-        return len(self.alignments)
+        return int(np.count_nonzero(self.computed))
 
-    def lower_bounds(self) -> np.ndarray:
-        if self._bounds is None:
-            batched = getattr(self.metric, "pairwise_lower_bound", None)
-            if callable(batched):
-                self._bounds = np.asarray(batched(self.configs), dtype=np.float64)
-            else:
-                k = len(self.configs)
-                self._bounds = np.zeros((k, k))
-                for i in range(k):
-                    for j in range(i + 1, k):
-                        self._bounds[i, j] = self._bounds[j, i] = self.metric.lower_bound(self.configs[i], self.configs[j])
-        return self._bounds
+    def all_pairs(self) -> np.ndarray:
+        return np.column_stack(np.triu_indices(len(self.configs), 1))
 
-    def fill(self, wanted: np.ndarray) -> None:
-        """Compute every upper-triangle cell where `wanted` holds and that is not computed yet."""
-        cells = [(i, j) for i, j in zip(*np.nonzero(np.triu(wanted, 1))) if (i, j) not in self.alignments]
-        if not cells:
+    def pairs_within(self, threshold: float) -> np.ndarray:
+        """Pairs i < j the metric cannot rule out at `threshold` (its pairs_within or lower_bound)."""
+        batched = getattr(self.metric, "pairs_within", None)
+        if callable(batched):
+            if self.n_jobs == 1 or "rows" not in inspect.signature(batched).parameters:
+                return np.asarray(batched(self.configs, threshold), dtype=int).reshape(-1, 2)
+            from joblib import Parallel, delayed
+
+            parts = Parallel(n_jobs=self.n_jobs)(delayed(batched)(self.configs, threshold, rows=rows) for rows in _row_ranges(len(self.configs), 4 * abs(self.n_jobs)))
+            return np.concatenate([np.asarray(part, dtype=int).reshape(-1, 2) for part in parts])
+        pairs = self.all_pairs()
+        bounds = np.array([self.metric.lower_bound(self.configs[i], self.configs[j]) for i, j in pairs])
+        return pairs[bounds <= threshold]
+
+    def fill(self, pairs: np.ndarray) -> None:
+        """Compute the distance of every pair (i < j) not computed yet."""
+        pairs = pairs[~self.computed[pairs[:, 0], pairs[:, 1]]]
+        if not len(pairs):
             return
-        found = _run(self.metric.compare, [(self.configs[i], self.configs[j]) for i, j in cells], self.n_jobs, self.progress)
-        for (i, j), alignment in zip(cells, found):
-            self.alignments[(int(i), int(j))] = alignment
-            self.values[i, j] = self.values[j, i] = alignment.distance
+        distances = _distances(self.metric, self.configs, pairs, self.n_jobs, self.progress)
+        i, j = pairs[:, 0], pairs[:, 1]
+        self.values[i, j] = self.values[j, i] = distances
+        self.computed[i, j] = self.computed[j, i] = True
 
     def alignment(self, i: int, j: int) -> flockkit.Alignment:
         """compare(config i, config j): computed for i < j, inverted for i > j."""
-        return self.alignments[(i, j)] if i < j else self.alignments[(j, i)].inverse()
+        key = (min(i, j), max(i, j))
+        if key not in self._alignments:
+            self._alignments[key] = self.metric.compare(self.configs[key[0]], self.configs[key[1]])
+        return self._alignments[key] if i < j else self._alignments[key].inverse()
 
 
-def _run(function, argument_pairs, n_jobs, progress):
-    """function(*pair) for every pair, through joblib when n_jobs != 1, with an optional bar."""
+def _distances(metric, configs, pairs, n_jobs, progress) -> np.ndarray:
+    """metric distances of `pairs`, in chunks (the metric's batched `pairwise` where it has one),
+    through joblib when n_jobs != 1, with an optional progress bar."""
+    size = int(np.clip(len(pairs) // (8 * max(n_jobs, 1)), 64, 4096)) if n_jobs != 1 else 1024
+    chunks = [pairs[s : s + size] for s in range(0, len(pairs), size)]
+    bar = None
     if progress:
         from tqdm.auto import tqdm
 
-        argument_pairs = tqdm(argument_pairs, desc="difference matrix", unit="pair")
+        bar = tqdm(total=len(pairs), desc="difference matrix", unit="pair")
     if n_jobs == 1:
-        return [function(a, b) for a, b in argument_pairs]
-    from joblib import Parallel, delayed
+        results = (_chunk_distances(metric, configs, chunk) for chunk in chunks)
+    else:
+        from joblib import Parallel, delayed
 
-    return Parallel(n_jobs=n_jobs, batch_size="auto")(delayed(function)(a, b) for a, b in argument_pairs)
+        # each job gets only the configurations its chunk uses
+        results = Parallel(n_jobs=n_jobs, return_as="generator")(delayed(_chunk_distances)(metric, *_localized(configs, chunk)) for chunk in chunks)
+    found = []
+    for chunk, distances in zip(chunks, results):
+        found.append(distances)
+        if bar is not None:
+            bar.update(len(chunk))
+    if bar is not None:
+        bar.close()
+    return np.concatenate(found)
+
+
+def _row_ranges(k: int, count: int) -> list[tuple[int, int]]:
+    """(start, stop) row ranges holding about equal numbers of pairs i < j (row i has k - 1 - i)."""
+    done = np.cumsum(np.arange(k - 1, -1, -1))
+    cuts = np.searchsorted(done, np.linspace(0, done[-1], count + 1)[1:-1])
+    edges = [0, *sorted(set(int(c) + 1 for c in cuts)), k]
+    return [(a, b) for a, b in zip(edges[:-1], edges[1:]) if a < b]
+
+
+def _localized(configs, pairs):
+    used, local = np.unique(pairs, return_inverse=True)
+    return [configs[u] for u in used], local.reshape(pairs.shape)
+
+
+def _chunk_distances(metric, configs, pairs) -> np.ndarray:
+    batched = getattr(metric, "pairwise", None)
+    if callable(batched):
+        return np.asarray(batched(configs, pairs), dtype=np.float64)
+    return np.array([metric.compare(configs[i], configs[j]).distance for i, j in pairs])
 
 
 def _local_minima(values: np.ndarray, far: np.ndarray) -> list[tuple[int, int]]:

@@ -171,11 +171,11 @@ class _Wrapped:
     def lower_bound(self, a, b):
         return self.inner.lower_bound(a, b)
 
-    def pairwise(self, configurations):
-        return self.inner.pairwise(configurations)
+    def pairwise(self, configurations, pairs=None):
+        return self.inner.pairwise(configurations, pairs)
 
-    def pairwise_lower_bound(self, configurations):
-        return self.inner.pairwise_lower_bound(configurations)
+    def pairs_within(self, configurations, threshold, *, rows=None):
+        return self.inner.pairs_within(configurations, threshold, rows=rows)
 
     @staticmethod
     def _with(found, **changes):
@@ -228,15 +228,18 @@ class LooseBound(_Wrapped):
         return 2 * self.inner.compare(a, b).distance + 1.0
 
 
-class LoosePairwiseBound(_Wrapped):
-    def pairwise_lower_bound(self, configurations):
-        return np.asarray(self.inner.pairwise_lower_bound(configurations)) * 3 + 1.0
+class PrunesTooMuch(_Wrapped):
+    """Leaves out the first pair, two configurations a few steps apart (so within the threshold)."""
+
+    def pairs_within(self, configurations, threshold, *, rows=None):
+        return self.inner.pairs_within(configurations, threshold, rows=rows)[1:]
 
 
 class WrongPairwise(_Wrapped):
-    def pairwise(self, configurations):
-        matrix = np.asarray(self.inner.pairwise(configurations))
-        return matrix * 2
+    """Distances for the pairs in column-major order instead of the asked order."""
+
+    def pairwise(self, configurations, pairs=None):
+        return np.asarray(self.inner.pairwise(configurations, pairs))[::-1]
 
 
 class Jittery(_Wrapped):
@@ -266,7 +269,7 @@ BROKEN_METRICS = {
     "check_rigid_and_permutation_invariant": IgnoresRotation,
     "check_distance_covers_alignment": UnderReports,
     "check_lower_bound": LooseBound,
-    "check_pairwise_lower_bound": LoosePairwiseBound,
+    "check_pairs_within": PrunesTooMuch,
     "check_pairwise": WrongPairwise,
     "check_deterministic": Jittery,
     "check_inputs_unchanged": MutatesConfiguration,
@@ -315,10 +318,15 @@ class OverclaimsAlignment(_KovarBased):
 
 
 class RandomSubset(_KovarBased):
+    """Drops a different transition on every call (as a build depending on global state would)."""
+
+    calls = 0
+
     def build(self, motion, metric, rng):
         graph = super().build(motion, metric, rng)
-        keep = np.random.default_rng().random(len(graph.transitions)) < 0.5
-        return attrs.evolve(graph, transitions=[t for t, k in zip(graph.transitions, keep) if k] or graph.transitions[:1])
+        RandomSubset.calls += 1
+        drop = RandomSubset.calls % len(graph.transitions)
+        return attrs.evolve(graph, transitions=[t for k, t in enumerate(graph.transitions) if k != drop])
 
 
 class MutatesMotion(_KovarBased):

@@ -80,15 +80,18 @@ def test_mirror_images_are_not_reflected():
     mirror = flockkit.Configuration(positions=corners * [1.0, -1.0], velocities=np.zeros((3, 2)))
     found = IcpHungarian(velocity_weight=0.0).compare(triangle, mirror)
     assert np.linalg.det(found.rotation) == pytest.approx(1.0)
-    # The true optimum over proper rotations, by brute force over the six assignments:
+    # The true optimum over proper rotations, by brute force over the six assignments and a fine
+    # grid of angles refined to the closed-form best angle of each assignment:
     from itertools import permutations
 
-    from flockkit_icp.metric import _kabsch
-
     a, b = corners - corners.mean(axis=0), mirror.positions - mirror.center_of_mass()
-    best = min(
-        np.mean(np.sum((a - b[list(p)] @ _kabsch(b[list(p)], a).T) ** 2, axis=1)) for p in permutations(range(3))
-    )
+
+    def best_rotation_cost(source, target):
+        angle = np.arctan2(np.sum(source[:, 0] * target[:, 1] - source[:, 1] * target[:, 0]), np.sum(source * target))
+        c, s = np.cos(angle), np.sin(angle)
+        return np.mean(np.sum((target - source @ np.array([[c, -s], [s, c]]).T) ** 2, axis=1))
+
+    best = min(best_rotation_cost(b[list(p)], a) for p in permutations(range(3)))
     assert found.distance == pytest.approx(best, rel=1e-9)
     assert best > 0.05  # whereas a reflection would match exactly
 
@@ -111,11 +114,46 @@ def test_bad_parameters(params, name):
         flockkit.get("metric", "icp-hungarian", **params)
 
 
-@settings(max_examples=25, deadline=None)
-@given(st.lists(fst.configurations(min_agents=4, max_agents=4, dims=2), min_size=2, max_size=5), st.floats(0, 2))
-def test_batched_lower_bound_equals_the_pairwise_one(configs, weight):
+@settings(max_examples=40, deadline=None)
+@given(st.lists(fst.configurations(min_agents=4, max_agents=4, dims=2), min_size=2, max_size=6), st.floats(0, 2), st.data())
+def test_pairs_within_lists_every_close_pair(configs, weight, data):
     metric = IcpHungarian(velocity_weight=weight)
-    matrix = metric.pairwise_lower_bound(configs)
-    for i, a in enumerate(configs):
-        for j, b in enumerate(configs):
-            assert matrix[i, j] == pytest.approx(metric.lower_bound(a, b), rel=1e-9, abs=1e-9)
+    distances = metric.pairwise(configs)
+    threshold = data.draw(st.sampled_from(sorted(distances)))
+    listed = metric.pairs_within(configs, threshold)
+    pairs = np.column_stack(np.triu_indices(len(configs), 1))
+    assert {tuple(p) for p in pairs[distances <= threshold]} <= {tuple(p) for p in listed}
+    assert np.all(listed[:, 0] < listed[:, 1]) and len({tuple(p) for p in listed}) == len(listed)
+
+
+@pytest.mark.parametrize("dims", [2, 3])
+def test_pairs_within_on_a_recording_is_exact_and_prunes(dims):
+    """On a flock's configurations a second apart: every pair within the threshold is listed,
+    and in 2D most of the others are ruled out."""
+    motion = flockkit.simulate(n_agents=12, steps=400, dims=dims, seed=2)
+    configs = [motion.configuration(t) for t in range(0, 400, 5)]
+    metric = IcpHungarian()
+    distances = metric.pairwise(configs)
+    threshold = float(np.quantile(distances, 0.05))
+    listed = {tuple(p) for p in metric.pairs_within(configs, threshold)}
+    pairs = np.column_stack(np.triu_indices(len(configs), 1))
+    assert {tuple(p) for p in pairs[distances <= threshold]} <= listed
+    if dims == 2:
+        assert len(listed) < 0.5 * len(pairs)
+
+
+def test_pairwise_equals_compare_bit_for_bit():
+    motion = flockkit.simulate(n_agents=9, steps=60, seed=3)
+    configs = [motion.configuration(t) for t in range(0, 60, 6)]
+    metric = IcpHungarian()
+    pairs = np.array([[0, 3], [5, 2], [9, 9], [4, 8]])
+    expected = [metric.compare(configs[i], configs[j]).distance for i, j in pairs]
+    assert list(metric.pairwise(configs, pairs)) == expected
+    condensed = metric.pairwise(configs)
+    assert condensed.shape == (45,) and condensed[0] == metric.compare(configs[0], configs[1]).distance
+
+
+def test_pairwise_rejects_bad_pairs():
+    configs = [flockkit.Configuration(positions=np.zeros((3, 2)), velocities=np.zeros((3, 2)))] * 2
+    with pytest.raises(ValidationError, match="pairs"):
+        IcpHungarian().pairwise(configs, [[0, 2]])
