@@ -5,7 +5,7 @@ lookup (``get``, ``available``, ``hookimpl``) and the convenience layer (``simul
 """
 
 from . import errors, io
-from .constraints import Ball, Box, Polygon
+from .constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
 from .convenience import build_graph, random_flock, simulate, walk
 from .graph import Clip, MotionGraph, Transition, Walk
 from .synthesis import synthesize, synthesize_many
@@ -31,6 +31,10 @@ __all__ = [
     "Ball",
     "Box",
     "Polygon",
+    "PointConstraint",
+    "ComConstraint",
+    "ShapeConstraint",
+    "Problem",
     "get",
     "available",
     "hookimpl",

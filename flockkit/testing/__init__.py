@@ -24,7 +24,7 @@ import functools
 
 from ..interfaces import PROTOCOLS
 from ..registry import interface_problems
-from . import behavior, builder, metric, strategies, walk
+from . import behavior, builder, metric, objective, strategies, walk
 
 __all__ = ["check_plugin", "parametrize_with_checks", "checks_for", "check_interface", "strategies"]
 
@@ -42,6 +42,7 @@ _KIND_CHECKS = {
     "metric": metric.CHECKS,
     "builder": builder.CHECKS,
     "walk": walk.CHECKS,
+    "objective": objective.CHECKS,
 }
 
 

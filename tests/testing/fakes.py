@@ -383,3 +383,55 @@ BROKEN_WALKS = {
     "check_rejects_bad_duration": ClampsDuration,
 }
 BROKEN_BY_KIND.update({"builder": BROKEN_BUILDERS, "walk": BROKEN_WALKS})
+
+
+# -- objectives: the built-in com term is the correct base ----------------------------------
+
+from flockkit_objectives import ComTerm  # noqa: E402
+
+
+class NoLogTerms:
+    def score(self, motion, problem, start=0, stop=None):
+        return 0.0
+
+
+class NanTerms(ComTerm):
+    def log_terms(self, motion, problem, start=0, stop=None):
+        terms = super().log_terms(motion, problem, start, stop)
+        return np.where(terms != 0, np.nan, terms)
+
+
+class WindowFromZero(ComTerm):
+    """Ignores `start`: returns the first stop - start frames."""
+
+    def log_terms(self, motion, problem, start=0, stop=None):
+        stop = motion.n_frames if stop is None else stop
+        return super().log_terms(motion, problem, 0, max(stop - start, 0)) if 0 <= start <= stop <= motion.n_frames else super().log_terms(motion, problem, start, stop)
+
+
+class MutatesMotionTerms(ComTerm):
+    def log_terms(self, motion, problem, start=0, stop=None):
+        motion.positions.setflags(write=True)
+        motion.positions[0, 0] += 1.0
+        return super().log_terms(motion, problem, start, stop)
+
+
+class ClipsWindow(ComTerm):
+    """Clips a bad window into the motion, and pads a short motion, instead of raising."""
+
+    def log_terms(self, motion, problem, start=0, stop=None):
+        stop = motion.n_frames if stop is None else min(stop, motion.n_frames)
+        start = min(start, stop)
+        if motion.n_agents != problem.n_agents:
+            return np.zeros(stop - start)
+        return super().log_terms(motion, problem, start, stop)
+
+
+BROKEN_OBJECTIVES = {
+    "check_interface": NoLogTerms,
+    "check_log_terms_per_frame": NanTerms,
+    "check_window_is_a_slice": WindowFromZero,
+    "check_inputs_unchanged": MutatesMotionTerms,
+    "check_rejects_bad_window": ClipsWindow,
+}
+BROKEN_BY_KIND["objective"] = BROKEN_OBJECTIVES

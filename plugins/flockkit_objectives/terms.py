@@ -1,0 +1,88 @@
+"""Objective terms of paper 004, section 3.4.2, in log space, one value per frame.
+
+Each term reads its constants from the Problem (sigma_com, shape_weight c_S, flock_weight c_F,
+flocks F_c, visibility), so one Problem describes the whole objective.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+import flockkit
+from flockkit.errors import ValidationError
+
+
+def _window(motion, problem, start, stop) -> tuple[int, int]:
+    if not isinstance(motion, flockkit.Motion):
+        raise ValidationError(f"objective: motion must be a flockkit.Motion; got {type(motion).__name__}")
+    if not isinstance(problem, flockkit.Problem):
+        raise ValidationError(f"objective: problem must be a flockkit.Problem; got {type(problem).__name__}")
+    if motion.n_agents != problem.n_agents or motion.dims != problem.dims:
+        raise ValidationError(
+            f"objective: the motion has {motion.n_agents} agents in {motion.dims}D, the problem {problem.n_agents} in {problem.dims}D"
+        )
+    stop = motion.n_frames if stop is None else stop
+    for name, value in (("start", start), ("stop", stop)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+            raise ValidationError(f"objective: {name} must be an integer frame; got {value!r}")
+    if not 0 <= start <= stop <= motion.n_frames:
+        raise ValidationError(f"objective: window [{start}, {stop}) is not inside the motion's {motion.n_frames} frames")
+    return int(start), int(stop)
+
+
+def _active(problem, kind, start, stop):
+    """(frame, constraint) for constraints of `kind` whose frame lies in [start, stop)."""
+    for constraint in problem.constraints:
+        frame = problem.frame(constraint.time)
+        if isinstance(constraint, kind) and start <= frame < stop:
+            yield frame, constraint
+
+
+class ComTerm:
+    """log g_c: at a COM-constrained frame, log N(COM error; 0, sigma_com) per constraint."""
+
+    def log_terms(self, motion, problem, start=0, stop=None) -> np.ndarray:
+        start, stop = _window(motion, problem, start, stop)
+        terms = np.zeros(stop - start)
+        sigma = problem.sigma_com
+        for frame, constraint in _active(problem, flockkit.ComConstraint, start, stop):
+            agents = list(problem.agents_of(constraint))
+            error = motion.positions[frame, agents].mean(axis=0) - constraint.position
+            terms[frame - start] += -math.log(sigma * math.sqrt(2 * math.pi)) - float(error @ error) / (2 * sigma**2)
+        return terms
+
+
+class ShapeTerm:
+    """log g_s: at a shape-constrained frame, -c_S times the summed squared distance of the
+    constrained agents outside the shape (zero inside)."""
+
+    def log_terms(self, motion, problem, start=0, stop=None) -> np.ndarray:
+        start, stop = _window(motion, problem, start, stop)
+        terms = np.zeros(stop - start)
+        for frame, constraint in _active(problem, flockkit.ShapeConstraint, start, stop):
+            outside = np.maximum(constraint.shape.signed_distance(motion.positions[frame, list(problem.agents_of(constraint))]), 0.0)
+            terms[frame - start] -= problem.shape_weight * float(outside @ outside)
+        return terms
+
+
+class FlockTerm:
+    """log g_f: -c_F |F - F_c| at every frame, F the number of connected groups when agents closer
+    than ``problem.visibility`` see each other."""
+
+    def log_terms(self, motion, problem, start=0, stop=None) -> np.ndarray:
+        start, stop = _window(motion, problem, start, stop)
+        counts = np.array([count_flocks(motion.positions[t], problem.visibility) for t in range(start, stop)], dtype=float)
+        return -problem.flock_weight * np.abs(counts - problem.flocks)
+
+
+def count_flocks(positions: np.ndarray, visibility: float) -> int:
+    """Connected components of the graph joining agents closer than `visibility`."""
+    n = len(positions)
+    pairs = cKDTree(positions).query_pairs(visibility, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
+    return int(connected_components(graph, directed=False)[0])
