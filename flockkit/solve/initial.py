@@ -1,0 +1,304 @@
+"""Initial trajectories that meet every constraint exactly (paper 004, section 3.3).
+
+The frames before the first constrained frame are simulated backward from the configuration
+there; then, window by window (see ``windows``):
+
+1. simulate forward from the window's start state (Operation 1);
+2. move the agents of point and COM sequences that span the window onto their B-spline paths,
+   and every other agent by the translation of the nearest such agent at the window start, or of
+   the COM path (Operation 2);
+3. if constraints at the window end are still unmet, build a constrained end configuration from
+   the forward result (section 3.3.1), simulate backward from it, path-transform that as well, and
+   blend the two with u = 3t^2 - 2t^3; without a spanning sequence, the COM is moved along a
+   Hermite curve between the window's end states (Operation 3).
+
+Constrained configurations (section 3.3.1) start from a snapshot. Point-constrained agents are
+moved rigidly onto their position with their velocity; a COM subset is moved rigidly so that its
+COM and mean velocity match; a shape subset gets uniform samples in the shape, relaxed apart. At a
+window end, agents are re-assigned among the subset's slots by a sampled matching that keeps
+their travel from the window start short. Unconstrained agents take the rigid transform of the
+nearest constrained agent in the snapshot.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.interpolate import CubicHermiteSpline, make_interp_spline
+from scipy.optimize import linear_sum_assignment
+
+from ..constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
+from ..convenience import random_flock
+from ..motion import Motion, State
+from .windows import windows
+
+_WANDER = "wander"
+_WARM_UP = 30  # steps of unconstrained simulation behind a snapshot
+_RELAXATION_STEPS = 5
+
+
+def initial_trajectories(problem: Problem, behavior, rng: np.random.Generator) -> Motion:
+    """A Motion of ``problem.n_frames`` frames meeting every constraint of `problem` exactly."""
+    return _Initial(problem, behavior, rng).run()
+
+
+class _Path:
+    """The B-spline through a point or COM sequence, over the frames it spans."""
+
+    def __init__(self, track, problem):
+        times = np.array([c.time for c in track])
+        self.first, self.last = problem.frame(times[0]), problem.frame(times[-1])
+        self.spline = make_interp_spline(times, np.array([c.position for c in track]), k=min(3, len(track) - 1))
+        self.agents = problem.agents_of(track[0])
+        self.is_point = isinstance(track[0], PointConstraint)
+        self.members = {id(c) for c in track}
+
+    def spans(self, start, stop) -> bool:
+        return self.first <= start and stop <= self.last
+
+
+class _Initial:
+    def __init__(self, problem, behavior, rng):
+        self.problem, self.behavior, self.rng = problem, behavior, rng
+        self.dt = problem.dt
+        self.paths = [_Path(track, problem) for track in problem.tracks if len(track) >= 2]
+        self.by_frame: dict[int, list] = {}
+        for constraint in problem.constraints:
+            self.by_frame.setdefault(problem.frame(constraint.time), []).append(constraint)
+
+    def run(self) -> Motion:
+        spans = windows(self.problem)
+        first_constrained = min(self.by_frame, default=None)
+        snapshot = self._snapshot()
+        if first_constrained is None:
+            state = State(positions=snapshot.positions, velocities=snapshot.velocities, extra=snapshot.extra)
+            pieces = [self.behavior.forward(state, self.problem.n_frames - 1, self.rng)]
+            return _join(pieces, self.dt)
+        positions, velocities = self._configure(snapshot.positions, snapshot.velocities, self.by_frame[first_constrained], fixed={})
+        state = State(positions=positions, velocities=velocities)
+        pieces = []
+        if first_constrained > 0:
+            lead = self.behavior.backward(state, first_constrained, self.rng)
+            pieces.append(lead)
+            state = _state_at_end(lead, velocities)
+        for start, stop in spans:
+            if stop <= first_constrained:
+                continue
+            piece = self._window(state, start, stop)
+            pieces.append(piece)
+            state = _state_at_end(piece, None)
+        return _join(pieces, self.dt)
+
+    # -- one window --------------------------------------------------------------------------
+
+    def _window(self, state: State, start: int, stop: int) -> Motion:
+        steps = stop - start
+        forward = self.behavior.forward(state, steps, self.rng)
+        spanning = [p for p in self.paths if p.spans(start, stop)]
+        positions = self._onto_paths(forward.positions, spanning, start, anchor=forward.positions[0])
+        ending = [c for c in self.by_frame.get(stop, []) if not any(id(c) in p.members for p in spanning)]
+        if not ending:
+            return Motion(positions=positions, dt=self.dt, channels=_channels(forward))
+        fixed = {a: positions[-1, a] for p in spanning if p.is_point for a in p.agents}
+        end_positions, end_velocities = self._configure(
+            positions[-1], (positions[-1] - positions[-2]) / self.dt, self.by_frame[stop], fixed=fixed, start_positions=positions[0]
+        )
+        backward = self.behavior.backward(State(positions=end_positions, velocities=end_velocities), steps, self.rng)
+        back = self._onto_paths(backward.positions, spanning, start, anchor=forward.positions[0])
+        u = _blend_weights(steps)[:, None, None]
+        blended = (1 - u) * positions + u * back
+        if not spanning:
+            blended = self._along_hermite(blended, state.velocities, end_velocities)
+        blended[0], blended[-1] = positions[0], end_positions  # exactly, whatever the rounding
+        return Motion(positions=blended, dt=self.dt, channels=_channels(forward))
+
+    def _onto_paths(self, positions, spanning, start, anchor) -> np.ndarray:
+        """Operation 2: translate constrained agents onto their paths, the others with them."""
+        if not spanning:
+            return positions.copy()
+        times = (start + np.arange(len(positions))) * self.dt
+        moved = positions.copy()
+        shift = np.zeros_like(positions)
+        owner = np.full(self.problem.n_agents, -1)  # which path moved each agent
+        on_point_path = set()
+        for index, path in enumerate(spanning):
+            if path.is_point:
+                agent = path.agents[0]
+                shift[:, agent] = path.spline(times) - positions[:, agent]
+                owner[agent] = index
+                on_point_path.add(agent)
+        for index, path in enumerate(spanning):
+            if not path.is_point:
+                free = [a for a in path.agents if a not in on_point_path]
+                if not free:
+                    continue
+                current = (positions[:, list(path.agents)] + shift[:, list(path.agents)]).sum(axis=1)
+                delta = (len(path.agents) * path.spline(times) - current) / len(free)
+                shift[:, free] += delta[:, None, :]
+                owner[free] = index
+        carriers = np.flatnonzero(owner >= 0)
+        point_carriers = np.array(sorted(on_point_path), dtype=int)
+        for agent in np.flatnonzero(owner < 0):
+            pool = point_carriers if len(point_carriers) else carriers
+            nearest = pool[np.argmin(np.linalg.norm(anchor[pool] - anchor[agent], axis=1))]
+            shift[:, agent] = shift[:, nearest]
+        moved += shift
+        return moved
+
+    def _along_hermite(self, positions, start_velocity, end_velocity) -> np.ndarray:
+        """Move the COM along the Hermite curve joining the window's end states."""
+        steps = len(positions) - 1
+        com = positions.mean(axis=1)
+        curve = CubicHermiteSpline([0.0, steps * self.dt], com[[0, -1]], np.stack([start_velocity.mean(axis=0), end_velocity.mean(axis=0)]))
+        return positions + (curve(np.arange(steps + 1) * self.dt) - com)[:, None, :]
+
+    # -- constrained configurations (3.3.1) ---------------------------------------------------
+
+    def _snapshot(self) -> State:
+        """The last state of a short unconstrained simulation from a random flock."""
+        flock = random_flock(n_agents=self.problem.n_agents, dims=self.problem.dims, rng=self.rng)
+        return self.behavior.forward(flock, _WARM_UP, self.rng).state(-1)
+
+    def _configure(self, snapshot, velocities, constraints, *, fixed, start_positions=None):
+        """Positions and velocities meeting `constraints`, built from the snapshot; `fixed` agents
+        keep their given positions."""
+        problem, rng = self.problem, self.rng
+        positions, out_velocities = snapshot.copy(), velocities.copy()
+        transforms: dict[int, tuple] = {}  # agent -> the rigid transform that placed it
+        for agent, where in fixed.items():
+            positions[agent] = where
+        for c in (c for c in constraints if isinstance(c, PointConstraint)):
+            if c.agent in fixed:
+                continue
+            rotation = _turn(velocities[c.agent], c.velocity)
+            transforms[c.agent] = (rotation, c.position - rotation @ snapshot[c.agent])
+            positions[c.agent], out_velocities[c.agent] = c.position, c.velocity
+        pinned = set(fixed) | {c.agent for c in constraints if isinstance(c, PointConstraint)}
+        for c in (c for c in constraints if not isinstance(c, PointConstraint)):
+            agents = list(problem.agents_of(c))
+            free = [a for a in agents if a not in pinned]
+            if not free:
+                continue
+            rotation = _turn(velocities[free].mean(axis=0), c.velocity)
+            target = c.position if isinstance(c, ComConstraint) else _centre(c.shape)
+            translation = target - rotation @ snapshot[free].mean(axis=0)
+            rigid = snapshot[free] @ rotation.T + translation
+            slots, slot_velocities = rigid, velocities[free] @ rotation.T
+            if isinstance(c, ShapeConstraint):
+                slots = _fill(c.shape, len(free), rng)
+                slot_velocities = slot_velocities - slot_velocities.mean(axis=0) + c.velocity
+            order = _matching(slots, start_positions[free] if start_positions is not None else rigid, rng)
+            positions[free], out_velocities[free] = slots[order], slot_velocities[order]
+            if isinstance(c, ComConstraint):  # exact COM, moving only the free agents
+                positions[free] += (len(agents) * c.position - positions[agents].sum(axis=0)) / len(free)
+            for agent in free:
+                transforms[agent] = (rotation, translation)
+            pinned.update(free)
+        others = [a for a in range(problem.n_agents) if a not in pinned]
+        placed = np.array(sorted(transforms), dtype=int)
+        for agent in others:
+            if not len(placed):
+                break
+            nearest = placed[np.argmin(np.linalg.norm(snapshot[placed] - snapshot[agent], axis=1))]
+            rotation, translation = transforms[nearest]
+            positions[agent] = rotation @ snapshot[agent] + translation
+            out_velocities[agent] = rotation @ velocities[agent]
+        return positions, out_velocities
+
+
+# -- helpers ----------------------------------------------------------------------------------
+
+
+def _blend_weights(steps: int) -> np.ndarray:
+    """u = -(2t^3 - 3t^2) for t from 0 to 1 over the window."""
+    t = np.linspace(0.0, 1.0, steps + 1)
+    return 3 * t**2 - 2 * t**3
+
+
+def _turn(source, target) -> np.ndarray:
+    """The smallest proper rotation taking the direction of `source` to that of `target`
+    (identity where either is too short to have a direction)."""
+    d = len(source)
+    a, b = np.linalg.norm(source), np.linalg.norm(target)
+    if a < 1e-12 or b < 1e-12:
+        return np.eye(d)
+    u, v = source / a, target / b
+    if d == 2:
+        angle = np.arctan2(u[0] * v[1] - u[1] * v[0], u @ v)
+        c, s = np.cos(angle), np.sin(angle)
+        return np.array([[c, -s], [s, c]])
+    axis = np.cross(u, v)
+    sine, cosine = np.linalg.norm(axis), float(u @ v)
+    if sine < 1e-12:
+        if cosine > 0:
+            return np.eye(3)
+        other = np.eye(3)[int(np.argmin(np.abs(u)))]  # half turn about an axis perpendicular to u
+        axis = np.cross(u, other) / np.linalg.norm(np.cross(u, other))
+        return 2 * np.outer(axis, axis) - np.eye(3)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]]) / sine
+    return np.eye(3) + sine * k + (1 - cosine) * k @ k
+
+
+def _centre(shape) -> np.ndarray:
+    if isinstance(shape, Ball):
+        return np.array(shape.center)
+    if isinstance(shape, Box):
+        return (shape.lower + shape.upper) / 2
+    a, b = shape.vertices, np.roll(shape.vertices, -1, axis=0)
+    cross = a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1]
+    return ((a + b) * cross[:, None]).sum(axis=0) / (3 * cross.sum())
+
+
+def _fill(shape, count: int, rng) -> np.ndarray:
+    """`count` points uniform in `shape`, pushed apart by a few relaxation steps, kept inside."""
+    lower, upper = _bounds(shape)
+    points = np.empty((0, len(lower)))
+    while len(points) < count:
+        candidates = rng.uniform(lower, upper, size=(4 * count + 16, len(lower)))
+        points = np.vstack([points, candidates[shape.contains(candidates)]])
+    points = points[:count]
+    volume = np.prod(upper - lower) * np.mean(shape.contains(rng.uniform(lower, upper, size=(512, len(lower)))))
+    spacing = 0.7 * (max(volume, 1e-12) / count) ** (1 / len(lower))
+    for _ in range(_RELAXATION_STEPS):
+        offsets = points[:, None, :] - points[None, :, :]
+        distance = np.linalg.norm(offsets, axis=2) + np.eye(count) * 1e9
+        push = np.where(distance < spacing, (spacing - distance) / np.maximum(distance, 1e-12), 0.0)
+        points = points + 0.25 * (offsets * push[:, :, None]).sum(axis=1)
+        depth = shape.signed_distance(points)
+        outside = depth > -1e-9
+        points[outside] -= (depth[outside] + 1e-6 * spacing)[:, None] * shape.surface_normal(points[outside])
+    return points
+
+
+def _bounds(shape):
+    if isinstance(shape, Ball):
+        return shape.center - shape.radius, shape.center + shape.radius
+    if isinstance(shape, Box):
+        return np.array(shape.lower), np.array(shape.upper)
+    return shape.vertices.min(axis=0), shape.vertices.max(axis=0)
+
+
+def _matching(slots: np.ndarray, origins: np.ndarray, rng) -> np.ndarray:
+    """order such that agent k (at origins[k]) takes slots[order[k]]: a sampled matching with a
+    short total squared travel (the optimal one on costs perturbed by noise)."""
+    cost = ((origins[:, None, :] - slots[None, :, :]) ** 2).sum(axis=2)
+    scale = float(np.median(cost)) or 1.0
+    _, order = linear_sum_assignment(cost + rng.gumbel(0.0, 0.05 * scale, cost.shape))
+    return order
+
+
+def _state_at_end(motion: Motion, velocities) -> State:
+    end = motion.state(-1)
+    return end if velocities is None else State(positions=end.positions, velocities=velocities, extra=end.extra)
+
+
+def _channels(motion: Motion) -> dict:
+    return {name: motion.channels[name] for name in motion.channels}
+
+
+def _join(pieces, dt) -> Motion:
+    """Windows share their boundary frames: keep each boundary once."""
+    positions = np.concatenate([pieces[0].positions] + [p.positions[1:] for p in pieces[1:]])
+    channels = {}
+    if all(_WANDER in p.channels for p in pieces):
+        channels[_WANDER] = np.concatenate([pieces[0].channels[_WANDER]] + [p.channels[_WANDER][1:] for p in pieces[1:]])
+    return Motion(positions=positions, dt=dt, channels=channels)
