@@ -10,6 +10,7 @@ from .convenience import build_graph, random_flock, simulate, walk
 from .graph import Clip, MotionGraph, Transition, Walk
 from .synthesis import synthesize, synthesize_many
 from .hookspecs import hookimpl
+from .solve import Proposal, Solution, solve
 from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State
 from .registry import available, get
 
@@ -41,6 +42,9 @@ __all__ = [
     "simulate",
     "build_graph",
     "walk",
+    "solve",
+    "Solution",
+    "Proposal",
     "random_flock",
     "errors",
     "io",

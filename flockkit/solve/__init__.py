@@ -1,5 +1,7 @@
 """Constrained animation (paper 004): windows, initial trajectories, objective and sampler."""
 
+from .initial import initial_trajectories, regenerate
+from .sampler import Proposal, ProposalContext, Solution, Trace, residuals, solve
 from .windows import windows
 
-__all__ = ["windows"]
+__all__ = ["windows", "initial_trajectories", "regenerate", "Proposal", "ProposalContext", "Solution", "Trace", "residuals", "solve"]

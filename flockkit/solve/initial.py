@@ -41,6 +41,32 @@ def initial_trajectories(problem: Problem, behavior, rng: np.random.Generator) -
     return _Initial(problem, behavior, rng).run()
 
 
+def regenerate(problem: Problem, behavior, current: Motion, start: int, stop: int, rng: np.random.Generator) -> Motion:
+    """`current` with frames start..stop (window boundaries) built anew, window by window as in
+    ``initial_trajectories``: from `current`'s state at `start` (arriving velocity) to exactly
+    its positions and velocities at `stop` (temporary continuity constraints, 3.4.1)."""
+    builder = _Initial(problem, behavior, rng)
+    last = current.n_frames - 1
+    state = _arriving(current, start)
+    pieces = [Motion(positions=current.positions[: start + 1], dt=current.dt)]
+    for a, b in windows(problem):
+        if a < start or b > stop:
+            continue
+        end = _arriving(current, b) if b == stop and stop < last else None
+        piece = builder._window(state, a, b, end=end)
+        pieces.append(piece)
+        state = _state_at_end(piece, None)
+    pieces.append(Motion(positions=current.positions[stop:], dt=current.dt))
+    joined = _join(pieces, current.dt)
+    return Motion(positions=joined.positions, dt=current.dt, channels=dict(current.channels))
+
+
+def _arriving(motion: Motion, t: int) -> State:
+    """The state at frame t with the velocity that arrives there (the one leaving, at frame 0)."""
+    velocity = (motion.positions[t] - motion.positions[t - 1]) / motion.dt if t > 0 else motion.state(0).velocities
+    return State(positions=motion.positions[t], velocities=velocity)
+
+
 class _Path:
     """The B-spline through a point or COM sequence, over the frames it spans."""
 
@@ -90,18 +116,22 @@ class _Initial:
 
     # -- one window --------------------------------------------------------------------------
 
-    def _window(self, state: State, start: int, stop: int) -> Motion:
+    def _window(self, state: State, start: int, stop: int, end: State | None = None) -> Motion:
+        """Trajectories for frames start..stop from `state`; with `end`, ending exactly there."""
         steps = stop - start
         forward = self.behavior.forward(state, steps, self.rng)
         spanning = [p for p in self.paths if p.spans(start, stop)]
         positions = self._onto_paths(forward.positions, spanning, start, anchor=forward.positions[0])
         ending = [c for c in self.by_frame.get(stop, []) if not any(id(c) in p.members for p in spanning)]
-        if not ending:
+        if not ending and end is None:
             return Motion(positions=positions, dt=self.dt, channels=_channels(forward))
-        fixed = {a: positions[-1, a] for p in spanning if p.is_point for a in p.agents}
-        end_positions, end_velocities = self._configure(
-            positions[-1], (positions[-1] - positions[-2]) / self.dt, self.by_frame[stop], fixed=fixed, start_positions=positions[0]
-        )
+        if end is None:
+            fixed = {a: positions[-1, a] for p in spanning if p.is_point for a in p.agents}
+            end_positions, end_velocities = self._configure(
+                positions[-1], (positions[-1] - positions[-2]) / self.dt, self.by_frame[stop], fixed=fixed, start_positions=positions[0]
+            )
+        else:
+            end_positions, end_velocities = np.array(end.positions), np.array(end.velocities)
         backward = self.behavior.backward(State(positions=end_positions, velocities=end_velocities), steps, self.rng)
         back = self._onto_paths(backward.positions, spanning, start, anchor=forward.positions[0])
         u = _blend_weights(steps)[:, None, None]

@@ -131,6 +131,9 @@ class Boids:
     obstacles: tuple = attrs.field(default=(), converter=_obstacles)
     kdtree_above: int = 128
 
+    # a change at frame f alters the inferred impulses at frames f - 1 .. f + 2 (see log_plausibility)
+    plausibility_reach = 2
+
     def __attrs_post_init__(self):
         if self.field_of_view > 360:
             raise ValidationError(f"boids parameter field_of_view must be in (0, 360] degrees; got {self.field_of_view}")

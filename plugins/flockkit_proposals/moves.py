@@ -1,0 +1,213 @@
+"""Proposal moves of paper 004, section 3.4.1. Each returns a flockkit.solve.Proposal (the new
+motion and the frames and agents it changed) or None, never mutates the current motion, and never
+moves a point-constrained agent at a constrained frame."""
+
+from __future__ import annotations
+
+import math
+
+import attrs
+import numpy as np
+
+import flockkit
+from flockkit.errors import ValidationError
+from flockkit.solve import Proposal, initial_trajectories, regenerate
+
+
+def _positive(name):
+    def check(instance, attribute, value):
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
+            raise ValidationError(f"proposal parameter {name} must be a finite number > 0; got {value!r}")
+
+    return check
+
+
+def _segment(context, n_frames, rng, short_probability):
+    """A segment (first, last) of frames, maybe reaching past the motion: its length is 2 to 10
+    steps with probability `short_probability`, else up to twice the motion; its centre is a frame
+    drawn with probability inversely proportional to its plausibility exp(score)."""
+    if rng.random() < short_probability:
+        length = int(rng.integers(2, 11))
+    else:
+        length = int(rng.integers(11, max(12, 2 * n_frames + 1)))
+    scores = np.asarray(context.scores, dtype=float)
+    weights = np.exp(scores.min() - scores) if np.all(np.isfinite(scores)) else np.isneginf(scores).astype(float)
+    centre = int(rng.choice(n_frames, p=weights / weights.sum()))
+    first = centre - length // 2
+    return first, first + length
+
+
+def _quartic(u):
+    return 16 * (u**2 - 2 * u**3 + u**4)
+
+
+@attrs.frozen(kw_only=True)
+class Bump:
+    """Add 1 to `max_bumps` bumps d = 16 s (x^2 - 2x^3 + x^4), s ~ N(0, size), each to one free
+    agent's trajectory in multi-resolution coordinates, so that the bump follows the trajectory
+    and scales with its sample spacing. A bump reaching past the motion is applied to the
+    trajectory extended along its end velocities, and the part outside is dropped."""
+
+    size: float = attrs.field(default=0.05, validator=_positive("size"))
+    max_bumps: int = attrs.field(default=3)
+    short_probability: float = attrs.field(default=0.8)
+
+    def propose(self, current, context, rng):
+        positions = np.array(current.positions)
+        n_frames = current.n_frames
+        changed, low, high = set(), n_frames, -1
+        for _ in range(int(rng.integers(1, self.max_bumps + 1))):
+            first, last = _segment(context, n_frames, rng, self.short_probability)
+            # frames the bump moves: all but its own (zero) ends, within the motion
+            moved_first, moved_last = max(first + 1, 0), min(last - 1, n_frames - 1)
+            if moved_first > moved_last:
+                continue
+            free = context.free_agents(moved_first, moved_last + 1)
+            if not len(free):
+                continue
+            agent = int(rng.choice(free))
+            height = rng.normal(0.0, self.size)
+            new = _add_bump(_extended(positions[:, agent], first, last), height, rng)
+            positions[moved_first : moved_last + 1, agent] = new[moved_first - first : moved_last - first + 1]
+            changed.add(agent)
+            low, high = min(low, moved_first), max(high, moved_last)
+        if not changed:
+            return None
+        motion = flockkit.Motion(positions=positions, dt=current.dt, channels=dict(current.channels))
+        return Proposal(motion=motion, start=low, stop=high + 1, agents=tuple(sorted(changed)))
+
+
+@attrs.frozen(kw_only=True)
+class Retime:
+    """Re-time one free agent along its own path over a segment (chosen as for bumps, kept inside
+    the motion): the arc length at each sample is offset by o = 16 s (u^2 - 2u^3 + u^4),
+    s ~ N(0, spread * r), r the segment's path length. Same path, same total distance, ends fixed;
+    None when the offset would make the agent go backwards."""
+
+    spread: float = attrs.field(default=0.025, validator=_positive("spread"))
+    short_probability: float = attrs.field(default=0.8)
+
+    def propose(self, current, context, rng):
+        n_frames = current.n_frames
+        first, last = _segment(context, n_frames, rng, self.short_probability)
+        first, last = max(first, 0), min(last, n_frames - 1)
+        if last - first < 2:
+            return None
+        free = context.free_agents(first + 1, last)
+        if not len(free):
+            return None
+        agent = int(rng.choice(free))
+        path = current.positions[first : last + 1, agent]
+        travelled = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
+        length = travelled[-1]
+        if length <= 1e-12:
+            return None
+        u = np.linspace(0.0, 1.0, len(path))
+        target = travelled + _quartic(u) * rng.normal(0.0, self.spread * length)
+        if np.any(np.diff(target) < 0):
+            return None
+        target[0], target[-1] = 0.0, length
+        retimed = np.stack([np.interp(target, travelled, path[:, k]) for k in range(path.shape[1])], axis=1)
+        positions = np.array(current.positions)
+        positions[first + 1 : last, agent] = retimed[1:-1]
+        motion = flockkit.Motion(positions=positions, dt=current.dt, channels=dict(current.channels))
+        return Proposal(motion=motion, start=first + 1, stop=last, agents=(agent,))
+
+
+@attrs.frozen(kw_only=True)
+class Regenerate:
+    """With probability `everything`, new initial trajectories for the whole problem; otherwise 1
+    to 3 contiguous windows rebuilt, held to the current motion at their ends."""
+
+    everything: float = attrs.field(default=0.5)
+
+    def propose(self, current, context, rng):
+        problem, behavior = context.problem, context.behavior
+        if rng.random() < self.everything:
+            motion = initial_trajectories(problem, behavior, rng)
+            return Proposal(motion=motion, start=0, stop=current.n_frames, agents=tuple(range(current.n_agents)))
+        spans = context.windows
+        count = min(int(rng.integers(1, 4)), len(spans))
+        first = int(rng.integers(0, len(spans) - count + 1))
+        start, stop = spans[first][0], spans[first + count - 1][1]
+        if stop - start < 2:
+            return None
+        motion = regenerate(problem, behavior, current, start, stop, rng)
+        return Proposal(motion=motion, start=start + 1, stop=stop, agents=tuple(range(current.n_agents)))
+
+
+# -- multi-resolution bumps ---------------------------------------------------------------------
+
+
+def _extended(track: np.ndarray, first: int, last: int) -> np.ndarray:
+    """track's frames first..last, continued along its end velocities where they fall outside."""
+    n = len(track)
+    frames = np.arange(first, last + 1)
+    inside = np.clip(frames, 0, n - 1)
+    points = track[inside].copy()
+    if n > 1:
+        before, after = frames < 0, frames > n - 1
+        points[before] = track[0] + frames[before, None] * (track[1] - track[0])
+        points[after] = track[-1] + (frames[after, None] - (n - 1)) * (track[-1] - track[-2])
+    return points
+
+
+def _hierarchy(last: int):
+    """(point, left, right) from coarse to fine: each point with the neighbours it is coded against."""
+    found, stack = [], [(0, last)]
+    while stack:
+        left, right = stack.pop(0)
+        if right - left < 2:
+            continue
+        middle = (left + right) // 2
+        found.append((middle, left, right))
+        stack += [(left, middle), (middle, right)]
+    return found
+
+
+def _frame(span: np.ndarray) -> np.ndarray:
+    """Rows: the unit vector along `span` and unit vectors across it (paper 004's n, s, t; in 3D the
+    global r = z, or x where span is along z)."""
+    length = np.linalg.norm(span)
+    along = span / length if length > 1e-12 else np.eye(len(span))[0]
+    if len(span) == 2:
+        return np.array([along, [-along[1], along[0]]])
+    r = np.array([0.0, 0.0, 1.0]) if abs(along[2]) < 0.99 else np.array([1.0, 0.0, 0.0])
+    t = np.cross(r, along)
+    t /= np.linalg.norm(t)
+    return np.array([along, np.cross(along, t), t])
+
+
+def _decompose(points: np.ndarray):
+    coefficients = {}
+    for middle, left, right in _hierarchy(len(points) - 1):
+        span = points[right] - points[left]
+        scale = max(np.linalg.norm(span), 1e-12)
+        coefficients[middle] = _frame(span) @ (points[middle] - (points[left] + points[right]) / 2) / scale
+    return coefficients
+
+
+def _recompose(ends: np.ndarray, coefficients: dict, count: int) -> np.ndarray:
+    points = np.empty((count, ends.shape[1]))
+    points[0], points[-1] = ends
+    for middle, left, right in _hierarchy(count - 1):
+        span = points[right] - points[left]
+        scale = max(np.linalg.norm(span), 1e-12)
+        points[middle] = (points[left] + points[right]) / 2 + scale * (_frame(span).T @ coefficients[middle])
+    return points
+
+
+def _add_bump(segment: np.ndarray, height: float, rng) -> np.ndarray:
+    """The segment with a bump of `height` added in multi-resolution coordinates."""
+    count, dims = segment.shape
+    x = np.linspace(0.0, 1.0, count)
+    bump = np.zeros((count, dims))
+    bump[:, 0] = x
+    across = _quartic(x) * height
+    if dims == 2:
+        bump[:, 1] = across
+    else:
+        angle = rng.uniform(0.0, 2 * math.pi)
+        bump[:, 1], bump[:, 2] = across * math.cos(angle), across * math.sin(angle)
+    mine, theirs = _decompose(segment), _decompose(bump)
+    return _recompose(segment[[0, -1]], {k: mine[k] + theirs[k] for k in mine}, count)
