@@ -24,7 +24,7 @@ import functools
 
 from ..interfaces import PROTOCOLS
 from ..registry import interface_problems
-from . import behavior, builder, metric, objective, strategies, walk
+from . import behavior, builder, metric, objective, proposal, strategies, walk
 
 __all__ = ["check_plugin", "parametrize_with_checks", "checks_for", "check_interface", "strategies"]
 
@@ -43,6 +43,7 @@ _KIND_CHECKS = {
     "builder": builder.CHECKS,
     "walk": walk.CHECKS,
     "objective": objective.CHECKS,
+    "proposal": proposal.CHECKS,
 }
 
 

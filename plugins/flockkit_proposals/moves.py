@@ -133,7 +133,8 @@ class Regenerate:
         if stop - start < 2:
             return None
         motion = regenerate(problem, behavior, current, start, stop, rng)
-        return Proposal(motion=motion, start=start + 1, stop=stop, agents=tuple(range(current.n_agents)))
+        held = stop < current.n_frames - 1  # the last frame is free unless constrained
+        return Proposal(motion=motion, start=start + 1, stop=stop if held else stop + 1, agents=tuple(range(current.n_agents)))
 
 
 # -- multi-resolution bumps ---------------------------------------------------------------------

@@ -435,3 +435,52 @@ BROKEN_OBJECTIVES = {
     "check_rejects_bad_window": ClipsWindow,
 }
 BROKEN_BY_KIND["objective"] = BROKEN_OBJECTIVES
+
+
+# -- proposals: the built-in velocity move is the correct base -------------------------------
+
+from flockkit_proposals import Retime  # noqa: E402
+
+
+class NoPropose:
+    def suggest(self, current, context, rng):
+        return None
+
+
+class DropsFrames(Retime):
+    def propose(self, current, context, rng):
+        proposal = super().propose(current, context, rng)
+        if proposal is None:
+            return None
+        return flockkit.Proposal(motion=flockkit.Motion(positions=proposal.motion.positions[:-1], dt=current.dt), start=proposal.start, stop=proposal.stop, agents=proposal.agents)
+
+
+class MovesPinned(Retime):
+    """Shifts every agent at every frame a little (and says so): breaks point constraints."""
+
+    def propose(self, current, context, rng):
+        return flockkit.Proposal(motion=flockkit.Motion(positions=current.positions + 1e-3, dt=current.dt), start=0, stop=current.n_frames, agents=tuple(range(current.n_agents)))
+
+
+class UnderReports(Retime):
+    def propose(self, current, context, rng):
+        proposal = super().propose(current, context, rng)
+        if proposal is None:
+            return None
+        return flockkit.Proposal(motion=proposal.motion, start=proposal.start, stop=proposal.start + 1, agents=proposal.agents)
+
+
+class MutatesCurrent(Retime):
+    def propose(self, current, context, rng):
+        current.positions.setflags(write=True)
+        current.positions[0, 0, 0] += 1.0
+        return super().propose(current, context, rng)
+
+
+BROKEN_BY_KIND["proposal"] = {
+    "check_interface": NoPropose,
+    "check_returns_proposals": DropsFrames,
+    "check_keeps_point_constraints": MovesPinned,
+    "check_reports_changes": UnderReports,
+    "check_input_unchanged": MutatesCurrent,
+}

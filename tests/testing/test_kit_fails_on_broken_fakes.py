@@ -8,7 +8,7 @@ from hypothesis.errors import InvalidArgument
 from flockkit.testing import check_plugin, checks_for, parametrize_with_checks
 from flockkit.testing import strategies as fst
 
-from .fakes import BROKEN_BY_KIND, ComTerm, IcpHungarian, Kovar, RandomVelocity, RandomWalk
+from .fakes import BROKEN_BY_KIND, ComTerm, IcpHungarian, Kovar, RandomVelocity, RandomWalk, Retime
 
 CASES = [(kind, name) for kind, fakes in BROKEN_BY_KIND.items() for name in sorted(fakes)]
 
@@ -23,7 +23,7 @@ def test_every_check_has_a_broken_fake(kind):
 
 
 @parametrize_with_checks(
-    [("behavior", RandomVelocity()), ("metric", IcpHungarian()), ("builder", Kovar()), ("walk", RandomWalk()), ("objective", ComTerm())]
+    [("behavior", RandomVelocity()), ("metric", IcpHungarian()), ("builder", Kovar()), ("walk", RandomWalk()), ("objective", ComTerm()), ("proposal", Retime())]
 )
 def test_correct_components_pass(component, check):
     check(component)

@@ -1,0 +1,97 @@
+"""Conformance checks for proposal moves (``flockkit.interfaces.ProposalMove``).
+
+Each check is ``check_<property>(name, move)`` and raises AssertionError saying what is wrong. They
+call the move many times on the initial trajectories of a problem with point, COM and shape
+constraints (2D and 3D), and look at every proposal it makes.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..constraints import Ball, ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
+from ..registry import get
+from ..solve import Proposal, ProposalContext, initial_trajectories, windows
+from ..solve.sampler import Scorer, pinned_frames
+
+SEED = 5077
+TRIES = 40
+
+
+def _cases():
+    square = Polygon(vertices=[[6.0, -2.0], [10.0, -2.0], [10.0, 2.0], [6.0, 2.0]])
+    planar = Problem(n_agents=8, duration=3.0, constraints=[
+        *(PointConstraint(agent=2, time=t, position=[t * 2.0, 0.5 * t]) for t in (0.5, 1.5, 2.5)),
+        ComConstraint(agents=[0, 1, 3], time=1.0, position=[2.0, 1.0], velocity=[1.0, 0.0]),
+        ShapeConstraint(time=3.0, shape=square, velocity=[1.0, 0.0]),
+    ])
+    spatial = Problem(n_agents=6, dims=3, duration=2.0, constraints=[
+        PointConstraint(agent=0, time=0.0, position=[0.0, 0.0, 0.0], velocity=[1.0, 0.0, 0.0]),
+        PointConstraint(agent=4, time=1.2, position=[2.0, 1.0, 0.5], velocity=[1.0, 0.0, 0.0]),
+        ShapeConstraint(agents=[1, 2], time=2.0, shape=Ball(center=[3.0, 0.0, 0.0], radius=1.5), velocity=[1.0, 0.0, 0.0]),
+    ])
+    found = []
+    for problem in (planar, spatial):
+        behavior = get("behavior", "boids", dt=problem.dt)
+        motion = initial_trajectories(problem, behavior, np.random.default_rng(SEED))
+        scores = Scorer(problem, behavior, [get("objective", n) for n in ("com", "shape", "flocks")]).frames(motion)
+        context = ProposalContext(problem=problem, behavior=behavior, windows=tuple(windows(problem)), scores=scores, pinned=pinned_frames(problem))
+        found.append((problem, motion, context))
+    return found
+
+
+def _proposals(move, cases=None):
+    """(problem, current, proposal) for each proposal made in TRIES calls per case."""
+    rng = np.random.default_rng(SEED)
+    for problem, motion, context in cases or _cases():
+        for _ in range(TRIES):
+            proposal = move.propose(motion, context, rng)
+            if proposal is not None:
+                yield problem, motion, proposal
+
+
+def check_returns_proposals(name, move):
+    """propose returns a flockkit.Proposal (or None), for a motion of the current's shape, and
+    proposes something at least sometimes. (A Motion's positions are finite by construction.)"""
+    made = 0
+    for _, current, proposal in _proposals(move):
+        assert isinstance(proposal, Proposal), f"{name}.propose returned {type(proposal).__name__}, not a flockkit.Proposal or None"
+        shape = proposal.motion.positions.shape
+        assert shape == current.positions.shape, f"{name} proposed a motion of shape {shape}; the current one is {current.positions.shape}"
+        assert proposal.motion.dt == current.dt, f"{name} changed dt"
+        made += 1
+    assert made, f"{name}.propose returned None every time"
+
+
+def check_keeps_point_constraints(name, move):
+    """Every point-constrained agent stays exactly at its constrained position (to 1e-9)."""
+    for problem, _, proposal in _proposals(move):
+        for c in problem.constraints:
+            if isinstance(c, PointConstraint):
+                error = np.abs(proposal.motion.positions[problem.frame(c.time), c.agent] - c.position).max()
+                assert error <= 1e-9, f"{name} moved agent {c.agent} {error:.3g} off its point constraint at t={c.time:g}"
+
+
+def check_reports_changes(name, move):
+    """Every changed value lies at frames start <= t < stop and at the reported agents."""
+    for _, current, proposal in _proposals(move):
+        changed = np.any(proposal.motion.positions != current.positions, axis=2)
+        frames, agents = np.nonzero(changed)
+        outside = (frames < proposal.start) | (frames >= proposal.stop) | ~np.isin(agents, proposal.agents)
+        assert not outside.any(), (
+            f"{name} changed agent {agents[outside][0]} at frame {frames[outside][0]} but reported frames "
+            f"[{proposal.start}, {proposal.stop}) and agents {proposal.agents}"
+        )
+
+
+def check_input_unchanged(name, move):
+    """propose leaves the current motion as it was."""
+    cases = _cases()
+    before = [motion.positions.copy() for _, motion, _ in cases]
+    for _ in _proposals(move, cases):
+        pass
+    for (_, motion, _), positions in zip(cases, before):
+        assert np.array_equal(positions, motion.positions), f"{name}.propose changed the current motion"
+
+
+CHECKS = (check_returns_proposals, check_keeps_point_constraints, check_reports_changes, check_input_unchanged)

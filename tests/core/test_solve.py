@@ -1,0 +1,84 @@
+import numpy as np
+import pytest
+
+import flockkit
+from flockkit import ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
+from flockkit.errors import UnknownPluginError, ValidationError
+from flockkit.solve.sampler import Scorer, _components
+
+
+def small_problem():
+    return Problem(n_agents=10, duration=3.0, constraints=[
+        *(PointConstraint(agent=4, time=t, position=[1.2 * t, 0.3 * np.sin(t)]) for t in (0.5, 1.5, 2.5)),
+        ComConstraint(time=2.0, position=[2.4, 0.5], velocity=[1.0, 0.0]),
+        ShapeConstraint(agents=[0, 1, 2], time=3.0, shape=Polygon(vertices=[[2, -1], [5, -1], [3.5, 2]]), velocity=[1.0, 0.0]),
+    ])
+
+
+def full_score(problem, motion):
+    behavior, _, terms = _components(problem, "boids", {}, ("com", "shape", "flocks"))
+    return Scorer(problem, behavior, terms).frames(motion).sum()
+
+
+def test_initial_trajectories_meet_every_constraint_exactly():
+    problem = small_problem()
+    solution = flockkit.solve(problem, iterations=0, seed=3)
+    assert solution.motion.n_frames == 31 and solution.trace[0].log_g.size == 0
+    assert max(solution.residuals) <= 1e-9
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_incremental_scores_equal_a_full_rescore(seed):
+    problem = small_problem()
+    solution = flockkit.solve(problem, iterations=120, seed=seed)
+    assert solution.log_g[0] == pytest.approx(full_score(problem, solution.motion), rel=1e-9, abs=1e-9)
+    assert np.count_nonzero(solution.trace[0].accepted) > 0
+
+
+def test_sampling_keeps_point_constraints_and_improves_plausibility():
+    problem = small_problem()
+    start = flockkit.solve(problem, iterations=0, seed=5)
+    solution = flockkit.solve(problem, iterations=150, seed=5)
+    for constraint, residual in zip(problem.constraints, solution.residuals):
+        if isinstance(constraint, PointConstraint):
+            assert residual <= 1e-9
+    boids = flockkit.get("behavior", "boids")
+    assert boids.log_plausibility(solution.motion).sum() >= boids.log_plausibility(start.motion).sum()
+    assert solution.log_g[0] >= start.log_g[0]
+
+
+def test_same_seed_same_solution_and_chains_are_ranked():
+    problem = small_problem()
+    first = flockkit.solve(problem, iterations=30, chains=2, seed=9, n_jobs=2)
+    second = flockkit.solve(problem, iterations=30, chains=2, seed=9)
+    assert np.array_equal(first.motion.positions, second.motion.positions)
+    assert list(first.log_g) == sorted(first.log_g, reverse=True) and len(first.motions) == 2
+    assert set(first.acceptance) <= {"bump", "velocity", "regenerate"}
+    assert all(0 <= rate <= 1 for rate in first.acceptance.values())
+
+
+def test_callback_sees_every_iteration():
+    seen = []
+    flockkit.solve(small_problem(), iterations=12, seed=1, callback=lambda chain, i, log_g, accepted: seen.append((chain, i)))
+    assert seen == [(0, i) for i in range(12)]
+
+
+@pytest.mark.parametrize(
+    "kwargs, error, match",
+    [
+        ({"proposals": {"wiggle": 1.0}}, UnknownPluginError, "wiggle"),
+        ({"proposals": {"bump": -1}}, ValidationError, "bump"),
+        ({"iterations": -1}, ValidationError, "iterations"),
+        ({"chains": 0}, ValidationError, "chains"),
+        ({"n_jobs": 2, "callback": print}, ValidationError, "callback"),
+        ({"behavior": "nope"}, UnknownPluginError, "nope"),
+    ],
+)
+def test_bad_arguments_are_named(kwargs, error, match):
+    with pytest.raises(error, match=match):
+        flockkit.solve(small_problem(), **kwargs)
+
+
+def test_solve_needs_a_problem():
+    with pytest.raises(ValidationError, match="Problem"):
+        flockkit.solve("scenario.toml")
