@@ -85,6 +85,92 @@ def _cmd_check(args) -> int:
     return 0
 
 
+def _progress(args) -> bool:
+    return not args.quiet and sys.stderr.isatty()
+
+
+def _cmd_build(args) -> int:
+    output = _require_suffix(args.output, (".npz",), "-o")
+    motion = flockkit.Motion.load(args.motion)
+    params = _parameters(args.param)
+    if args.threshold is not None:
+        params["threshold"] = args.threshold
+    if args.jobs is not None:
+        params["n_jobs"] = args.jobs
+    if args.builder == "kovar":
+        params.setdefault("progress", _progress(args))
+    graph = flockkit.build_graph(motion, builder=args.builder, metric=args.metric, **params)
+    graph.save(output)
+    stats = graph.stats()
+    print(f"wrote {output}: {stats['nodes']} nodes, {stats['transitions']} transitions, {stats['fraction_kept']:.0%} of frames kept")
+    return 0
+
+
+def _region(text: str):
+    """box:x0,y0,x1,y1 (or 3D: 6 numbers), ball:cx,cy[,cz],r, polygon:x0,y0,x1,y1,..."""
+    kind, sep, numbers = text.partition(":")
+    try:
+        values = [float(v) for v in numbers.split(",")] if sep else []
+    except ValueError:
+        values = []
+    if kind == "box" and len(values) in (4, 6):
+        half = len(values) // 2
+        return flockkit.Box(lower=values[:half], upper=values[half:])
+    if kind == "ball" and len(values) in (3, 4):
+        return flockkit.Ball(center=values[:-1], radius=values[-1])
+    if kind == "polygon" and len(values) >= 6 and len(values) % 2 == 0:
+        return flockkit.Polygon(vertices=[values[i : i + 2] for i in range(0, len(values), 2)])
+    raise ValidationError(
+        f"--region {text!r}: expected box:x0,y0,x1,y1 (or 6 numbers in 3D), ball:cx,cy[,cz],r or polygon:x0,y0,x1,y1,x2,y2,..."
+    )
+
+
+def _cmd_walk(args) -> int:
+    output = _require_suffix(args.output, (".npz",), "-o")
+    graph = flockkit.MotionGraph.load(args.graph)
+    params = _parameters(args.param)
+    if args.region is not None:
+        params["region"] = _region(args.region)
+    path = flockkit.walk(graph, strategy=args.strategy, duration=args.duration, seed=args.seed, **params)
+    motion = flockkit.synthesize(graph, path)
+    motion.save(output)
+    print(f"wrote {output}: {motion!r}")
+    return 0
+
+
+def _cmd_info(args) -> int:
+    from .errors import FileFormatError
+
+    try:
+        graph = flockkit.MotionGraph.load(args.file)
+    except FileFormatError as not_graph:
+        try:
+            motion = flockkit.Motion.load(args.file)
+        except FileFormatError:
+            raise not_graph from None
+        print(json.dumps({"kind": "motion", "frames": motion.n_frames, "agents": motion.n_agents, "dims": motion.dims,
+                          "dt": motion.dt, "seconds": motion.duration, "channels": sorted(motion.channels)}, indent=2))
+        return 0
+    print(json.dumps({"kind": "graph", **graph.stats(), "params": graph.params, "provenance": graph.provenance}, indent=2, default=str))
+    return 0
+
+
+def _cmd_solve(args) -> int:
+    from .solve import load_scenario
+
+    output = _require_suffix(args.output, (".npz",), "-o")
+    problem, settings = load_scenario(args.scenario)
+    for option in ("iterations", "chains", "seed"):
+        if getattr(args, option) is not None:
+            settings[option] = getattr(args, option)
+    solution = flockkit.solve(problem, n_jobs=args.jobs, progress=_progress(args), **settings)
+    solution.motion.save(output)
+    rates = ", ".join(f"{name} {rate:.0%}" for name, rate in sorted(solution.acceptance.items())) or "none"
+    print(f"wrote {output}: {solution.motion!r}")
+    print(f"log g {solution.log_g[0]:.6g}; largest constraint residual {max(solution.residuals, default=0.0):.3g}; accepted: {rates}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="flockkit", description="Animate flocks, schools, herds and small crowds.")
     parser.add_argument("--version", action="version", version=f"flockkit {flockkit.__version__}")
@@ -106,6 +192,41 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--picture", help="also draw the trajectories (.png, .pdf or .svg; needs flockkit[viz])")
     simulate.add_argument("--quiet", action="store_true", help="no progress bar")
     simulate.set_defaults(run=_cmd_simulate)
+
+    build = commands.add_parser("build", help="build a motion graph from a motion (.npz)")
+    build.add_argument("motion", help="motion file (.npz, from simulate or import)")
+    build.add_argument("-o", "--output", required=True, help="graph file to write (.npz)")
+    build.add_argument("--metric", default="icp-hungarian", help="configuration metric (default icp-hungarian)")
+    build.add_argument("--builder", default="kovar", help="graph builder (default kovar)")
+    build.add_argument("--threshold", type=float, help="absolute transition threshold (default: adaptive)")
+    build.add_argument("--jobs", type=int, help="parallel workers (-1: all cores)")
+    build.add_argument("--param", action="append", metavar="KEY=VALUE", help="builder parameter, repeatable")
+    build.add_argument("--quiet", action="store_true", help="no progress bar")
+    build.set_defaults(run=_cmd_build)
+
+    walk = commands.add_parser("walk", help="walk a motion graph and write the synthesized motion (.npz)")
+    walk.add_argument("graph", help="graph file (.npz, from build)")
+    walk.add_argument("--duration", type=float, required=True, help="seconds of motion to synthesize")
+    walk.add_argument("--strategy", default="random", help="walk strategy (default random; region needs --region)")
+    walk.add_argument("--region", help="box:x0,y0,x1,y1 | ball:cx,cy,r | polygon:x0,y0,x1,y1,... (for --strategy region)")
+    walk.add_argument("--seed", type=int, default=None, help="random seed")
+    walk.add_argument("--param", action="append", metavar="KEY=VALUE", help="strategy parameter, repeatable")
+    walk.add_argument("-o", "--output", required=True, help="motion file to write (.npz)")
+    walk.set_defaults(run=_cmd_walk)
+
+    info = commands.add_parser("info", help="describe a graph or motion file")
+    info.add_argument("file", help="a .npz written by flockkit")
+    info.set_defaults(run=_cmd_info)
+
+    solve = commands.add_parser("solve", help="solve a constrained-animation scenario (.toml) and write the motion")
+    solve.add_argument("scenario", help="scenario file (.toml; see examples/scenarios)")
+    solve.add_argument("-o", "--output", required=True, help="motion file to write (.npz)")
+    solve.add_argument("--iterations", type=int, help="sampler iterations (default: the scenario's, else 1000)")
+    solve.add_argument("--chains", type=int, help="independent chains")
+    solve.add_argument("--seed", type=int, help="random seed")
+    solve.add_argument("--jobs", type=int, default=1, help="parallel workers for chains")
+    solve.add_argument("--quiet", action="store_true", help="no progress bar")
+    solve.set_defaults(run=_cmd_solve)
 
     check = commands.add_parser("check", help="run the conformance kit on an installed plugin component")
     check.add_argument("kind", choices=KINDS)

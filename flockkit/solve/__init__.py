@@ -2,6 +2,7 @@
 
 from .initial import initial_trajectories, regenerate
 from .sampler import Proposal, ProposalContext, Solution, Trace, residuals, solve
+from .scenario import load_scenario
 from .windows import windows
 
-__all__ = ["windows", "initial_trajectories", "regenerate", "Proposal", "ProposalContext", "Solution", "Trace", "residuals", "solve"]
+__all__ = ["windows", "initial_trajectories", "regenerate", "Proposal", "ProposalContext", "Solution", "Trace", "residuals", "solve", "load_scenario"]

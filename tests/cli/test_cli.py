@@ -83,3 +83,83 @@ def test_console_script_is_installed():
     assert result.returncode == 0 and flockkit.__version__ in result.stdout
     result = subprocess.run([exe, "simulate"], capture_output=True, text=True)
     assert result.returncode == 2 and "required" in result.stderr
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    path = tmp_path_factory.mktemp("cli") / "flock.npz"
+    flockkit.simulate(n_agents=8, steps=300, seed=6).save(path)
+    return path
+
+
+def test_build_walk_and_info(capsys, tmp_path, recording):
+    graph_file, walked, boxed = tmp_path / "graph.npz", tmp_path / "walk.npz", tmp_path / "boxed.npz"
+    code, out, err = run(capsys, "build", str(recording), "-o", str(graph_file), "--jobs", "1", "--quiet")
+    assert code == 0, err
+    graph = flockkit.MotionGraph.load(graph_file)
+    assert f"{len(graph.transitions)} transitions" in out
+    code, out, err = run(capsys, "walk", str(graph_file), "--duration", "20", "--seed", "3", "-o", str(walked))
+    assert code == 0, err
+    expected = flockkit.synthesize(graph, flockkit.walk(graph, duration=20, seed=3))
+    assert flockkit.Motion.load(walked) == expected
+    code, _, err = run(capsys, "walk", str(graph_file), "--duration", "20", "--strategy", "region", "--region", "box:-100,-100,100,100", "-o", str(boxed))
+    assert code == 0, err
+    code, out, _ = run(capsys, "info", str(graph_file))
+    assert code == 0 and f'"transitions": {len(graph.transitions)}' in out
+    code, out, _ = run(capsys, "info", str(walked))
+    assert code == 0 and '"kind": "motion"' in out
+
+
+def test_build_with_a_threshold_that_leaves_nothing_says_what_would_work(capsys, tmp_path, recording):
+    code, _, err = run(capsys, "build", str(recording), "-o", str(tmp_path / "g.npz"), "--threshold", "1e-9", "--quiet")
+    assert code == 1 and "threshold=" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "g.npz").exists()
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["walk", "GRAPH", "--duration", "5", "--strategy", "region", "--region", "box:1,2", "-o", "OUT.npz"], "--region"),
+        (["build", "GRAPH", "-o", "OUT.npz"], "expected a 'motion' file"),
+        (["walk", "GRAPH", "--duration", "5", "-o", "OUT.gif"], "unknown extension"),
+        (["info", "MISSING.npz"], "no such file"),
+    ],
+)
+def test_graph_commands_reject_bad_input_in_one_line(capsys, tmp_path, recording, argv, message):
+    graph_file = tmp_path / "graph.npz"
+    flockkit.build_graph(flockkit.Motion.load(recording)).save(graph_file)
+    argv = [str(graph_file) if a == "GRAPH" else str(tmp_path / a) if a in ("OUT.npz", "OUT.gif", "MISSING.npz") else a for a in argv]
+    code, _, err = run(capsys, *argv)
+    assert code == 1 and message in err and len(err.strip().splitlines()) == 1
+
+
+def test_solve_writes_the_solution(capsys, tmp_path):
+    scenario = tmp_path / "scenario.toml"
+    scenario.write_text(
+        "[problem]\nagents = 6\nduration = 2.0\n[solve]\nseed = 3\n"
+        "[[point]]\nagent = 0\ntime = 0.5\nposition = [0.0, 0.0]\nvelocity = [1.0, 0.0]\n"
+        "[[shape]]\ntime = 2.0\nvelocity = [1.0, 0.0]\nbox = { lower = [0.0, -2.0], upper = [3.0, 2.0] }\n"
+    )
+    out_file = tmp_path / "solution.npz"
+    code, out, err = run(capsys, "solve", str(scenario), "--iterations", "20", "-o", str(out_file), "--quiet")
+    assert code == 0, err
+    motion = flockkit.Motion.load(out_file)
+    assert motion.n_frames == 21 and abs(motion.positions[5, 0]).max() <= 1e-9 and "residual" in out
+
+
+@pytest.mark.parametrize(
+    "text, message",
+    [
+        ("[problem]\nagents = 3\n", "duration"),
+        ("[problem]\nagents = 3\nduration = 1.0\n[[point]]\nagent = 9\ntime = 0.5\nposition = [0, 0]\nvelocity = [1, 0]\n", "agent 9 does not exist"),
+        ("[problem]\nagents = 3\nduration = 1.0\n[[shape]]\ntime = 0.5\nvelocity = [1, 0]\n", "exactly one of polygon, box or ball"),
+        ("[problem]\nagents = 3\nduration = 1.0\ncolour = 'red'\n", "unknown key 'colour'"),
+        ("[problem\n", "not a TOML scenario"),
+    ],
+)
+def test_bad_scenarios_are_named_in_one_line(capsys, tmp_path, text, message):
+    scenario = tmp_path / "bad.toml"
+    scenario.write_text(text)
+    code, _, err = run(capsys, "solve", str(scenario), "-o", str(tmp_path / "out.npz"))
+    assert code == 1 and message in err and "bad.toml" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "out.npz").exists()
