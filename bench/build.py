@@ -1,6 +1,6 @@
 """Motion-graph build time: prune=False against the default (pruned), same recording, one run.
 
-    python bench/build.py [--candidates 300] [--agents 20] [--jobs 2]
+    python bench/build.py [--candidates 2000] [--agents 20] [--jobs 2]
 
 Records boids (2D) long enough for the given number of candidate frames (one every 0.2 s), builds
 with prune=False and with the default, checks that both graphs are identical, and prints the
@@ -20,7 +20,7 @@ import flockkit
 
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--candidates", type=int, default=300)
+    parser.add_argument("--candidates", type=int, default=2000)
     parser.add_argument("--agents", type=int, default=20)
     parser.add_argument("--jobs", type=int, default=2)
     args = parser.parse_args()
