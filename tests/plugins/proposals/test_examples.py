@@ -1,0 +1,38 @@
+"""The paper's examples (examples/scenarios), solved with their default settings."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import flockkit
+from flockkit import ComConstraint, PointConstraint
+from flockkit.solve import load_scenario
+
+from flockkit_objectives.terms import count_flocks
+
+SCENARIOS = sorted((Path(__file__).parents[3] / "examples" / "scenarios").glob("*.toml"))
+
+
+def test_the_five_examples_are_there():
+    assert [p.stem for p in SCENARIOS] == ["arrows", "come-from-behind", "looping-3d", "obstacle-squeeze", "one-agent"]
+
+
+@pytest.mark.parametrize("path", SCENARIOS, ids=lambda p: p.stem)
+def test_a_default_run_meets_the_constraints_and_improves_plausibility(path):
+    problem, settings = load_scenario(path)
+    solution = flockkit.solve(problem, **settings)
+    start = flockkit.solve(problem, **{**settings, "iterations": 0})
+    for constraint, residual in zip(problem.constraints, solution.residuals):
+        if isinstance(constraint, PointConstraint):
+            assert residual <= 1e-9
+        elif isinstance(constraint, ComConstraint):
+            assert residual <= 3 * problem.sigma_com
+        else:
+            assert residual == 0.0  # every constrained agent inside its shape
+        if problem.flocks == 1:
+            assert count_flocks(solution.motion.positions[problem.frame(constraint.time)], problem.visibility) == 1
+    params = {"dt": problem.dt, **({"obstacles": problem.obstacles} if problem.obstacles else {})}
+    behavior = flockkit.get("behavior", "boids", **params)
+    assert behavior.log_plausibility(solution.motion).sum() >= behavior.log_plausibility(start.motion).sum()
+    assert np.isfinite(solution.log_g[0]) and solution.log_g[0] >= start.log_g[0]

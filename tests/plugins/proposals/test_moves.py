@@ -1,0 +1,72 @@
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import flockkit
+from flockkit import PointConstraint, Problem
+from flockkit.solve import ProposalContext, initial_trajectories, windows
+from flockkit.solve.sampler import pinned_frames
+
+from flockkit_proposals.moves import _add_bump, _decompose, _recompose
+
+
+def context_for(problem, motion):
+    behavior = flockkit.get("behavior", "boids")
+    return ProposalContext(problem=problem, behavior=behavior, windows=tuple(windows(problem)),
+                           scores=np.zeros(motion.n_frames), pinned=pinned_frames(problem))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(3, 40), st.sampled_from([2, 3]), st.integers(0, 2**31))
+def test_multiresolution_coordinates_recompose_exactly(count, dims, seed):
+    points = np.cumsum(np.random.default_rng(seed).normal(size=(count, dims)), axis=0)
+    np.testing.assert_allclose(_recompose(points[[0, -1]], _decompose(points), count), points, atol=1e-9)
+
+
+def test_a_bump_keeps_the_ends_and_has_the_asked_height_on_a_straight_line():
+    line = np.column_stack([np.linspace(0, 4, 9), np.zeros(9)])
+    bumped = _add_bump(line, 0.1, np.random.default_rng(0))
+    np.testing.assert_array_equal(bumped[[0, -1]], line[[0, -1]])
+    # d = 16 s (x^2 - 2x^3 + x^4) peaks at s in the middle; coefficients scale with the length 4
+    assert bumped[4, 1] == pytest.approx(0.1 * 4)
+    assert np.all(bumped[1:-1, 1] > 0)
+
+
+def test_retiming_keeps_the_path_and_the_distance():
+    problem = Problem(n_agents=5, duration=4.0)
+    motion = flockkit.simulate(n_agents=5, steps=40, seed=2)
+    context = context_for(problem, motion)
+    rng = np.random.default_rng(1)
+    move = flockkit.get("proposal", "velocity")
+    for _ in range(20):
+        proposal = move.propose(motion, context, rng)
+        if proposal is None:
+            continue
+        agent = proposal.agents[0]
+        old, new = motion.positions[:, agent], proposal.motion.positions[:, agent]
+        first, last = proposal.start - 1, proposal.stop
+        np.testing.assert_array_equal(new[[first, last]], old[[first, last]])
+        # every new point lies on the old polyline
+        for point in new[first + 1 : last]:
+            segments = old[first : last + 1]
+            a, b = segments[:-1], segments[1:]
+            t = np.clip(np.einsum("kd,kd->k", point - a, b - a) / np.maximum(np.einsum("kd,kd->k", b - a, b - a), 1e-300), 0, 1)
+            assert np.min(np.linalg.norm(a + t[:, None] * (b - a) - point, axis=1)) < 1e-9
+
+
+def test_bumps_avoid_agents_pinned_inside_their_span():
+    constraints = [PointConstraint(agent=a, time=t, position=[t, a], velocity=[1, 0]) for a in range(4) for t in np.arange(0, 3.05, 0.1)]
+    problem = Problem(n_agents=5, duration=3.0, constraints=constraints)
+    motion = initial_trajectories(problem, flockkit.get("behavior", "boids"), np.random.default_rng(0))
+    context = context_for(problem, motion)
+    rng = np.random.default_rng(3)
+    for _ in range(30):
+        proposal = flockkit.get("proposal", "bump").propose(motion, context, rng)
+        assert proposal is None or proposal.agents == (4,)
+
+
+@pytest.mark.parametrize("name, params", [("bump", {"size": 0}), ("velocity", {"spread": -1.0})])
+def test_bad_parameters_are_named(name, params):
+    with pytest.raises(flockkit.errors.ValidationError, match=next(iter(params))):
+        flockkit.get("proposal", name, **params)
