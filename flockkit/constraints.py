@@ -376,6 +376,10 @@ class Problem:
         The paper's sigma_com = 0.1, c_S = 10 and c_F = 1000.
     visibility : float
         Agents closer than this see each other when counting flocks (boids' perception radius).
+    follow : str
+        How the initial trajectories move unconstrained agents: "nearest" (with the constrained
+        agent nearest to them, smoother) or "random" (with a constrained agent drawn at random,
+        livelier), as section 3.3.1 offers.
     """
 
     n_agents: int = attrs.field(converter=lambda v: count(v, field="Problem.n_agents"))
@@ -389,10 +393,13 @@ class Problem:
     shape_weight: float = attrs.field(default=10.0, converter=functools.partial(positive_number, field="Problem.shape_weight"))
     flock_weight: float = attrs.field(default=1000.0, converter=functools.partial(positive_number, field="Problem.flock_weight"))
     visibility: float = attrs.field(default=3.0, converter=functools.partial(positive_number, field="Problem.visibility"))
+    follow: str = attrs.field(default="nearest")
 
     def __attrs_post_init__(self):
         if self.dims not in (2, 3) or isinstance(self.dims, bool):
             raise ValidationError(f"Problem.dims must be 2 or 3; got {self.dims!r}")
+        if self.follow not in ("nearest", "random"):
+            raise ValidationError(f"Problem.follow must be 'nearest' or 'random'; got {self.follow!r}")
         for index, constraint in enumerate(self.constraints):
             self._check_constraint(index, constraint)
         for index, obstacle in enumerate(self.obstacles):

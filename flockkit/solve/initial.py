@@ -169,8 +169,7 @@ class _Initial:
         point_carriers = np.array(sorted(on_point_path), dtype=int)
         for agent in np.flatnonzero(owner < 0):
             pool = point_carriers if len(point_carriers) else carriers
-            nearest = pool[np.argmin(np.linalg.norm(anchor[pool] - anchor[agent], axis=1))]
-            shift[:, agent] = shift[:, nearest]
+            shift[:, agent] = shift[:, self._leader(pool, anchor, agent)]
         moved += shift
         return moved
 
@@ -180,6 +179,12 @@ class _Initial:
         com = positions.mean(axis=1)
         curve = CubicHermiteSpline([0.0, steps * self.dt], com[[0, -1]], np.stack([start_velocity.mean(axis=0), end_velocity.mean(axis=0)]))
         return positions + (curve(np.arange(steps + 1) * self.dt) - com)[:, None, :]
+
+    def _leader(self, pool, positions, agent) -> int:
+        """The constrained agent whose move an unconstrained one copies (Problem.follow)."""
+        if self.problem.follow == "random":
+            return int(self.rng.choice(pool))
+        return int(pool[np.argmin(np.linalg.norm(positions[pool] - positions[agent], axis=1))])
 
     # -- constrained configurations (3.3.1) ---------------------------------------------------
 
@@ -228,8 +233,7 @@ class _Initial:
         for agent in others:
             if not len(placed):
                 break
-            nearest = placed[np.argmin(np.linalg.norm(snapshot[placed] - snapshot[agent], axis=1))]
-            rotation, translation = transforms[nearest]
+            rotation, translation = transforms[self._leader(placed, snapshot, agent)]
             positions[agent] = rotation @ snapshot[agent] + translation
             out_velocities[agent] = rotation @ velocities[agent]
         return positions, out_velocities

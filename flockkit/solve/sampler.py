@@ -141,9 +141,14 @@ class Scorer:
         return max(0, proposal.start - self.reach), min(n_frames, proposal.stop + self.reach)
 
 
-def run_chain(problem, behavior, objectives, moves, initial: Motion, iterations: int, rng, *, callback=None, progress=None):
+STABLE_WINDOW = 100  # iterations per running mean for the `stable` stopping rule
+
+
+def run_chain(problem, behavior, objectives, moves, initial: Motion, iterations: int, rng, *, callback=None, progress=None, stable=None):
     """One chain from `initial`: (best motion, its log g, Trace). `moves` is a list of
-    (name, move, probability)."""
+    (name, move, probability). With `stable`, stop early once the mean log g over the last
+    STABLE_WINDOW iterations differs from the mean over the window before by at most `stable`
+    times its size."""
     scorer = Scorer(problem, behavior, objectives)
     names = [name for name, _, _ in moves]
     weights = np.array([p for _, _, p in moves], dtype=float)
@@ -173,11 +178,17 @@ def run_chain(problem, behavior, objectives, moves, initial: Motion, iterations:
             callback(iteration, total, bool(accepted[iteration]))
         if progress is not None:
             progress(iteration + 1)
+        if stable is not None and iteration + 1 >= 2 * STABLE_WINDOW:
+            recent = log_g[iteration + 1 - STABLE_WINDOW : iteration + 1].mean()
+            before = log_g[iteration + 1 - 2 * STABLE_WINDOW : iteration + 1 - STABLE_WINDOW].mean()
+            if abs(recent - before) <= stable * max(abs(before), 1.0):
+                log_g, accepted = log_g[: iteration + 1], accepted[: iteration + 1]
+                break
     return best, best_total, Trace(log_g=log_g, proposals=tuple(tried), accepted=accepted)
 
 
 def solve(problem: Problem, *, behavior="boids", iterations=1000, chains=1, seed=None, proposals=None,
-          objectives=DEFAULT_OBJECTIVES, n_jobs=1, callback=None, progress=False) -> Solution:
+          objectives=DEFAULT_OBJECTIVES, stable=None, n_jobs=1, callback=None, progress=False) -> Solution:
     """Constrained, plausible motion for `problem` (paper 004).
 
     Parameters
@@ -185,7 +196,10 @@ def solve(problem: Problem, *, behavior="boids", iterations=1000, chains=1, seed
     behavior : str
         Name of the behavior model, made with the problem's ``dt`` (and ``obstacles``, if any).
     iterations : int
-        Sampler iterations per chain; 0 returns the initial trajectories.
+        Sampler iterations per chain (at most, with `stable`); 0 returns the initial trajectories.
+    stable : float, optional
+        Stop a chain early once its running mean of log g stabilizes: the mean over the last 100
+        iterations within this fraction of the mean over the 100 before.
     chains, n_jobs : int
         Independent chains (each from its own initial trajectories), run by joblib workers.
     seed : int, optional
@@ -214,9 +228,11 @@ def solve(problem: Problem, *, behavior="boids", iterations=1000, chains=1, seed
     if iterations and not sum(proposals.values()) > 0:
         raise ValidationError("solve: proposals need a positive total probability")
     objectives = tuple(objectives)
+    if stable is not None and (isinstance(stable, bool) or not isinstance(stable, (int, float)) or not stable >= 0):
+        raise ValidationError(f"solve: stable must be None or a number >= 0; got {stable!r}")
     _components(problem, behavior, proposals, objectives)  # fail early on unknown names
     seeds = np.random.SeedSequence(seed).spawn(chains)
-    arguments = (problem, behavior, proposals, objectives, iterations)
+    arguments = (problem, behavior, proposals, objectives, iterations, stable)
     if n_jobs == 1:
         bar = _bar(progress, chains * iterations)
         results = []
@@ -249,14 +265,14 @@ def _components(problem, behavior_name, proposals, objectives):
     return behavior, moves, terms
 
 
-def _chain(problem, behavior_name, proposals, objectives, iterations, seed, callback, progress):
+def _chain(problem, behavior_name, proposals, objectives, iterations, stable, seed, callback, progress):
     behavior, moves, terms = _components(problem, behavior_name, proposals, objectives)
     rng = np.random.default_rng(seed)
     initial = initial_trajectories(problem, behavior, rng)
     if not iterations:
         scores = Scorer(problem, behavior, terms).frames(initial)
         return initial, float(scores.sum()), Trace(log_g=np.empty(0), proposals=(), accepted=np.zeros(0, dtype=bool))
-    return run_chain(problem, behavior, terms, moves, initial, iterations, rng, callback=callback, progress=progress)
+    return run_chain(problem, behavior, terms, moves, initial, iterations, rng, callback=callback, progress=progress, stable=stable)
 
 
 def _acceptance(traces) -> dict:

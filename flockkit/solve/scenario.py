@@ -6,7 +6,7 @@
     agents = 20          # required; dims = 2, dt = 0.1, flocks = 1, sigma_com, shape_weight,
     duration = 8.0       # flock_weight and visibility are optional (defaults as in Problem)
 
-    [solve]              # optional: behavior, iterations, chains, seed, proposals = {bump = 0.6, ...}
+    [solve]              # optional: behavior, iterations, chains, seed, stable, proposals = {bump = 0.6, ...}
     iterations = 1000
 
     [[point]]            # agent, time, position, optional velocity
@@ -30,8 +30,8 @@ from ..constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, Pr
 from ..errors import FileFormatError, FlockkitError, ValidationError
 
 _PROBLEM_KEYS = {"agents": "n_agents", "dims": "dims", "dt": "dt", "duration": "duration", "flocks": "flocks",
-                 "sigma_com": "sigma_com", "shape_weight": "shape_weight", "flock_weight": "flock_weight", "visibility": "visibility"}
-_SOLVE_KEYS = {"behavior", "iterations", "chains", "seed", "proposals", "objectives"}
+                 "sigma_com": "sigma_com", "shape_weight": "shape_weight", "flock_weight": "flock_weight", "visibility": "visibility", "follow": "follow"}
+_SOLVE_KEYS = {"behavior", "iterations", "chains", "seed", "proposals", "objectives", "stable"}
 _CONSTRAINT_KEYS = {"point": {"agent", "time", "position", "velocity"}, "com": {"agents", "time", "position", "velocity"},
                     "shape": {"agents", "time", "velocity", "polygon", "box", "ball"}}
 

@@ -82,3 +82,16 @@ def test_bad_arguments_are_named(kwargs, error, match):
 def test_solve_needs_a_problem():
     with pytest.raises(ValidationError, match="Problem"):
         flockkit.solve("scenario.toml")
+
+
+def test_a_stable_chain_stops_early():
+    solution = flockkit.solve(small_problem(), iterations=2000, seed=2, stable=0.5)
+    assert 200 <= solution.trace[0].log_g.size < 2000
+    assert len(solution.trace[0].proposals) == solution.trace[0].log_g.size
+
+
+def test_follow_random_still_meets_the_constraints():
+    problem = Problem(n_agents=10, duration=3.0, follow="random", constraints=small_problem().constraints)
+    assert max(flockkit.solve(problem, iterations=0, seed=4).residuals) <= 1e-9
+    with pytest.raises(ValidationError, match="follow"):
+        Problem(n_agents=10, duration=3.0, follow="leader")
