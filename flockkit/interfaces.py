@@ -53,6 +53,11 @@ class BehaviorModel(Protocol):
 
     ``forward`` and ``backward`` may also accept an optional keyword ``progress``: a callable
     taking the number of steps completed so far. ``flockkit.simulate`` passes it when present.
+    They may also accept ``guide``: a mapping of agent index to (steps + 1, D) positions those
+    agents take (keyframed) while the others react to them; the constrained-animation initial
+    trajectories use it where offered. And a model may declare ``plausibility_reach``: how many
+    frames on each side of a changed frame its ``log_plausibility`` can change (the sampler then
+    re-scores only those).
     """
 
     def forward(self, initial: State, steps: int, rng: np.random.Generator) -> Motion: ...

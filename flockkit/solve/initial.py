@@ -22,6 +22,8 @@ nearest constrained agent in the snapshot.
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline, make_interp_spline
 from scipy.optimize import linear_sum_assignment
@@ -48,14 +50,15 @@ def regenerate(problem: Problem, behavior, current: Motion, start: int, stop: in
     builder = _Initial(problem, behavior, rng)
     last = current.n_frames - 1
     state = _arriving(current, start)
+    prior = current.state(start - 1) if start > 0 else None
     pieces = [Motion(positions=current.positions[: start + 1], dt=current.dt)]
     for a, b in windows(problem):
         if a < start or b > stop:
             continue
         end = _arriving(current, b) if b == stop and stop < last else None
-        piece = builder._window(state, a, b, end=end)
+        piece = builder._window(state, a, b, end=end, prior=prior)
         pieces.append(piece)
-        state = _state_at_end(piece, None)
+        state, prior = _state_at_end(piece, None), piece.state(-2)
     pieces.append(Motion(positions=current.positions[stop:], dt=current.dt))
     joined = _join(pieces, current.dt)
     return Motion(positions=joined.positions, dt=current.dt, channels=dict(current.channels))
@@ -87,6 +90,7 @@ class _Initial:
         self.problem, self.behavior, self.rng = problem, behavior, rng
         self.dt = problem.dt
         self.paths = [_Path(track, problem) for track in problem.tracks if len(track) >= 2]
+        self.guided = "guide" in inspect.signature(behavior.forward).parameters and "guide" in inspect.signature(behavior.backward).parameters
         self.by_frame: dict[int, list] = {}
         for constraint in problem.constraints:
             self.by_frame.setdefault(problem.frame(constraint.time), []).append(constraint)
@@ -104,23 +108,41 @@ class _Initial:
         pieces = []
         if first_constrained > 0:
             lead = self.behavior.backward(state, first_constrained, self.rng)
-            pieces.append(lead)
-            state = _state_at_end(lead, velocities)
+            pinned = self.by_frame[first_constrained]
+            if self.guided and all(isinstance(c, PointConstraint) for c in pinned):
+                # simulate the lead-in forward (backward simulation is not forward-plausible),
+                # keeping the constrained agents on the backward path to their constraints
+                lead = self.behavior.forward(lead.state(0), first_constrained, self.rng, guide={c.agent: lead.positions[:, c.agent] for c in pinned})
+                pieces.append(lead)
+                state = _state_at_end(lead, None)
+            else:
+                pieces.append(lead)
+                state = _state_at_end(lead, velocities)
+        prior = pieces[-1].state(-2) if pieces else None
         for start, stop in spans:
             if stop <= first_constrained:
                 continue
-            piece = self._window(state, start, stop)
+            piece = self._window(state, start, stop, prior=prior)
             pieces.append(piece)
-            state = _state_at_end(piece, None)
+            state, prior = _state_at_end(piece, None), piece.state(-2)
         return _join(pieces, self.dt)
 
     # -- one window --------------------------------------------------------------------------
 
-    def _window(self, state: State, start: int, stop: int, end: State | None = None) -> Motion:
-        """Trajectories for frames start..stop from `state`; with `end`, ending exactly there."""
+    def _window(self, state: State, start: int, stop: int, end: State | None = None, prior: State | None = None) -> Motion:
+        """Trajectories for frames start..stop from `state`; with `end`, ending exactly there.
+
+        With `prior`, the state one frame before `start` (with the velocity leaving it), the
+        forward simulation starts there: a simulation's first step carries no impulse, so starting
+        one frame early joins the windows without a kink in the inferred wander."""
         steps = stop - start
-        forward = self.behavior.forward(state, steps, self.rng)
         spanning = [p for p in self.paths if p.spans(start, stop)]
+        guide = self._guide(spanning, start, steps)
+        if prior is None:
+            forward = self.behavior.forward(state, steps, self.rng, **guide)
+        else:
+            early = self._guide(spanning, start - 1, steps + 1)
+            forward = self.behavior.forward(prior, steps + 1, self.rng, **early)[1:]
         positions = self._onto_paths(forward.positions, spanning, start, anchor=forward.positions[0])
         ending = [c for c in self.by_frame.get(stop, []) if not any(id(c) in p.members for p in spanning)]
         if not ending and end is None:
@@ -132,7 +154,7 @@ class _Initial:
             )
         else:
             end_positions, end_velocities = np.array(end.positions), np.array(end.velocities)
-        backward = self.behavior.backward(State(positions=end_positions, velocities=end_velocities), steps, self.rng)
+        backward = self.behavior.backward(State(positions=end_positions, velocities=end_velocities), steps, self.rng, **guide)
         back = self._onto_paths(backward.positions, spanning, start, anchor=forward.positions[0])
         u = _blend_weights(steps)[:, None, None]
         blended = (1 - u) * positions + u * back
@@ -140,6 +162,15 @@ class _Initial:
             blended = self._along_hermite(blended, state.velocities, end_velocities)
         blended[0], blended[-1] = positions[0], end_positions  # exactly, whatever the rounding
         return Motion(positions=blended, dt=self.dt, channels=_channels(forward))
+
+    def _guide(self, spanning, start, steps) -> dict:
+        """Keyword arguments keeping point-path agents on their paths during simulation, so the
+        others react to where they really are (for models whose forward takes `guide`)."""
+        points = [p for p in spanning if p.is_point]
+        if not points or not self.guided:
+            return {}
+        times = (start + np.arange(steps + 1)) * self.dt
+        return {"guide": {p.agents[0]: p.spline(times) for p in points}}
 
     def _onto_paths(self, positions, spanning, start, anchor) -> np.ndarray:
         """Operation 2: translate constrained agents onto their paths, the others with them."""

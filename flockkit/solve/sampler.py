@@ -74,7 +74,10 @@ class Solution:
     Attributes
     ----------
     motion : Motion
-        The most plausible sample found (highest log g over every chain).
+        The most plausible sample found (highest log g over every chain) among those that meet
+        the constraints: point constraints exactly, COM constraints within 3 sigma_com, every
+        shape-constrained agent inside its shape (the sampler keeps COM and shape constraints
+        only through the objective, so samples in between may stray a little).
     motions : tuple of Motion
         Each chain's most plausible sample, ranked by log g (best first).
     log_g : tuple of float
@@ -104,6 +107,16 @@ def pinned_frames(problem: Problem) -> np.ndarray:
         if isinstance(c, PointConstraint):
             pinned[problem.frame(c.time), c.agent] = True
     return pinned
+
+
+def feasible(problem: Problem, motion: Motion) -> bool:
+    """Whether `motion` meets the constraints as a solution must: point constraints to 1e-9, COM
+    constraints within 3 sigma_com, every shape-constrained agent inside its shape."""
+    for c, residual in zip(problem.constraints, residuals(problem, motion)):
+        limit = 1e-9 if isinstance(c, PointConstraint) else 3 * problem.sigma_com if isinstance(c, ComConstraint) else 0.0
+        if residual > limit:
+            return False
+    return True
 
 
 def residuals(problem: Problem, motion: Motion) -> tuple[float, ...]:
@@ -145,8 +158,8 @@ STABLE_WINDOW = 100  # iterations per running mean for the `stable` stopping rul
 
 
 def run_chain(problem, behavior, objectives, moves, initial: Motion, iterations: int, rng, *, callback=None, progress=None, stable=None):
-    """One chain from `initial`: (best motion, its log g, Trace). `moves` is a list of
-    (name, move, probability). With `stable`, stop early once the mean log g over the last
+    """One chain from `initial`: (best motion, its log g, Trace). The best motion is the most
+    plausible sample that is `feasible`. `moves` is a list of (name, move, probability). With `stable`, stop early once the mean log g over the last
     STABLE_WINDOW iterations differs from the mean over the window before by at most `stable`
     times its size."""
     scorer = Scorer(problem, behavior, objectives)
@@ -156,7 +169,7 @@ def run_chain(problem, behavior, objectives, moves, initial: Motion, iterations:
     spans, pinned = tuple(windows(problem)), pinned_frames(problem)
     current, scores = initial, scorer.frames(initial)
     total = float(scores.sum())
-    best, best_total = current, total
+    best, best_total = current, total  # the initial trajectories meet every constraint
     log_g, tried, accepted = np.empty(iterations), [], np.zeros(iterations, dtype=bool)
     for iteration in range(iterations):
         pick = int(rng.choice(len(moves), p=weights))
@@ -170,7 +183,7 @@ def run_chain(problem, behavior, objectives, moves, initial: Motion, iterations:
                 current, accepted[iteration] = proposal.motion, True
                 scores[start:stop] = fresh
                 total = float(scores.sum())
-                if total > best_total:
+                if total > best_total and feasible(problem, current):
                     best, best_total = current, total
         log_g[iteration] = total
         tried.append(names[pick])

@@ -142,22 +142,28 @@ class Boids:
 
     # -- the three operations -------------------------------------------------------------
 
-    def forward(self, initial: flockkit.State, steps: int, rng: np.random.Generator, *, progress=None) -> flockkit.Motion:
-        """Simulate `steps` steps from `initial`; ``steps + 1`` frames, the first equal to `initial`."""
+    def forward(self, initial: flockkit.State, steps: int, rng: np.random.Generator, *, progress=None, guide=None) -> flockkit.Motion:
+        """Simulate `steps` steps from `initial`; ``steps + 1`` frames, the first equal to `initial`.
+
+        `guide` maps agent indices to (steps + 1, D) positions those agents take from frame 1 on
+        (keyframed agents): the others see them there and react."""
         self._check_state(initial, "initial")
         steps = _steps(steps)
+        guide = self._guide(guide, steps, initial)
         positions, wander = self._simulate(
-            initial.positions, initial.velocities, self._wander_of(initial, rng), steps, rng, perception=1.0, progress=progress
+            initial.positions, initial.velocities, self._wander_of(initial, rng), steps, rng, perception=1.0, progress=progress, guide=guide
         )
         return flockkit.Motion(positions=positions, dt=self.dt, channels={_WANDER: wander})
 
-    def backward(self, final: flockkit.State, steps: int, rng: np.random.Generator, *, progress=None) -> flockkit.Motion:
+    def backward(self, final: flockkit.State, steps: int, rng: np.random.Generator, *, progress=None, guide=None) -> flockkit.Motion:
         """``steps + 1`` frames ending at `final`: simulate from `final` with velocities reversed and
-        perception reversed (agents react to those behind them), then reverse time (004, 3.1)."""
+        perception reversed (agents react to those behind them), then reverse time (004, 3.1).
+        `guide` as for forward, its arrays in forward time (the last row at `final`)."""
         self._check_state(final, "final")
         steps = _steps(steps)
+        guide = {agent: path[::-1] for agent, path in self._guide(guide, steps, final).items()}
         positions, wander = self._simulate(
-            final.positions, -final.velocities, -self._wander_of(final, rng), steps, rng, perception=-1.0, progress=progress
+            final.positions, -final.velocities, -self._wander_of(final, rng), steps, rng, perception=-1.0, progress=progress, guide=guide
         )
         return flockkit.Motion(positions=positions[::-1], dt=self.dt, channels={_WANDER: -wander[::-1]})
 
@@ -244,7 +250,20 @@ class Boids:
             )
         return int(start), int(stop)
 
-    def _simulate(self, x0, v0, wander0, steps, rng, *, perception, progress):
+    def _guide(self, guide, steps, state) -> dict:
+        if guide is None:
+            return {}
+        checked = {}
+        for agent, path in dict(guide).items():
+            path = np.asarray(path, dtype=np.float64)
+            if isinstance(agent, bool) or not isinstance(agent, (int, np.integer)) or not 0 <= agent < state.n_agents:
+                raise ValidationError(f"boids: guide keys must be agent indices below {state.n_agents}; got {agent!r}")
+            if path.shape != (steps + 1, state.dims) or not np.all(np.isfinite(path)):
+                raise ValidationError(f"boids: guide[{agent}] must be finite positions of shape {(steps + 1, state.dims)}; got {path.shape}")
+            checked[int(agent)] = path
+        return checked
+
+    def _simulate(self, x0, v0, wander0, steps, rng, *, perception, progress, guide=None):
         n, d = x0.shape
         positions = np.empty((steps + 1, n, d))
         wander = np.empty_like(positions)
@@ -260,6 +279,8 @@ class Boids:
             else:
                 wander[t] = wander0
             positions[t + 1] = positions[t] + velocity * self.dt
+            for agent, path in (guide or {}).items():
+                positions[t + 1, agent] = path[t + 1]
             # Continue from the velocity the positions imply, exactly as inference will see it.
             velocity = (positions[t + 1] - positions[t]) / self.dt
             if progress is not None:

@@ -165,3 +165,23 @@ def test_default_flock_stays_together():
     spread = np.linalg.norm(last - last.mean(axis=0), axis=1).max()
     speed = np.linalg.norm(motion.velocities()[-100:], axis=-1).mean()
     assert spread < 10 and 0.8 < speed < 1.3
+
+
+def test_guided_agents_follow_their_paths_and_the_others_react():
+    boids = flockkit.get("behavior", "boids")
+    start = flockkit.random_flock(n_agents=6, rng=np.random.default_rng(2))
+    path = start.positions[0] + np.outer(np.arange(31) * 0.1, [0.0, 2.0])  # agent 0 flies north at speed 2
+    free = boids.forward(start, 30, np.random.default_rng(5))
+    guided = boids.forward(start, 30, np.random.default_rng(5), guide={0: path})
+    np.testing.assert_array_equal(guided.positions[1:, 0], path[1:])
+    assert not np.allclose(guided.positions[:, 1:], free.positions[:, 1:])  # the others see it
+    back = boids.backward(guided.state(-1), 30, np.random.default_rng(5), guide={0: path})
+    np.testing.assert_array_equal(back.positions[:-1, 0], path[:-1])
+
+
+@pytest.mark.parametrize("guide, match", [({9: np.zeros((11, 2))}, "agent indices"), ({0: np.zeros((5, 2))}, "shape")])
+def test_bad_guides_are_named(guide, match):
+    boids = flockkit.get("behavior", "boids")
+    start = flockkit.random_flock(n_agents=3, rng=np.random.default_rng(0))
+    with pytest.raises(ValidationError, match=match):
+        boids.forward(start, 10, np.random.default_rng(0), guide=guide)
