@@ -171,6 +171,25 @@ def _cmd_solve(args) -> int:
     return 0
 
 
+def _cmd_export(args) -> int:
+    from .io import EXPORT_SUFFIXES, export
+
+    output = _require_suffix(args.output, EXPORT_SUFFIXES, "-o")
+    motion = flockkit.Motion.load(args.motion)
+    export(motion, output)
+    print(f"wrote {output}: {motion.n_frames} frames x {motion.n_agents} agents")
+    return 0
+
+
+def _cmd_import(args) -> int:
+    output = _require_suffix(args.output, (".npz",), "-o")
+    reader = {"long": flockkit.io.read_long, "wide": flockkit.io.read_wide}[args.format]
+    motion = reader(args.table, dt=args.dt, fps=args.fps, dims=args.dims, max_gap=args.max_gap)
+    motion.save(output)
+    print(f"wrote {output}: {motion!r}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="flockkit", description="Animate flocks, schools, herds and small crowds.")
     parser.add_argument("--version", action="version", version=f"flockkit {flockkit.__version__}")
@@ -227,6 +246,22 @@ def build_parser() -> argparse.ArgumentParser:
     solve.add_argument("--jobs", type=int, default=1, help="parallel workers for chains")
     solve.add_argument("--quiet", action="store_true", help="no progress bar")
     solve.set_defaults(run=_cmd_solve)
+
+    export = commands.add_parser("export", help="write a motion as CSV, JSON or USD (.usda/.usdc, needs flockkit[usd])")
+    export.add_argument("motion", help="motion file (.npz)")
+    export.add_argument("-o", "--output", required=True, help="out.csv | out.json | out.usda | out.usdc")
+    export.set_defaults(run=_cmd_export)
+
+    importer = commands.add_parser("import", help="read a captured-motion table (CSV/TSV) into a motion (.npz)")
+    importer.add_argument("table", help="long (frame, agent, x, y[, z]) or wide (frame, x1, y1, x2, y2, ...) table")
+    importer.add_argument("-o", "--output", required=True, help="motion file to write (.npz)")
+    importer.add_argument("--format", choices=("long", "wide"), default="long", help="table layout (default long)")
+    rate = importer.add_mutually_exclusive_group(required=True)
+    rate.add_argument("--fps", type=float, help="frames per second of the capture")
+    rate.add_argument("--dt", type=float, help="seconds per frame of the capture")
+    importer.add_argument("--dims", type=int, default=2, choices=(2, 3), help="2 or 3 coordinates per agent")
+    importer.add_argument("--max-gap", type=int, default=flockkit.io.DEFAULT_MAX_GAP, help="longest run of missing frames to fill")
+    importer.set_defaults(run=_cmd_import)
 
     check = commands.add_parser("check", help="run the conformance kit on an installed plugin component")
     check.add_argument("kind", choices=KINDS)

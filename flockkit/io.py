@@ -1,4 +1,5 @@
-"""Reading captured motion into a Motion: wide and long text tables, and (T, N, D) .npy arrays.
+"""Files in and out: captured motion read into a Motion (wide and long text tables, (T, N, D)
+.npy arrays), and motions exported for other tools (CSV, JSON, USD).
 
 Captures do not record their frame rate in a form these readers can trust, so every reader takes
 ``dt=`` (seconds per frame) or ``fps=``.
@@ -14,6 +15,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +24,7 @@ from ._arrays import count
 from .errors import FileFormatError, ValidationError
 from .motion import Motion
 
-__all__ = ["read_wide", "read_long", "read_npy", "fill_gaps"]
+__all__ = ["read_wide", "read_long", "read_npy", "fill_gaps", "export", "write_csv", "write_json", "write_usd", "EXPORT_SUFFIXES"]
 
 DEFAULT_MAX_GAP = 10
 
@@ -203,3 +205,122 @@ def read_npy(path, *, dt=None, fps=None, max_gap: int = DEFAULT_MAX_GAP, agents=
     if not isinstance(array, np.ndarray) or array.ndim != 3 or array.shape[2] not in (2, 3) or array.dtype.kind not in "fiu":
         raise FileFormatError(f"{path}: expected a numeric (T, N, D) array with D in {{2, 3}}; got {getattr(array, 'shape', '?')}")
     return _motion(array, dt, max_gap, str(path), agents=agents)
+
+
+# -- writing: exports for animation tools ------------------------------------------------------
+
+EXPORT_SUFFIXES = (".csv", ".json", ".usda", ".usdc")
+
+
+def export(motion: Motion, path) -> Path:
+    """Write `motion` in the format its suffix names: .csv (long format: frame, agent, x, y[, z],
+    readable by :func:`read_long`), .json, or .usda / .usdc (Universal Scene Description, needs
+    the ``usd`` extra). Atomic: an interrupted export leaves nothing behind."""
+    if not isinstance(motion, Motion):
+        raise ValidationError(f"export needs a flockkit.Motion; got {type(motion).__name__}")
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in EXPORT_SUFFIXES:
+        raise ValidationError(f"{path}: unknown export extension {path.suffix!r}; expected {', '.join(EXPORT_SUFFIXES)}")
+    writer = {".csv": write_csv, ".json": write_json}.get(suffix, write_usd)
+    writer(motion, path)
+    return path
+
+
+def write_csv(motion: Motion, path) -> None:
+    """Long format, one row per frame and agent: frame, agent, x, y[, z] (header first)."""
+    frames, agents = np.meshgrid(np.arange(motion.n_frames), np.arange(motion.n_agents), indexing="ij")
+    table = np.column_stack([frames.ravel(), agents.ravel(), motion.positions.reshape(-1, motion.dims)])
+    header = ",".join(["frame", "agent", *"xyz"[: motion.dims]])
+    with _atomic(path, "w") as handle:
+        handle.write(header + "\n")
+        np.savetxt(handle, table, delimiter=",", fmt=["%d", "%d"] + ["%.17g"] * motion.dims)
+
+
+def write_json(motion: Motion, path) -> None:
+    """{"format": "flockkit-motion", "version": 1, "dt", "frames", "agents", "dims", "positions"}
+    with positions nested frame, agent, coordinate."""
+    import json
+
+    document = {"format": "flockkit-motion", "version": 1, "dt": motion.dt, "frames": motion.n_frames,
+                "agents": motion.n_agents, "dims": motion.dims, "positions": motion.positions.tolist()}
+    with _atomic(path, "w") as handle:
+        json.dump(document, handle)
+
+
+def write_usd(motion: Motion, path) -> None:
+    """A USD stage (.usda text or .usdc binary) holding /Flock/Agents, a UsdGeom.PointInstancer
+    with one time sample of positions and orientations (facing the velocity, the prototype's +x)
+    per frame; timeCodesPerSecond = 1 / dt, frames 0 .. T-1, up axis z (2D motions lie in z = 0).
+    Blender, Houdini and Maya import it."""
+    try:
+        from pxr import Gf, Usd, UsdGeom, Vt
+    except ImportError:
+        from .errors import MissingDependencyError
+
+        raise MissingDependencyError("USD export needs usd-core: pip install 'flockkit[usd]'") from None
+    path = Path(path)
+    positions = np.zeros((motion.n_frames, motion.n_agents, 3))
+    positions[..., : motion.dims] = motion.positions
+    velocities = np.zeros_like(positions)
+    velocities[..., : motion.dims] = motion.velocities()
+    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
+    try:
+        stage = Usd.Stage.CreateNew(str(tmp))
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+        stage.SetTimeCodesPerSecond(1.0 / motion.dt)
+        stage.SetFramesPerSecond(1.0 / motion.dt)
+        stage.SetStartTimeCode(0)
+        stage.SetEndTimeCode(motion.n_frames - 1)
+        root = UsdGeom.Xform.Define(stage, "/Flock")
+        stage.SetDefaultPrim(root.GetPrim())
+        instancer = UsdGeom.PointInstancer.Define(stage, "/Flock/Agents")
+        body = UsdGeom.Cone.Define(stage, "/Flock/Agents/Prototypes/Agent")
+        body.CreateAxisAttr(UsdGeom.Tokens.x)
+        body.CreateHeightAttr(0.5)
+        body.CreateRadiusAttr(0.15)
+        instancer.CreatePrototypesRel().SetTargets([body.GetPath()])
+        instancer.CreateProtoIndicesAttr(Vt.IntArray([0] * motion.n_agents))
+        points, turns = instancer.CreatePositionsAttr(), instancer.CreateOrientationsAttr()
+        for frame in range(motion.n_frames):
+            time = Usd.TimeCode(frame)
+            points.Set(Vt.Vec3fArray.FromNumpy(positions[frame].astype(np.float32)), time)
+            quaternions = _facing(velocities[frame])
+            turns.Set(Vt.QuathArray([Gf.Quath(float(w), Gf.Vec3h(float(x), float(y), float(z))) for w, x, y, z in quaternions]), time)
+        stage.GetRootLayer().Save()
+        os.replace(tmp, path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _facing(velocities: np.ndarray) -> np.ndarray:
+    """Unit quaternions (w, x, y, z) turning +x onto each velocity (identity for a still agent)."""
+    speed = np.linalg.norm(velocities, axis=1, keepdims=True)
+    u = np.divide(velocities, speed, out=np.tile([1.0, 0.0, 0.0], (len(velocities), 1)), where=speed > 1e-12)
+    q = np.column_stack([1.0 + u[:, 0], np.zeros(len(u)), -u[:, 2], u[:, 1]])  # half-way rotation
+    backwards = q[:, 0] < 1e-9
+    q[backwards] = [0.0, 0.0, 0.0, 1.0]  # facing -x: half a turn about z
+    return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+class _atomic:
+    """Open a temporary file beside `path` and move it into place only on success."""
+
+    def __init__(self, path, mode):
+        self.path, self.mode = Path(path), mode
+
+    def __enter__(self):
+        import tempfile
+
+        fd, self.tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
+        os.chmod(self.tmp, 0o644)  # mkstemp makes it private; an export is an ordinary file
+        self.handle = os.fdopen(fd, self.mode)
+        return self.handle
+
+    def __exit__(self, kind, value, traceback):
+        self.handle.close()
+        if kind is None:
+            os.replace(self.tmp, self.path)
+        else:
+            Path(self.tmp).unlink(missing_ok=True)
+        return False

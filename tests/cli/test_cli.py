@@ -1,6 +1,7 @@
 import shutil
 import subprocess
 
+import numpy as np
 import pytest
 
 import flockkit
@@ -163,3 +164,33 @@ def test_bad_scenarios_are_named_in_one_line(capsys, tmp_path, text, message):
     code, _, err = run(capsys, "solve", str(scenario), "-o", str(tmp_path / "out.npz"))
     assert code == 1 and message in err and "bad.toml" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "out.npz").exists()
+
+
+def test_export_and_import_round_trip(capsys, tmp_path, recording):
+    table = tmp_path / "flock.csv"
+    code, _, err = run(capsys, "export", str(recording), "-o", str(table))
+    assert code == 0, err
+    code, _, err = run(capsys, "import", str(table), "--fps", "10", "-o", str(tmp_path / "back.npz"))
+    assert code == 0, err
+    np.testing.assert_array_equal(flockkit.Motion.load(tmp_path / "back.npz").positions, flockkit.Motion.load(recording).positions)
+    code, _, err = run(capsys, "export", str(recording), "-o", str(tmp_path / "flock.usda"))
+    assert code == 0 and (tmp_path / "flock.usda").read_text().startswith("#usda")
+
+
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["export", "MOTION", "-o", "OUT.fbx"], "unknown extension"),
+        (["export", "GRAPH", "-o", "OUT.csv"], "expected a 'motion' file"),
+        (["export", "MOTION", "-o", "NOWHERE/out.csv"], "does not exist"),
+        (["import", "MOTION", "--fps", "10", "-o", "OUT.npz"], "not all fields are numbers"),
+    ],
+)
+def test_export_and_import_reject_bad_input_in_one_line(capsys, tmp_path, recording, argv, message):
+    graph_file = tmp_path / "graph.npz"
+    flockkit.build_graph(flockkit.Motion.load(recording)).save(graph_file)
+    names = {"MOTION": str(recording), "GRAPH": str(graph_file)}
+    argv = [names.get(a) or (str(tmp_path / a) if a.startswith(("OUT", "NOWHERE")) else a) for a in argv]
+    code, _, err = run(capsys, *argv)
+    assert code == 1 and len(err.strip().splitlines()) == 1 and message in err
+    assert not any(p.name.startswith("OUT") for p in tmp_path.iterdir())
