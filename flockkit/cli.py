@@ -171,6 +171,26 @@ def _cmd_solve(args) -> int:
     return 0
 
 
+def _cmd_render(args) -> int:
+    from .viz import ANIMATION_SUFFIXES, PICTURE_SUFFIXES
+
+    output = _require_suffix(args.output, PICTURE_SUFFIXES + ANIMATION_SUFFIXES, "-o")
+    motion = flockkit.Motion.load(args.motion)
+    problem = None
+    if args.scenario:
+        from .solve import load_scenario
+
+        problem = load_scenario(args.scenario)[0]
+    from . import viz
+
+    if output.suffix.lower() in ANIMATION_SUFFIXES:
+        viz.animate(motion, output, problem=problem)
+    else:
+        viz.plot_motion(motion, output, problem=problem)
+    print(f"wrote {output}")
+    return 0
+
+
 def _cmd_export(args) -> int:
     from .io import EXPORT_SUFFIXES, export
 
@@ -246,6 +266,12 @@ def build_parser() -> argparse.ArgumentParser:
     solve.add_argument("--jobs", type=int, default=1, help="parallel workers for chains")
     solve.add_argument("--quiet", action="store_true", help="no progress bar")
     solve.set_defaults(run=_cmd_solve)
+
+    render = commands.add_parser("render", help="draw a motion: a still (.png/.pdf/.svg) or an animation (.gif/.mp4)")
+    render.add_argument("motion", help="motion file (.npz)")
+    render.add_argument("-o", "--output", required=True, help="out.png | out.pdf | out.svg | out.gif | out.mp4 (needs flockkit[viz])")
+    render.add_argument("--scenario", help="also draw this scenario's constraints and obstacles (.toml)")
+    render.set_defaults(run=_cmd_render)
 
     export = commands.add_parser("export", help="write a motion as CSV, JSON or USD (.usda/.usdc, needs flockkit[usd])")
     export.add_argument("motion", help="motion file (.npz)")

@@ -8,13 +8,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .constraints import Ball, Box, Polygon
+from .constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, ShapeConstraint
 from .errors import MissingDependencyError, ValidationError
 from .motion import Motion
 
-__all__ = ["plot_motion", "PICTURE_SUFFIXES"]
+__all__ = ["plot_motion", "animate", "plot_difference_matrix", "plot_graph", "plot_trace", "PICTURE_SUFFIXES", "ANIMATION_SUFFIXES"]
 
 PICTURE_SUFFIXES = (".png", ".pdf", ".svg")
+ANIMATION_SUFFIXES = (".gif", ".mp4")
 
 
 def _pyplot():
@@ -47,10 +48,11 @@ def _draw_region(ax, region, **style):
         ax.add_patch(patches.Polygon(region.vertices, closed=True, **style))
 
 
-def plot_motion(motion: Motion, path=None, *, obstacles=(), ax=None, title=None):
+def plot_motion(motion: Motion, path=None, *, problem=None, obstacles=(), regions=(), ax=None, title=None):
     """Draw every agent's trajectory (x-y plane), its start (dot) and end (arrow along the last
-    velocity), and any obstacles. Returns the matplotlib Figure; writes it to `path` if given
-    (.png, .pdf or .svg; atomically)."""
+    velocity), obstacles (grey), regions (outlined) and, with a `problem`, its constraints: point
+    targets (crosses), COM targets (stars) and shapes (dashed). Returns the matplotlib Figure;
+    writes it to `path` if given (.png, .pdf or .svg; atomically)."""
     if not isinstance(motion, Motion):
         raise ValidationError(f"plot_motion needs a flockkit.Motion; got {type(motion).__name__}")
     if path is not None:
@@ -66,20 +68,191 @@ def plot_motion(motion: Motion, path=None, *, obstacles=(), ax=None, title=None)
     travel = 0.5 * motion.velocities()[-1, :, :2]  # arrows show half a second of travel
     ax.quiver(xy[-1, :, 0], xy[-1, :, 1], travel[:, 0], travel[:, 1], color="black", angles="xy",
               scale_units="xy", scale=1.0, width=0.004, zorder=4, label="end")
-    for obstacle in obstacles:
-        _draw_region(ax, obstacle, facecolor="0.75", edgecolor="0.3")
+    _draw_scene(ax, problem, obstacles, regions)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x")
     ax.set_ylabel("y")
     ax.set_title(title or f"{motion.n_agents} agents, {motion.duration:g} s")
     ax.legend(loc="upper right")
     if path is not None:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent if str(path.parent) else ".")
-        os.close(fd)
-        try:
-            figure.savefig(tmp, dpi=120, bbox_inches="tight")
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
+        _save(figure, path)
+    return figure
+
+
+def _draw_scene(ax, problem, obstacles, regions):
+    """Obstacles, regions and a problem's constraints, in the x-y plane."""
+    obstacles = tuple(obstacles) + (tuple(problem.obstacles) if problem is not None else ())
+    for obstacle in obstacles:
+        _draw_region(ax, obstacle, facecolor="0.75", edgecolor="0.3")
+    for region in regions:
+        _draw_region(ax, region, fill=False, edgecolor="tab:blue", linewidth=1.5)
+    if problem is None:
+        return
+    for c in problem.constraints:
+        if isinstance(c, PointConstraint):
+            ax.scatter(*c.position[:2], marker="x", s=60, color="tab:red", zorder=5)
+        elif isinstance(c, ComConstraint):
+            ax.scatter(*c.position[:2], marker="*", s=120, color="tab:orange", zorder=5)
+        elif isinstance(c, ShapeConstraint):
+            _draw_region(ax, c.shape, fill=False, edgecolor="tab:red", linestyle="--", linewidth=1.2)
+
+
+def _save(figure, path: Path) -> None:
+    """Write a figure atomically (a temporary file moved into place)."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent if str(path.parent) else ".")
+    os.close(fd)
+    try:
+        figure.savefig(tmp, dpi=120, bbox_inches="tight")
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    finally:
+        import matplotlib.pyplot as plt
+
+        plt.close(figure)
+
+
+def animate(motion: Motion, path, *, problem=None, obstacles=(), regions=(), fps=None, max_frames=400):
+    """An animation of `motion`: agents as arrows facing their velocity, with a short trail, the
+    scene as in plot_motion. ``.gif`` through Pillow; ``.mp4`` through ffmpeg when it is on the
+    PATH. At most `max_frames` frames (evenly subsampled); `fps` defaults to real time."""
+    if not isinstance(motion, Motion):
+        raise ValidationError(f"animate needs a flockkit.Motion; got {type(motion).__name__}")
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in ANIMATION_SUFFIXES:
+        raise ValidationError(f"animation path {path}: unknown extension {path.suffix!r}; expected {' or '.join(ANIMATION_SUFFIXES)}")
+    plt = _pyplot()
+    from matplotlib import animation
+
+    if suffix == ".mp4" and not animation.FFMpegWriter.isAvailable():
+        raise MissingDependencyError("MP4 animations need ffmpeg on the PATH; write a .gif instead")
+    step = max(1, int(np.ceil(motion.n_frames / max_frames)))
+    frames = np.arange(0, motion.n_frames, step)
+    xy, velocity = motion.positions[..., :2], motion.velocities()[..., :2]
+    speed = np.linalg.norm(velocity, axis=2, keepdims=True)
+    heading = np.divide(velocity, speed, out=np.zeros_like(velocity), where=speed > 1e-12)
+    figure = plt.figure(figsize=(6, 6))
+    ax = figure.add_subplot()
+    _draw_scene(ax, problem, obstacles, regions)
+    low, high = xy.reshape(-1, 2).min(axis=0), xy.reshape(-1, 2).max(axis=0)
+    margin = 0.05 * max(float(np.max(high - low)), 1.0) + 0.5
+    ax.set_xlim(low[0] - margin, high[0] + margin)
+    ax.set_ylim(low[1] - margin, high[1] + margin)
+    ax.set_aspect("equal")
+    trails = [ax.plot([], [], color="0.6", linewidth=0.6)[0] for _ in range(motion.n_agents)]
+    arrows = ax.quiver(xy[0, :, 0], xy[0, :, 1], heading[0, :, 0], heading[0, :, 1], angles="xy", scale_units="xy",
+                       scale=2.0, width=0.006, headwidth=4, color="black", zorder=4)
+    label = ax.set_title("")
+
+    def draw(frame):
+        arrows.set_offsets(xy[frame])
+        arrows.set_UVC(heading[frame, :, 0], heading[frame, :, 1])
+        first = max(0, frame - 10)
+        for agent, trail in enumerate(trails):
+            trail.set_data(xy[first : frame + 1, agent, 0], xy[first : frame + 1, agent, 1])
+        label.set_text(f"t = {frame * motion.dt:.1f} s")
+        return [arrows, label, *trails]
+
+    rate = fps or max(1.0, 1.0 / (motion.dt * step))
+    writer = animation.PillowWriter(fps=rate) if suffix == ".gif" else animation.FFMpegWriter(fps=rate)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent if str(path.parent) else ".")
+    os.close(fd)
+    try:
+        animation.FuncAnimation(figure, draw, frames=frames, blit=False).save(tmp, writer=writer)
+        os.chmod(tmp, 0o644)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    finally:
+        plt.close(figure)
+    return path
+
+
+def plot_difference_matrix(values, path=None, *, marked=(), title="difference matrix"):
+    """The difference matrix E(t_i, t_j) (an array (K, K); +inf where not computed) as an image,
+    with `marked` cells (pairs (i, j), e.g. the chosen transitions) circled."""
+    values = np.asarray(values, dtype=float)
+    if values.ndim != 2 or values.shape[0] != values.shape[1]:
+        raise ValidationError(f"plot_difference_matrix needs a square (K, K) array; got shape {values.shape}")
+    if path is not None:
+        path = _check_picture_path(path)
+    plt = _pyplot()
+    figure, ax = plt.subplots(figsize=(6.5, 6))
+    shown = np.where(np.isfinite(values), values, np.nan)
+    image = ax.imshow(shown, cmap="magma", origin="lower", interpolation="nearest")
+    figure.colorbar(image, ax=ax, label="E")
+    marked = np.asarray(list(marked), dtype=float).reshape(-1, 2)
+    if len(marked):
+        ax.scatter(marked[:, 1], marked[:, 0], s=30, facecolors="none", edgecolors="cyan", linewidths=1.0, label="transitions")
+        ax.legend(loc="upper left")
+    ax.set_xlabel("candidate j")
+    ax.set_ylabel("candidate i")
+    ax.set_title(title)
+    if path is not None:
+        _save(figure, path)
+    return figure
+
+
+def plot_graph(graph, path=None):
+    """A motion graph drawn along the source's time axis: nodes at their frames, clips as arcs
+    below the axis, transitions as arcs above it (colored by cost)."""
+    from .graph import MotionGraph
+
+    if not isinstance(graph, MotionGraph):
+        raise ValidationError(f"plot_graph needs a flockkit.MotionGraph; got {type(graph).__name__}")
+    if path is not None:
+        path = _check_picture_path(path)
+    plt = _pyplot()
+    from matplotlib.patches import Arc
+
+    figure, ax = plt.subplots(figsize=(10, 4))
+    seconds = np.asarray(graph.nodes, dtype=float) * graph.motion.dt
+    costs = np.array([t.alignment.distance for t in graph.transitions])
+    cmap = plt.get_cmap("plasma")
+    scale = costs.max() if len(costs) and costs.max() > 0 else 1.0
+    for clip in graph.clips:
+        a, b = seconds[clip.source], seconds[clip.target]
+        ax.add_patch(Arc(((a + b) / 2, 0), abs(b - a), abs(b - a) * 0.3, theta1=180, theta2=360, color="0.5", linewidth=0.8))
+    for transition, cost in zip(graph.transitions, costs):
+        a, b = seconds[transition.source], seconds[transition.target]
+        ax.add_patch(Arc(((a + b) / 2, 0), abs(b - a), abs(b - a) * 0.6, theta1=0, theta2=180, color=cmap(cost / scale), linewidth=0.8))
+    ax.scatter(seconds, np.zeros_like(seconds), s=10, color="black", zorder=3)
+    span = graph.motion.duration
+    ax.set_xlim(-0.02 * span, 1.02 * span)
+    ax.set_ylim(-0.17 * span, 0.32 * span)
+    ax.set_yticks([])
+    ax.set_xlabel("source time (s)")
+    stats = graph.stats()
+    ax.set_title(f"motion graph: {stats['nodes']} nodes, {stats['clips']} clips (below), {stats['transitions']} transitions (above)")
+    if path is not None:
+        _save(figure, path)
+    return figure
+
+
+def plot_trace(solution, path=None):
+    """The sampler's log g per iteration for every chain of a flockkit.Solution, accepted
+    proposals marked."""
+    from .solve import Solution
+
+    if not isinstance(solution, Solution):
+        raise ValidationError(f"plot_trace needs a flockkit.Solution; got {type(solution).__name__}")
+    if path is not None:
+        path = _check_picture_path(path)
+    plt = _pyplot()
+    figure, ax = plt.subplots(figsize=(8, 4))
+    for chain, trace in enumerate(solution.trace):
+        iterations = np.arange(len(trace.log_g))
+        ax.plot(iterations, trace.log_g, linewidth=1.0, label=f"chain {chain}")
+        ax.scatter(iterations[trace.accepted], trace.log_g[trace.accepted], s=4)
+    ax.set_xlabel("iteration")
+    ax.set_ylabel("log g")
+    ax.set_title("sampler trace (dots: accepted proposals)")
+    if solution.trace:
+        ax.legend(loc="lower right")
+    if path is not None:
+        _save(figure, path)
     return figure

@@ -194,3 +194,14 @@ def test_export_and_import_reject_bad_input_in_one_line(capsys, tmp_path, record
     code, _, err = run(capsys, *argv)
     assert code == 1 and len(err.strip().splitlines()) == 1 and message in err
     assert not any(p.name.startswith("OUT") for p in tmp_path.iterdir())
+
+
+def test_render_draws_motions_and_refuses_graphs(capsys, tmp_path, recording):
+    code, _, err = run(capsys, "render", str(recording), "-o", str(tmp_path / "flock.gif"))
+    assert code == 0 and (tmp_path / "flock.gif").read_bytes()[:3] == b"GIF", err
+    code, _, err = run(capsys, "render", str(recording), "-o", str(tmp_path / "flock.png"))
+    assert code == 0 and (tmp_path / "flock.png").exists(), err
+    graph_file = tmp_path / "graph.npz"
+    flockkit.build_graph(flockkit.Motion.load(recording)).save(graph_file)
+    code, _, err = run(capsys, "render", str(graph_file), "-o", str(tmp_path / "graph.gif"))
+    assert code == 1 and "expected a 'motion' file" in err and not (tmp_path / "graph.gif").exists()
