@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
+import time
 from pathlib import Path
 
 import flockkit
@@ -171,6 +172,19 @@ def _cmd_solve(args) -> int:
     return 0
 
 
+def _cmd_demo(args) -> int:
+    from .demo import run_demo
+
+    begin = time.perf_counter()
+    summary = run_demo(args.output, data=args.data, progress=_progress(args))
+    graph = summary["graph"]
+    print(f"graph: {graph['nodes']} nodes, {graph['transitions']} transitions; come-from-behind: largest residual "
+          f"{max(summary['come-from-behind']['residuals']):.3g}; sticklebacks: "
+          f"{'built' if isinstance(summary['sticklebacks'], dict) else summary['sticklebacks']}")
+    print(f"done in {time.perf_counter() - begin:.0f} s; everything is in {Path(args.output).resolve()}")
+    return 0
+
+
 def _cmd_render(args) -> int:
     from .viz import ANIMATION_SUFFIXES, PICTURE_SUFFIXES
 
@@ -266,6 +280,12 @@ def build_parser() -> argparse.ArgumentParser:
     solve.add_argument("--jobs", type=int, default=1, help="parallel workers for chains")
     solve.add_argument("--quiet", action="store_true", help="no progress bar")
     solve.set_defaults(run=_cmd_solve)
+
+    demo = commands.add_parser("demo", help="the tour: graph, synthesis, constrained flock, real fish; pictures and a summary")
+    demo.add_argument("-o", "--output", default="flockkit-demo", help="folder to write into (default ./flockkit-demo)")
+    demo.add_argument("--data", help="folder of the shared captures (default: ../shared/data when present)")
+    demo.add_argument("--quiet", action="store_true", help="no progress bars")
+    demo.set_defaults(run=_cmd_demo)
 
     render = commands.add_parser("render", help="draw a motion: a still (.png/.pdf/.svg) or an animation (.gif/.mp4)")
     render.add_argument("motion", help="motion file (.npz)")

@@ -1,3 +1,4 @@
+import json
 import shutil
 import subprocess
 
@@ -205,3 +206,15 @@ def test_render_draws_motions_and_refuses_graphs(capsys, tmp_path, recording):
     flockkit.build_graph(flockkit.Motion.load(recording)).save(graph_file)
     code, _, err = run(capsys, "render", str(graph_file), "-o", str(tmp_path / "graph.gif"))
     assert code == 1 and "expected a 'motion' file" in err and not (tmp_path / "graph.gif").exists()
+
+
+def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data):
+    code, out, err = run(capsys, "demo", "-o", str(tmp_path / "demo"), "--data", str(shared_data), "--quiet")
+    assert code == 0, err
+    names = {p.name for p in (tmp_path / "demo").iterdir()}
+    assert names == {"recording.png", "difference-matrix.png", "graph.png", "synthesized.png", "synthesized.gif",
+                     "come-from-behind.png", "come-from-behind.gif", "trace.png", "sticklebacks.png", "sticklebacks.gif", "summary.json"}
+    summary = json.loads((tmp_path / "demo" / "summary.json").read_text())
+    assert summary["synthesized"]["seconds"] >= 120 and summary["synthesized"]["center of mass in the box"]
+    assert max(summary["come-from-behind"]["residuals"]) <= 0.3 and summary["sticklebacks"]["transitions"] >= 3
+    assert str((tmp_path / "demo").resolve()) in out
