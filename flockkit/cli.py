@@ -198,7 +198,7 @@ def _cmd_render(args) -> int:
     from . import viz
 
     if output.suffix.lower() in ANIMATION_SUFFIXES:
-        viz.animate(motion, output, problem=problem)
+        viz.animate(motion, output, problem=problem, progress=_progress(args))
     else:
         viz.plot_motion(motion, output, problem=problem)
     print(f"wrote {output}")
@@ -291,6 +291,7 @@ def build_parser() -> argparse.ArgumentParser:
     render.add_argument("motion", help="motion file (.npz)")
     render.add_argument("-o", "--output", required=True, help="out.png | out.pdf | out.svg | out.gif | out.mp4 (needs flockkit[viz])")
     render.add_argument("--scenario", help="also draw this scenario's constraints and obstacles (.toml)")
+    render.add_argument("--quiet", action="store_true", help="no progress bar")
     render.set_defaults(run=_cmd_render)
 
     export = commands.add_parser("export", help="write a motion as CSV, JSON or USD (.usda/.usdc, needs flockkit[usd])")

@@ -96,7 +96,7 @@ def run_demo(out, *, data=None, progress=False, report=print) -> dict:
     synthesized = synthesize(graph, walk(graph, strategy="region", region=box, duration=120, seed=2))
     done("synthesize 2 min in a box")
     viz.plot_motion(synthesized, wrote(out / "synthesized.png"), regions=[box], title="2 minutes synthesized, kept in the box")
-    viz.animate(synthesized, wrote(out / "synthesized.gif"), regions=[box])
+    viz.animate(synthesized, wrote(out / "synthesized.gif"), regions=[box], progress=progress)
 
     from .solve import solve
 
@@ -105,7 +105,7 @@ def run_demo(out, *, data=None, progress=False, report=print) -> dict:
     solution = solve(problem, iterations=1000, seed=2, progress=progress)
     done("solve come-from-behind")
     viz.plot_motion(solution.motion, wrote(out / "come-from-behind.png"), problem=problem, title="come from behind to win (paper 004, Fig. 5)")
-    viz.animate(solution.motion, wrote(out / "come-from-behind.gif"), problem=problem)
+    viz.animate(solution.motion, wrote(out / "come-from-behind.gif"), problem=problem, progress=progress)
     viz.plot_trace(solution, wrote(out / "trace.png"))
 
     summary = {
@@ -125,7 +125,7 @@ def run_demo(out, *, data=None, progress=False, report=print) -> dict:
         fish_walk = synthesize(fish_graph, walk(fish_graph, duration=60, seed=3))
         done("sticklebacks graph and 60 s walk")
         viz.plot_motion(fish_walk, wrote(out / "sticklebacks.png"), title="60 s synthesized from 20 s of five sticklebacks")
-        viz.animate(fish_walk, wrote(out / "sticklebacks.gif"))
+        viz.animate(fish_walk, wrote(out / "sticklebacks.gif"), progress=progress)
         summary["sticklebacks"] = fish_graph.stats()
     summary["seconds"] = timings
     summary_path = wrote(out / "summary.json")

@@ -114,10 +114,11 @@ def _save(figure, path: Path) -> None:
         plt.close(figure)
 
 
-def animate(motion: Motion, path, *, problem=None, obstacles=(), regions=(), fps=None, max_frames=400):
+def animate(motion: Motion, path, *, problem=None, obstacles=(), regions=(), fps=None, max_frames=400, progress=False):
     """An animation of `motion`: agents as arrows facing their velocity, with a short trail, the
     scene as in plot_motion. ``.gif`` through Pillow; ``.mp4`` through ffmpeg when it is on the
-    PATH. At most `max_frames` frames (evenly subsampled); `fps` defaults to real time."""
+    PATH. At most `max_frames` frames (evenly subsampled); `fps` defaults to real time.
+    `progress` shows a bar over the frames."""
     if not isinstance(motion, Motion):
         raise ValidationError(f"animate needs a flockkit.Motion; got {type(motion).__name__}")
     path = Path(path)
@@ -160,8 +161,15 @@ def animate(motion: Motion, path, *, problem=None, obstacles=(), regions=(), fps
     writer = animation.PillowWriter(fps=rate) if suffix == ".gif" else animation.FFMpegWriter(fps=rate)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent if str(path.parent) else ".")
     os.close(fd)
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=len(frames), desc=f"drawing {path.name}", unit="frame")
     try:
-        animation.FuncAnimation(figure, draw, frames=frames, blit=False).save(tmp, writer=writer)
+        animation.FuncAnimation(figure, draw, frames=frames, blit=False).save(
+            tmp, writer=writer, progress_callback=None if bar is None else (lambda done, total: bar.update(1))
+        )
         os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     except BaseException:
@@ -169,6 +177,8 @@ def animate(motion: Motion, path, *, problem=None, obstacles=(), regions=(), fps
         raise
     finally:
         plt.close(figure)
+        if bar is not None:
+            bar.close()
     return path
 
 

@@ -197,11 +197,20 @@ class _Matrix:
         """Pairs i < j the metric cannot rule out at `threshold` (its pairs_within or lower_bound)."""
         batched = getattr(self.metric, "pairs_within", None)
         if callable(batched):
-            if self.n_jobs == 1 or "rows" not in inspect.signature(batched).parameters:
+            if "rows" not in inspect.signature(batched).parameters:
                 return np.asarray(batched(self.configs, threshold), dtype=int).reshape(-1, 2)
-            from joblib import Parallel, delayed
+            # in row ranges, for the workers and for the progress bar
+            ranges = _row_ranges(len(self.configs), 4 * max(abs(self.n_jobs), 2))
+            if self.n_jobs == 1:
+                parts = (batched(self.configs, threshold, rows=rows) for rows in ranges)
+            else:
+                from joblib import Parallel, delayed
 
-            parts = Parallel(n_jobs=self.n_jobs)(delayed(batched)(self.configs, threshold, rows=rows) for rows in _row_ranges(len(self.configs), 4 * abs(self.n_jobs)))
+                parts = Parallel(n_jobs=self.n_jobs, return_as="generator")(delayed(batched)(self.configs, threshold, rows=rows) for rows in ranges)
+            if self.progress:
+                from tqdm.auto import tqdm
+
+                parts = tqdm(parts, total=len(ranges), desc=f"bounding pairs (threshold {threshold:.3g})", unit="block")
             return np.concatenate([np.asarray(part, dtype=int).reshape(-1, 2) for part in parts])
         pairs = self.all_pairs()
         bounds = np.array([self.metric.lower_bound(self.configs[i], self.configs[j]) for i, j in pairs])

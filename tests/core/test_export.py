@@ -53,3 +53,13 @@ def test_unknown_extensions_are_refused_and_nothing_is_written(tmp_path):
     with pytest.raises(ValidationError, match="unknown export extension"):
         flockkit.io.export(motion, tmp_path / "flock.fbx")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_usd_without_usd_core_names_the_extra(tmp_path, monkeypatch):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "pxr", None)  # as if usd-core were not installed
+    motion = flockkit.simulate(n_agents=3, steps=5, seed=1)
+    with pytest.raises(flockkit.errors.MissingDependencyError, match=r"flockkit\[usd\]"):
+        flockkit.io.export(motion, tmp_path / "flock.usdc")
+    assert list(tmp_path.iterdir()) == []
