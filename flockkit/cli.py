@@ -81,7 +81,7 @@ def _cmd_check(args) -> int:
     from .testing import check_plugin, checks_for
 
     component = flockkit.get(args.kind, args.name, **_parameters(args.param))
-    check_plugin(args.kind, component, name=args.name)
+    check_plugin(args.kind, component, name=args.name, progress=_progress(args))
     print(f"{args.kind} {args.name!r}: all {len(checks_for(args.kind))} checks passed")
     return 0
 
@@ -314,6 +314,7 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("kind", choices=KINDS)
     check.add_argument("name")
     check.add_argument("--param", action="append", metavar="KEY=VALUE", help="factory parameter, repeatable")
+    check.add_argument("--quiet", action="store_true", help="no progress bar")
     check.set_defaults(run=_cmd_check)
     return parser
 

@@ -60,14 +60,19 @@ def _name_of(component) -> str:
     return getattr(component, "__name__", None) or type(component).__name__
 
 
-def check_plugin(kind: str, component, *, name: str | None = None) -> None:
+def check_plugin(kind: str, component, *, name: str | None = None, progress: bool = False) -> None:
     """Run every check of `kind` on `component` (a configured instance).
 
     Raises AssertionError naming the first failed check and the plugin; an unexpected exception
-    inside a check counts as that check failing.
+    inside a check counts as that check failing. `progress` shows a bar over the checks.
     """
     name = name or _name_of(component)
-    for check in checks_for(kind):
+    checks = checks_for(kind)
+    if progress:
+        from tqdm.auto import tqdm
+
+        checks = tqdm(checks, desc=f"checking {kind} {name}", unit="check")
+    for check in checks:
         try:
             check(name, component)
         except Exception as exc:  # noqa: BLE001 - every failure is reported the same way
