@@ -8,13 +8,12 @@ leaves a half-written file.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
+from ._atomic import atomic_path
 from .errors import FileFormatError
 
 METADATA_KEY = "__metadata__"
@@ -29,15 +28,8 @@ def write(path, *, kind: str, version: int, arrays: dict[str, np.ndarray], metad
         if array.dtype == object:
             raise TypeError(f"refusing to write object array {name!r}: flockkit files hold plain numeric arrays only")
     payload[METADATA_KEY] = np.frombuffer(json.dumps(header).encode("utf-8"), dtype=np.uint8)
-    folder = path.parent if str(path.parent) else Path(".")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
-    try:
-        with os.fdopen(fd, "wb") as handle:
-            np.savez_compressed(handle, **payload)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_path(path) as tmp, open(tmp, "wb") as handle:
+        np.savez_compressed(handle, **payload)
     return path
 
 

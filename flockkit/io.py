@@ -15,12 +15,12 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 from pathlib import Path
 
 import numpy as np
 
 from ._arrays import count
+from ._atomic import atomic_path
 from .errors import FileFormatError, ValidationError
 from .motion import Motion
 
@@ -232,7 +232,7 @@ def write_csv(motion: Motion, path) -> None:
     frames, agents = np.meshgrid(np.arange(motion.n_frames), np.arange(motion.n_agents), indexing="ij")
     table = np.column_stack([frames.ravel(), agents.ravel(), motion.positions.reshape(-1, motion.dims)])
     header = ",".join(["frame", "agent", *"xyz"[: motion.dims]])
-    with _atomic(path, "w") as handle:
+    with atomic_path(path) as tmp, open(tmp, "w") as handle:
         handle.write(header + "\n")
         np.savetxt(handle, table, delimiter=",", fmt=["%d", "%d"] + ["%.17g"] * motion.dims)
 
@@ -244,7 +244,7 @@ def write_json(motion: Motion, path) -> None:
 
     document = {"format": "flockkit-motion", "version": 1, "dt": motion.dt, "frames": motion.n_frames,
                 "agents": motion.n_agents, "dims": motion.dims, "positions": motion.positions.tolist()}
-    with _atomic(path, "w") as handle:
+    with atomic_path(path) as tmp, open(tmp, "w") as handle:
         json.dump(document, handle)
 
 
@@ -264,8 +264,8 @@ def write_usd(motion: Motion, path) -> None:
     positions[..., : motion.dims] = motion.positions
     velocities = np.zeros_like(positions)
     velocities[..., : motion.dims] = motion.velocities()
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.tmp{path.suffix}")
-    try:
+    with atomic_path(path) as tmp:
+        tmp.unlink()  # USD creates the layer itself
         stage = Usd.Stage.CreateNew(str(tmp))
         UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
         stage.SetTimeCodesPerSecond(1.0 / motion.dt)
@@ -288,9 +288,6 @@ def write_usd(motion: Motion, path) -> None:
             quaternions = _facing(velocities[frame])
             turns.Set(Vt.QuathArray([Gf.Quath(float(w), Gf.Vec3h(float(x), float(y), float(z))) for w, x, y, z in quaternions]), time)
         stage.GetRootLayer().Save()
-        os.replace(tmp, path)
-    finally:
-        tmp.unlink(missing_ok=True)
 
 
 def _facing(velocities: np.ndarray) -> np.ndarray:
@@ -301,26 +298,3 @@ def _facing(velocities: np.ndarray) -> np.ndarray:
     backwards = q[:, 0] < 1e-9
     q[backwards] = [0.0, 0.0, 0.0, 1.0]  # facing -x: half a turn about z
     return q / np.linalg.norm(q, axis=1, keepdims=True)
-
-
-class _atomic:
-    """Open a temporary file beside `path` and move it into place only on success."""
-
-    def __init__(self, path, mode):
-        self.path, self.mode = Path(path), mode
-
-    def __enter__(self):
-        import tempfile
-
-        fd, self.tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
-        os.chmod(self.tmp, 0o644)  # mkstemp makes it private; an export is an ordinary file
-        self.handle = os.fdopen(fd, self.mode)
-        return self.handle
-
-    def __exit__(self, kind, value, traceback):
-        self.handle.close()
-        if kind is None:
-            os.replace(self.tmp, self.path)
-        else:
-            Path(self.tmp).unlink(missing_ok=True)
-        return False

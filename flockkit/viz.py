@@ -2,12 +2,11 @@
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
+from ._atomic import atomic_path
 from .constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, ShapeConstraint
 from .errors import MissingDependencyError, ValidationError
 from .motion import Motion
@@ -98,19 +97,13 @@ def _draw_scene(ax, problem, obstacles, regions):
 
 
 def _save(figure, path: Path) -> None:
-    """Write a figure atomically (a temporary file moved into place)."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent if str(path.parent) else ".")
-    os.close(fd)
-    try:
-        figure.savefig(tmp, dpi=120, bbox_inches="tight")
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-    finally:
-        import matplotlib.pyplot as plt
+    """Write a figure atomically, then close it."""
+    import matplotlib.pyplot as plt
 
+    try:
+        with atomic_path(path) as tmp:
+            figure.savefig(tmp, dpi=120, bbox_inches="tight")
+    finally:
         plt.close(figure)
 
 
@@ -159,22 +152,16 @@ def animate(motion: Motion, path, *, problem=None, obstacles=(), regions=(), fps
 
     rate = fps or max(1.0, 1.0 / (motion.dt * step))
     writer = animation.PillowWriter(fps=rate) if suffix == ".gif" else animation.FFMpegWriter(fps=rate)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=suffix, dir=path.parent if str(path.parent) else ".")
-    os.close(fd)
     bar = None
     if progress:
         from tqdm.auto import tqdm
 
         bar = tqdm(total=len(frames), desc=f"drawing {path.name}", unit="frame")
     try:
-        animation.FuncAnimation(figure, draw, frames=frames, blit=False).save(
-            tmp, writer=writer, progress_callback=None if bar is None else (lambda done, total: bar.update(1))
-        )
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+        with atomic_path(path) as tmp:
+            animation.FuncAnimation(figure, draw, frames=frames, blit=False).save(
+                tmp, writer=writer, progress_callback=None if bar is None else (lambda done, total: bar.update(1))
+            )
     finally:
         plt.close(figure)
         if bar is not None:
