@@ -4,7 +4,7 @@
 
     [problem]
     agents = 20          # required; dims = 2, dt = 0.1, flocks = 1, sigma_com, shape_weight,
-    duration = 8.0       # flock_weight and visibility are optional (defaults as in Problem)
+    duration = 8.0       # flock_weight, visibility and follow are optional (defaults as in Problem)
 
     [solve]              # optional: behavior, iterations, chains, seed, stable, proposals = {bump = 0.6, ...}
     iterations = 1000
