@@ -1,12 +1,16 @@
 """Initial trajectories that meet every constraint exactly (paper 004, section 3.3).
 
 The frames before the first constrained frame are simulated backward from the configuration
-there; then, window by window (see ``windows``):
+there (and, when only point constraints sit there and the model can be guided, simulated again
+forward with those agents guided along that path). Then, window by window (see ``windows``):
 
-1. simulate forward from the window's start state (Operation 1);
+1. simulate forward from the window's start state (Operation 1). A model whose ``forward`` takes
+   ``guide`` simulates with the agents of spanning point sequences already on their B-spline paths,
+   so the others react to where they really are; the simulation starts one frame early, so that
+   windows join without a step that has no impulse;
 2. move the agents of point and COM sequences that span the window onto their B-spline paths,
    and every other agent by the translation of the nearest such agent at the window start, or of
-   the COM path (Operation 2);
+   the COM path (Operation 2; a guided agent needs no move, and neither do those following it);
 3. if constraints at the window end are still unmet, build a constrained end configuration from
    the forward result (section 3.3.1), simulate backward from it, path-transform that as well, and
    blend the two with u = 3t^2 - 2t^3; without a spanning sequence, the COM is moved along a
@@ -17,7 +21,7 @@ moved rigidly onto their position with their velocity; a COM subset is moved rig
 COM and mean velocity match; a shape subset gets uniform samples in the shape, relaxed apart. At a
 window end, agents are re-assigned among the subset's slots by a sampled matching that keeps
 their travel from the window start short. Unconstrained agents take the rigid transform of the
-nearest constrained agent in the snapshot.
+nearest (or, with ``Problem.follow = "random"``, a random) constrained agent in the snapshot.
 """
 
 from __future__ import annotations
