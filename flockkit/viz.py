@@ -28,10 +28,10 @@ def _pyplot():
     return plt
 
 
-def _check_picture_path(path) -> Path:
+def _check_picture_path(path, suffixes=PICTURE_SUFFIXES, what="picture") -> Path:
     path = Path(path)
-    if path.suffix.lower() not in PICTURE_SUFFIXES:
-        raise ValidationError(f"picture path {path}: unknown extension {path.suffix!r}; expected one of {', '.join(PICTURE_SUFFIXES)}")
+    if path.suffix.lower() not in suffixes:
+        raise ValidationError(f"{what} path {path}: unknown extension {path.suffix!r}; expected one of {', '.join(suffixes)}")
     return path
 
 
@@ -114,10 +114,8 @@ def animate(motion: Motion, path, *, problem=None, obstacles=(), regions=(), fps
     `progress` shows a bar over the frames."""
     if not isinstance(motion, Motion):
         raise ValidationError(f"animate needs a flockkit.Motion; got {type(motion).__name__}")
-    path = Path(path)
+    path = _check_picture_path(path, ANIMATION_SUFFIXES, "animation")
     suffix = path.suffix.lower()
-    if suffix not in ANIMATION_SUFFIXES:
-        raise ValidationError(f"animation path {path}: unknown extension {path.suffix!r}; expected {' or '.join(ANIMATION_SUFFIXES)}")
     plt = _pyplot()
     from matplotlib import animation
 

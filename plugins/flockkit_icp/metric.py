@@ -195,7 +195,7 @@ class IcpHungarian:
         w = self.velocity_weight
         source = np.concatenate([prepared.centered[ib], math.sqrt(w) * prepared.velocities[ib]], axis=1)
         target = np.concatenate([prepared.centered[ia], math.sqrt(w) * prepared.velocities[ia]], axis=1)
-        rotation = _kabsch(target, source, target, source, 0.0)
+        rotation = _kabsch(target, source)
         return np.sqrt(((target - _rotate(source, rotation)) ** 2).sum(axis=(1, 2)) / prepared.n_agents)
 
     # -- internals -------------------------------------------------------------------------
@@ -334,7 +334,7 @@ def _gather(points, assignment):
     return np.take_along_axis(points, assignment[:, :, None], axis=1)
 
 
-def _kabsch(target, source, target_velocities, source_velocities, w):
+def _kabsch(target, source, target_velocities=None, source_velocities=None, w=0.0):
     """Proper rotations R (M, D, D) minimizing sum |target - R source|^2 (+ w for velocities)."""
     cross = (source[:, :, :, None] * target[:, :, None, :]).sum(axis=1)  # sum_i s_i t_i^T
     if w:
