@@ -87,8 +87,8 @@ class RegionWalk:
     """Keep the group's center of mass inside `region` (paper 000 section 5.2).
 
     At each node the outgoing edges are tried in random order; an edge is taken if a depth-first
-    search finds a path starting with it whose center of mass stays inside the region for
-    `horizon` seconds (across a transition both the old motion's continuation, which its blend
+    search finds a path starting with it whose center of mass stays inside the region over the
+    whole edge and `horizon` seconds from its start (across a transition both the old motion's continuation, which its blend
     mixes in, and the new one are checked). The walk starts with the group's center of mass at
     the region's center (for a polygon, an interior point).
 
@@ -187,7 +187,9 @@ class _Search:
         graph = self.graph
         if edge[0] == "clip":
             clip = graph.clips[edge[1]]
-            frames = np.arange(clip.start + 1, min(clip.stop, clip.start + self.horizon - ahead) + 1)
+            # the edge decided on is played whole, so it is checked whole, however long
+            end = clip.stop if ahead == 0 else min(clip.stop, clip.start + self.horizon - ahead)
+            frames = np.arange(clip.start + 1, end + 1)
             if not np.all(self.region.contains(self.com[frames] @ rotation.T + translation)):
                 return False
             ahead += len(frames)

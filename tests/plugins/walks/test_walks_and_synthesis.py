@@ -72,6 +72,17 @@ def test_region_walk_keeps_the_flock_in_the_box_for_five_minutes(graph, recordin
     assert_quality(motion, recording)
 
 
+def test_region_walk_checks_each_edge_it_takes_whole(graph, recording):
+    """Clips longer than the look-ahead are checked to their end, not only for `horizon` seconds."""
+    box = com_box(recording)
+    middle, half = (box.lower + box.upper) / 2, (box.upper - box.lower) / 4
+    pen = flockkit.Box(lower=middle - half, upper=middle + half)
+    assert max(clip.stop - clip.start for clip in graph.clips) * graph.motion.dt > 10  # clips far longer than the horizon
+    for seed in (0, 2):
+        motion = flockkit.synthesize(graph, flockkit.walk(graph, strategy="region", region=pen, duration=120, seed=seed, horizon=0.5))
+        assert pen.contains(motion.center_of_mass()).all()
+
+
 def test_sticklebacks(fish):
     source, graph = fish
     assert graph.stats()["transitions"] >= 3
