@@ -31,12 +31,12 @@ def largest_step(motion):
     return np.linalg.norm(np.diff(motion.positions, axis=0), axis=-1).max()
 
 
-def nearest_neighbor_distance(motion):
-    return np.mean([cKDTree(p).query(p, k=2)[0][:, 1].mean() for p in motion.positions[::5]])
+def nearest_neighbor_distance(motion, frames=slice(None)):
+    return np.mean([cKDTree(p).query(p, k=2)[0][:, 1].mean() for p in motion.positions[frames][::5]])
 
 
-def polarization(motion):
-    velocities = motion.velocities()[:-1]
+def polarization(motion, frames=slice(None)):
+    velocities = motion.velocities()[frames] if isinstance(frames, np.ndarray) else motion.velocities()[:-1]
     unit = velocities / np.maximum(np.linalg.norm(velocities, axis=-1, keepdims=True), 1e-12)
     return np.linalg.norm(unit.mean(axis=1), axis=-1).mean()
 
@@ -86,7 +86,13 @@ def test_region_walk_checks_each_edge_it_takes_whole(graph, recording):
 def test_sticklebacks(fish):
     source, graph = fish
     assert graph.stats()["transitions"] >= 3
-    assert_quality(flockkit.synthesize(graph, flockkit.walk(graph, duration=60, seed=0)), source)
+    motion = flockkit.synthesize(graph, flockkit.walk(graph, duration=60, seed=0))
+    assert_quality(motion, source)
+    # The last 40% of this 20 s recording (the fish spread out) has no transition back, so the graph
+    # trims it: synthesis can only reproduce the frames its clips keep, and is measured against them.
+    kept = np.unique(np.concatenate([np.arange(clip.start, clip.stop + 1) for clip in graph.clips]))
+    assert nearest_neighbor_distance(motion) == pytest.approx(nearest_neighbor_distance(source, kept), rel=0.10)
+    assert polarization(motion) == pytest.approx(polarization(source, kept), rel=0.10)
     box = com_box(source)
     kept = flockkit.synthesize(graph, flockkit.walk(graph, strategy="region", region=box, duration=300, seed=0))
     assert kept.duration >= 300 and box.contains(kept.center_of_mass()).all()
