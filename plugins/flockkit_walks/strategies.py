@@ -88,9 +88,9 @@ class RegionWalk:
 
     At each node the outgoing edges are tried in random order; an edge is taken if a depth-first
     search finds a path starting with it whose center of mass stays inside the region over the
-    whole edge and `horizon` seconds from its start (across a transition both the old motion's continuation, which its blend
-    mixes in, and the new one are checked). The walk starts with the group's center of mass at
-    the region's center (for a polygon, an interior point).
+    whole edge and `horizon` seconds from its start (across a transition both the old motion's
+    continuation, which its blend mixes in, and the new one are checked). The walk starts with the
+    group's center of mass at the region's center (for a polygon, an interior point).
 
     Parameters
     ----------
