@@ -11,7 +11,7 @@ from .graph import Clip, MotionGraph, Transition, Walk
 from .synthesis import synthesize, synthesize_many
 from .hookspecs import hookimpl
 from .solve import Proposal, Solution, solve
-from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State
+from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State, heading_axes
 from .registry import available, get
 
 __version__ = "0.1.0"
@@ -20,6 +20,7 @@ __all__ = [
     "Motion",
     "Configuration",
     "ConfigurationFrame",
+    "heading_axes",
     "Alignment",
     "State",
     "DEFAULT_UP",

@@ -20,7 +20,7 @@ from . import _npzfile
 from ._arrays import check_agent_array, check_finite, positive_number, readonly_float, readonly_mapping
 from .errors import FileFormatError, ValidationError
 
-__all__ = ["Motion", "Configuration", "State", "ConfigurationFrame", "Alignment", "DEFAULT_UP"]
+__all__ = ["Motion", "Configuration", "State", "ConfigurationFrame", "Alignment", "DEFAULT_UP", "heading_axes"]
 
 #: The world up direction used for 3D configuration frames unless another is given (z up).
 DEFAULT_UP = (0.0, 0.0, 1.0)
@@ -161,26 +161,35 @@ def _readonly_int(value, field: str) -> np.ndarray:
     return array
 
 
-def _heading_axes(mean_velocity: np.ndarray, mean_speed: float, up) -> np.ndarray:
-    """Rows x, y(, z) of the configuration frame; see Configuration.frame for the fallbacks."""
-    d = mean_velocity.shape[0]
-    norm = float(np.linalg.norm(mean_velocity))
-    if norm > 0 and norm > _DEGENERATE * mean_speed:
-        x = mean_velocity / np.max(np.abs(mean_velocity))  # rescaled first: tiny norms lose precision
-        x = x / np.linalg.norm(x)
-    else:
-        x = np.eye(d)[0]
+def heading_axes(velocities, *, up=DEFAULT_UP) -> np.ndarray:
+    """The axes of ``Configuration(...).frame(up=up)`` for many configurations at once.
+
+    `velocities` has shape (..., N, D); the result (..., D, D) holds each frame's rows x, y(, z),
+    with the fallbacks that `Configuration.frame` describes. Metrics that start from the
+    configuration-space alignment of thousands of configurations use it."""
+    velocities = np.asarray(velocities, dtype=float)
+    if velocities.ndim < 2 or velocities.shape[-1] not in (2, 3):
+        raise ValidationError(f"heading_axes needs velocities of shape (..., N, 2 or 3); got {velocities.shape}")
+    d = velocities.shape[-1]
+    mean = velocities.mean(axis=-2)
+    mean_speed = np.linalg.norm(velocities, axis=-1).mean(axis=-1)
+    norm = np.linalg.norm(mean, axis=-1)
+    ok = (norm > 0) & (norm > _DEGENERATE * mean_speed)
+    # rescaled first: tiny norms lose precision
+    scaled = mean / np.where(ok, np.abs(mean).max(axis=-1), 1.0)[..., None]
+    with np.errstate(divide="ignore", invalid="ignore"):  # the degenerate ones are replaced
+        x = np.where(ok[..., None], scaled / np.linalg.norm(scaled, axis=-1, keepdims=True), np.eye(d)[0])
     if d == 2:
-        return np.array([x, [-x[1], x[0]]])
+        return np.stack([x, np.stack([-x[..., 1], x[..., 0]], axis=-1)], axis=-2)
     up = readonly_float(up, field="up")
     if up.shape != (3,) or not np.all(np.isfinite(up)) or not np.linalg.norm(up) > 0:
         raise ValidationError(f"up must be a finite, non-zero 3-vector; got {up!r}")
     y = np.cross(up / np.linalg.norm(up), x)
-    if np.linalg.norm(y) <= _DEGENERATE:
-        # Heading parallel to up: use the world axis least aligned with the heading instead.
-        y = np.cross(np.eye(3)[int(np.argmin(np.abs(x)))], x)
-    y = y / np.linalg.norm(y)
-    return np.array([x, y, np.cross(x, y)])
+    # heading parallel to up: use the world axis least aligned with the heading instead
+    parallel = np.linalg.norm(y, axis=-1) <= _DEGENERATE
+    y = np.where(parallel[..., None], np.cross(np.eye(3)[np.argmin(np.abs(x), axis=-1)], x), y)
+    y = y / np.linalg.norm(y, axis=-1, keepdims=True)
+    return np.stack([x, y, np.cross(x, y)], axis=-2)
 
 
 class _OneInstant:
@@ -237,9 +246,7 @@ class Configuration(_OneInstant):
         - in 3D, if the heading is parallel to `up` (sine of the angle below 1e-6), `up` is
           replaced by the world axis least aligned with the heading (lowest index on ties).
         """
-        speeds = np.linalg.norm(self.velocities, axis=1)
-        axes = _heading_axes(self.velocities.mean(axis=0), float(speeds.mean()), up)
-        return ConfigurationFrame(origin=self.center_of_mass(), axes=axes)
+        return ConfigurationFrame(origin=self.center_of_mass(), axes=heading_axes(self.velocities, up=up))
 
 
 @attrs.frozen(kw_only=True, eq=False)

@@ -284,7 +284,7 @@ class _Prepared:
         self.com = positions.mean(axis=1)
         self.centered = positions - self.com[:, None, :]
         self.velocities = np.stack([c.velocities for c in configurations])
-        self.frames = np.stack([c.frame(up=up).axes for c in configurations])
+        self.frames = flockkit.heading_axes(self.velocities, up=up)
         self.principal = _principal_axes(self.centered)
         mean_velocity = self.velocities.mean(axis=1)
         self.deviations = self.velocities - mean_velocity[:, None, :]

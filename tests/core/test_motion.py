@@ -251,3 +251,20 @@ def test_frame_fallbacks():
     np.testing.assert_allclose(y_up[2], [0, 1, 0], atol=1e-12)
     with pytest.raises(ValidationError, match="up"):
         level.frame(up=(0, 0, 0))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(fst.configurations(min_agents=3, max_agents=3, dims=3), min_size=1, max_size=6))
+def test_heading_axes_of_many_equals_each_frame(configs):
+    still = flockkit.Configuration(positions=np.zeros((3, 3)), velocities=[[1.0, 0, 0], [-1.0, 0, 0], [0, 0, 0]])
+    upward = flockkit.Configuration(positions=np.zeros((3, 3)), velocities=np.tile([0, 0, 2.0], (3, 1)))
+    configs = [*configs, still, upward]  # both fallbacks in the batch
+    many = flockkit.heading_axes(np.stack([c.velocities for c in configs]))
+    np.testing.assert_array_equal(many, np.stack([c.frame().axes for c in configs]))
+    np.testing.assert_allclose(many[-2], np.eye(3), atol=1e-12)
+    np.testing.assert_allclose(many[-1][0], [0, 0, 1])
+
+
+def test_heading_axes_refuses_other_shapes():
+    with pytest.raises(ValidationError, match="heading_axes"):
+        flockkit.heading_axes(np.zeros((4, 3, 4)))
