@@ -328,8 +328,8 @@ def _rotate(points, rotation):
 
 def _pair_costs(x, y):
     """Squared distances (M, N, N) between the rows of x (M, N, D) and y (M, N, D), as
-    |x|^2 + |y|^2 - 2 x.y: one batched product (each pair's its own, so a pair's result does not
-    depend on the batch it is in), ten times faster than differences."""
+    |x|^2 + |y|^2 - 2 x.y: ten times faster than differences. The batched product multiplies each
+    pair's matrices on their own, so a pair's result does not depend on the batch it is in."""
     cost = x @ np.transpose(y, (0, 2, 1))
     cost *= -2
     cost += (x * x).sum(axis=2)[:, :, None]
