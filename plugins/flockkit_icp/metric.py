@@ -17,9 +17,9 @@ Bounds. With V the mean velocity and d_i = v_i - V the deviations, the velocity 
 exactly into w |V_a - R V_b|^2 + (w/N) sum_i |d_i - R d'_M(i)|^2 (the deviations sum to zero).
 `lower_bound` drops the rotation: sorted distances to the center of mass, sorted deviation
 speeds and the difference of mean speeds. `pairs_within` (2D) keeps it: over an interval of
-angles every entry of the assignment cost has a closed-form minimum, so max(mean of row minima,
-mean of column minima) plus the interval's minimum of the mean-velocity term bounds E for every
-rotation in the interval, and the optimal assignment of the entries' minima bounds tighter.
+angles every entry of the assignment cost has a closed-form minimum, so the mean of the row
+minima plus the interval's minimum of the mean-velocity term bounds E for every rotation in the
+interval (a quick test), and the optimal assignment of the entries' minima bounds tighter.
 Intervals whose bound exceeds the threshold are dropped and the others halved (branch and bound)
 seven times; a pair is listed when an interval survives, or as soon as the assignment found for
 one, at its own best rotation, reaches a distance within the threshold.
@@ -373,7 +373,7 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=7) -> np.ndarray
     # memory traffic, and the limit allows for its rounding (see _filter)
     a_all = ((left**2).sum(axis=2)[:, :, None] + (right**2).sum(axis=2)[:, None, :]).astype(np.float32)
     h_all = (2 * np.sqrt(p_all * p_all + q_all * q_all)).astype(np.float32)
-    phase_all = np.arctan2(q_all, p_all).astype(np.float32)
+    p2_all, q2_all = (2 * p_all).astype(np.float32), (2 * q_all).astype(np.float32)
     # the mean-velocity term w |Va - R Vb|^2 = a0 - 2 h0 cos(theta - phase0)
     va, vb = prepared.mean_velocity[ia], prepared.mean_velocity[ib]
     p0, q0 = w * (va[:, 0] * vb[:, 0] + va[:, 1] * vb[:, 1]), w * (va[:, 1] * vb[:, 0] - va[:, 0] * vb[:, 1])
@@ -393,21 +393,22 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=7) -> np.ndarray
     for level in range(levels + 1):
         c, s = np.cos(centre), np.sin(centre)
         velocity_term = a0[pair] - 2 * _interval_max(p0[pair] * c + q0[pair] * s, q0[pair] * c - p0[pair] * s, h0[pair], half)
-        entries = _entry_minima(a_all[pair], h_all[pair], phase_all[pair], centre, half)
-        spread = np.maximum(entries.min(axis=2).sum(axis=1), entries.min(axis=1).sum(axis=1)) / n
+        entries = _entry_minima(a_all[pair], h_all[pair], p2_all[pair], q2_all[pair], centre, half)
+        spread = entries.min(axis=2).sum(axis=1) / n
         alive = np.maximum(spread, floor[pair]) + velocity_term <= limit[pair]
         if alive.any():
             # the optimal assignment of the entries' minima bounds much tighter (measured: a cheaper
             # dual of it, row then column reduction, listed twice the pairs for more time)
             ks = np.flatnonzero(alive)
             sigma = np.array([linear_sum_assignment(entries[k])[1] for k in ks])
-            matched = np.take_along_axis(entries[ks], sigma[:, :, None], axis=2)[:, :, 0].sum(axis=1) / n
+            rows = np.arange(n)
+            matched = entries[ks[:, None], rows, sigma].sum(axis=1) / n
             alive[ks] = np.maximum(matched, floor[pair[ks]]) + velocity_term[ks] <= limit[pair[ks]]
             # that assignment at its own best rotation is a distance some alignment reaches: where it
             # is within the limit, the pair must be listed, and nothing more needs refining
             owner = pair[ks]
-            big_p = np.take_along_axis(p_all[owner], sigma[:, :, None], axis=2)[:, :, 0].sum(axis=1) / n + p0[owner]
-            big_q = np.take_along_axis(q_all[owner], sigma[:, :, None], axis=2)[:, :, 0].sum(axis=1) / n + q0[owner]
+            big_p = p_all[owner[:, None], rows, sigma].sum(axis=1) / n + p0[owner]
+            big_q = q_all[owner[:, None], rows, sigma].sum(axis=1) / n + q0[owner]
             reached = squares[owner] / n + a0[owner] - 2 * np.hypot(big_p, big_q)
             passed[owner[reached <= limit[owner]]] = True
             alive &= ~passed[pair]
@@ -419,18 +420,25 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=7) -> np.ndarray
     return passed
 
 
-def _entry_minima(a, h, phase, centre, half):
+def _entry_minima(a, h, hc, hs, centre, half):
     """min over |theta - centre| <= half of a - h cos(theta - phase), for stacks (M, N, N) and
-    intervals (M,): the angle nearest to the phase inside the interval."""
-    gap = phase - centre.astype(np.float32)[:, None, None]
-    np.abs(gap, out=gap)
-    gap %= np.float32(2 * math.pi)
-    np.minimum(gap, np.float32(2 * math.pi) - gap, out=gap)
-    gap -= half.astype(np.float32)[:, None, None]
-    np.maximum(gap, 0, out=gap)
-    np.cos(gap, out=gap)
-    gap *= h
-    return np.subtract(a, gap, out=gap)
+    intervals (M,), where hc = h cos(phase) and hs = h sin(phase): the angle nearest to the phase
+    inside the interval. With g the angle from the centre to the phase, h cos(g) and h |sin(g)|
+    are linear in hc and hs, and cos(g - half) follows from them, so no entry needs a cosine."""
+    c, s = np.cos(centre).astype(np.float32)[:, None, None], np.sin(centre).astype(np.float32)[:, None, None]
+    cos_half = np.cos(half).astype(np.float32)[:, None, None]
+    sin_half = np.sin(half).astype(np.float32)[:, None, None]
+    along = hc * c
+    along += hs * s  # h cos(g)
+    across = hs * c
+    across -= hc * s
+    np.abs(across, out=across)  # h |sin(g)|
+    inside = along >= h * cos_half  # the phase lies in the interval: the entry reaches a - h
+    along *= cos_half
+    across *= sin_half
+    along += across  # h cos(|g| - half)
+    np.copyto(along, h, where=inside)
+    return np.subtract(a, along, out=along)
 
 
 def _interval_max(p, q, magnitude, half):
