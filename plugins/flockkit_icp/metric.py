@@ -320,8 +320,8 @@ def _half_turns(d: int) -> list[np.ndarray]:
 
 
 def _rotate(points, rotation):
-    """points @ rotation.T for stacks (M, N, D) and (M, D, D), elementwise (so a pair's result does
-    not depend on the batch it is in, unlike a BLAS product)."""
+    """points @ rotation.T for stacks (M, N, D) and (M, D, D), elementwise, so a pair's result does
+    not depend on the batch it is in."""
     d = points.shape[2]
     return np.stack([sum(points[:, :, k] * rotation[:, e, k, None] for k in range(d)) for e in range(d)], axis=2)
 
@@ -371,7 +371,8 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=7) -> np.ndarray
     q_all = left @ np.transpose(turned, (0, 2, 1))  # ay bx - ax by (+ deviations)
     # each entry |a_i - R b_j|^2 (+ deviations) = a - h cos(theta - phase); float32 halves the
     # memory traffic, and the limit allows for its rounding (see _filter)
-    a_all = ((left**2).sum(axis=2)[:, :, None] + (right**2).sum(axis=2)[:, None, :]).astype(np.float32)
+    left_squares, right_squares = (left**2).sum(axis=2), (right**2).sum(axis=2)
+    a_all = (left_squares[:, :, None] + right_squares[:, None, :]).astype(np.float32)
     h_all = (2 * np.sqrt(p_all * p_all + q_all * q_all)).astype(np.float32)
     p2_all, q2_all = (2 * p_all).astype(np.float32), (2 * q_all).astype(np.float32)
     # the mean-velocity term w |Va - R Vb|^2 = a0 - 2 h0 cos(theta - phase0)
@@ -388,7 +389,7 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=7) -> np.ndarray
     half = (reach / np.maximum(pieces, 1))[pair]
     first = np.cumsum(pieces) - pieces
     centre = np.arctan2(q0, p0)[pair] - reach[pair] + half * (2 * (np.arange(len(pair)) - first[pair]) + 1)
-    squares = (left**2).sum(axis=(1, 2)) + (right**2).sum(axis=(1, 2))
+    squares = left_squares.sum(axis=1) + right_squares.sum(axis=1)
     passed = np.zeros(len(ia), dtype=bool)
     for level in range(levels + 1):
         c, s = np.cos(centre), np.sin(centre)

@@ -31,12 +31,13 @@ def largest_step(motion):
     return np.linalg.norm(np.diff(motion.positions, axis=0), axis=-1).max()
 
 
-def nearest_neighbor_distance(motion, frames=slice(None)):
-    return np.mean([cKDTree(p).query(p, k=2)[0][:, 1].mean() for p in motion.positions[frames][::5]])
+def nearest_neighbor_distance(motion, frames=None):
+    positions = motion.positions if frames is None else motion.positions[frames]
+    return np.mean([cKDTree(p).query(p, k=2)[0][:, 1].mean() for p in positions[::5]])
 
 
-def polarization(motion, frames=slice(None)):
-    velocities = motion.velocities()[frames] if isinstance(frames, np.ndarray) else motion.velocities()[:-1]
+def polarization(motion, frames=None):
+    velocities = motion.velocities()[:-1] if frames is None else motion.velocities()[frames]
     unit = velocities / np.maximum(np.linalg.norm(velocities, axis=-1, keepdims=True), 1e-12)
     return np.linalg.norm(unit.mean(axis=1), axis=-1).mean()
 
