@@ -38,7 +38,7 @@ from flockkit.errors import ValidationError
 
 _CHUNK = 256  # pairs searched together: bounds the (pairs x starts x N x N) cost array
 _BOUND_CHUNK = 2048  # pairs bounded together
-_BLOCK = 1  # pairs_within certifies blocks of (2 * _BLOCK + 1)^2 neighboring pairs at once
+_BLOCK_SIZES = (9, 3, 1)  # pairs_within rules out pairs of blocks of neighbors, coarse to fine
 
 
 def _positive(name):
@@ -129,8 +129,9 @@ class IcpHungarian:
         Neighboring configurations of a recording are close, which saves most of the work: the
         metric (its exact minimum) obeys the triangle inequality, so if the bound between
         configurations p and q exceeds (sqrt(threshold) + r_p + r_q)^2, where r_p bounds the
-        distance from p to each configuration within `_BLOCK` places of it (the identity
-        assignment, best rotation), no pair of those two blocks can be within the threshold."""
+        distance from p to each configuration of its block of neighbors (the identity assignment,
+        best rotation), no pair of those two blocks can be within the threshold. Blocks of 9, then
+        3, then single configurations."""
         configurations = self._check_many(configurations)
         if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not threshold >= 0:
             raise ValidationError(f"icp-hungarian.pairs_within: threshold must be a number >= 0; got {threshold!r}")
@@ -144,24 +145,28 @@ class IcpHungarian:
             i, j = np.triu_indices(k, 1)
             inside = (i >= first) & (i < stop)
             return self._filter(prepared, i[inside], j[inside], limit)
-        size = 2 * _BLOCK + 1
-        starts = np.arange(0, k, size)  # blocks of `size` neighbors, the last one maybe shorter
-        centres = np.minimum(starts + _BLOCK, k - 1)
-        reach = self._block_reach(prepared, starts, centres, size)
-        p, q = np.triu_indices(len(starts))
-        mine = (starts[p] + size > first) & (starts[p] < stop)
-        p, q = p[mine], q[mine]
-        widened = (math.sqrt(limit) + reach[p] + reach[q]) ** 2
-        found = []
-        for bp, bq in self._filter(prepared, centres[p], centres[q], widened, blocks=(p, q)):
-            # these two blocks were not ruled out together: look at their pairs one by one
-            row_range = np.arange(max(first, starts[bp]), min(stop, starts[bp] + size))
-            i, j = (x.ravel() for x in np.meshgrid(row_range, np.arange(starts[bq], min(k, starts[bq] + size)), indexing="ij"))
-            found.append((i[i < j], j[i < j]))
-        if not found:
-            return np.zeros((0, 2), dtype=int)
-        i, j = np.concatenate([f[0] for f in found]), np.concatenate([f[1] for f in found])
-        listed = self._filter(prepared, i, j, np.full(len(i), limit))
+        # the pairs of two blocks of neighbors, coarse to fine: a block pair that is not ruled out
+        # as a whole is split into the pairs of its sub-blocks, down to single configurations
+        count = -(-k // _BLOCK_SIZES[0])
+        p, q = np.triu_indices(count)
+        for level, size in enumerate(_BLOCK_SIZES):
+            starts = np.arange(0, k, size)
+            mine = (starts[p] + size > first) & (starts[p] < stop)
+            p, q = p[mine], q[mine]
+            if size == 1:
+                p, q = p[p < q], q[p < q]
+                break
+            centres = np.minimum(starts + size // 2, k - 1)
+            reach = self._block_reach(prepared, starts, centres, size)
+            widened = (math.sqrt(limit) + reach[p] + reach[q]) ** 2
+            p, q = self._filter(prepared, centres[p], centres[q], widened, blocks=(p, q)).T
+            ratio = size // _BLOCK_SIZES[level + 1]
+            offsets = np.arange(ratio)
+            p, q = (p[:, None, None] * ratio + offsets[:, None]), (q[:, None, None] * ratio + offsets[None, :])
+            p, q = (np.broadcast_to(x, (len(x), ratio, ratio)).ravel() for x in (p, q))
+            inside = (p <= q) & (q < -(-k // _BLOCK_SIZES[level + 1]))
+            p, q = p[inside], q[inside]
+        listed = self._filter(prepared, p, q, np.full(len(p), limit))
         return listed[np.lexsort((listed[:, 1], listed[:, 0]))]
 
     def _filter(self, prepared, ia, ib, limit, blocks=None) -> np.ndarray:
@@ -358,94 +363,87 @@ def _kabsch(target, source, target_velocities=None, source_velocities=None, w=0.
     return (v * signs[:, None, :]) @ np.transpose(u, (0, 2, 1))
 
 
-def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=7) -> np.ndarray:
-    """Mask over pairs (ia, ib) (2D): True where some rotation interval keeps the bound <= limit
-    (one limit per pair). `floor` bounds the position and deviation part for every rotation."""
+def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=12) -> np.ndarray:
+    """Mask over pairs (ia, ib) (2D): True where some rotation may keep E <= limit (one limit per
+    pair). `floor` bounds the position and deviation part for every rotation.
+
+    At a fixed rotation theta, E(theta) = S - 2 g(theta), where S does not depend on theta and
+    g(theta) = max over assignments s of <z_s, u(theta)>, z_s the 2D vector of the assignment's
+    cross terms: g is the support function of a convex polygon. One optimal assignment at theta
+    gives E(theta) exactly. Over an interval [t1, t2] (narrower than pi) the polygon lies in the
+    wedge {<x, u(t1)> <= g(t1), <x, u(t2)> <= g(t2)}, so g is at most the wedge apex's support:
+    a lower bound on E over the interval from its two ends alone. It is exact when both ends have
+    the same optimal assignment (that vertex is then the apex), so intervals are halved until
+    their bound exceeds the limit, or their ends agree, or a sampled E(theta) is within it."""
     n = prepared.n_agents
     root = math.sqrt(w)
     # a . R(theta) b = p cos(theta) + q sin(theta), for positions plus root(w) * deviations
     stacked = np.concatenate([prepared.centered, root * prepared.deviations], axis=2)
     left, right = stacked[ia], stacked[ib]  # (P, N, 4): x, y, dx, dy
     turned = right[:, :, [1, 0, 3, 2]] * np.array([-1.0, 1.0, -1.0, 1.0])  # (-y, x, -dy, dx)
-    p_all = left @ np.transpose(right, (0, 2, 1))
-    q_all = left @ np.transpose(turned, (0, 2, 1))  # ay bx - ax by (+ deviations)
-    # each entry |a_i - R b_j|^2 (+ deviations) = a - h cos(theta - phase); float32 halves the
-    # memory traffic, and the limit allows for its rounding (see _filter)
+    p2 = 2 * left @ np.transpose(right, (0, 2, 1))
+    q2 = 2 * left @ np.transpose(turned, (0, 2, 1))  # 2 (ay bx - ax by) (+ deviations)
     left_squares, right_squares = (left**2).sum(axis=2), (right**2).sum(axis=2)
-    a_all = (left_squares[:, :, None] + right_squares[:, None, :]).astype(np.float32)
-    h_all = (2 * np.sqrt(p_all * p_all + q_all * q_all)).astype(np.float32)
-    p2_all, q2_all = (2 * p_all).astype(np.float32), (2 * q_all).astype(np.float32)
-    # the mean-velocity term w |Va - R Vb|^2 = a0 - 2 h0 cos(theta - phase0)
+    squares = left_squares[:, :, None] + right_squares[:, None, :]  # entry = squares - p2 cos - q2 sin
+    # the mean-velocity term w |Va - R Vb|^2 = a0 - 2 (p0 cos(theta) + q0 sin(theta))
     va, vb = prepared.mean_velocity[ia], prepared.mean_velocity[ib]
     p0, q0 = w * (va[:, 0] * vb[:, 0] + va[:, 1] * vb[:, 1]), w * (va[:, 1] * vb[:, 0] - va[:, 0] * vb[:, 1])
-    a0, h0 = w * ((va**2).sum(axis=1) + (vb**2).sum(axis=1)), np.sqrt(p0 * p0 + q0 * q0)
-    # first intervals: the angles where that term alone stays under the limit, in pieces <= 45 degrees
-    with np.errstate(divide="ignore", invalid="ignore"):
+    a0, h0 = w * ((va**2).sum(axis=1) + (vb**2).sum(axis=1)), np.hypot(p0, q0)
+    total = (left_squares.sum(axis=1) + right_squares.sum(axis=1)) / n + a0  # S
+
+    def sample(pair, theta):
+        """E(theta) and its optimal assignment for each (pair, angle)."""
+        c, s = np.cos(theta), np.sin(theta)
+        cost = squares[pair] - p2[pair] * c[:, None, None] - q2[pair] * s[:, None, None]
+        assignment = np.array([linear_sum_assignment(m)[1] for m in cost]).reshape(len(pair), n)
+        matched = np.take_along_axis(cost, assignment[:, :, None], axis=2)[:, :, 0].sum(axis=1) / n
+        return matched + a0[pair] - 2 * (p0[pair] * c + q0[pair] * s), assignment
+
+    # only angles where the mean-velocity term alone stays under the limit, in pieces <= pi / 2
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         cosine = np.where(h0 > 0, (a0 - (limit - floor)) / (2 * h0), -1.0)
     reach = np.arccos(np.clip(cosine, -1.0, 1.0))
-    reach[cosine > 1] = 0.0
-    pieces = np.where(cosine > 1, 0, np.maximum(1, np.ceil(reach / (math.pi / 8)))).astype(int)
-    pair = np.repeat(np.arange(len(ia)), pieces)
-    half = (reach / np.maximum(pieces, 1))[pair]
-    first = np.cumsum(pieces) - pieces
-    centre = np.arctan2(q0, p0)[pair] - reach[pair] + half * (2 * (np.arange(len(pair)) - first[pair]) + 1)
-    squares = left_squares.sum(axis=1) + right_squares.sum(axis=1)
+    pieces = np.where(cosine > 1, 0, np.maximum(1, np.ceil(2 * reach / (math.pi / 2)))).astype(int)
+    pair = np.repeat(np.arange(len(ia)), pieces + (pieces > 0))  # each piece's start, plus the last end
+    order = np.arange(len(pair)) - (np.cumsum(pieces + (pieces > 0)) - pieces - (pieces > 0))[pair]
+    theta = np.arctan2(q0, p0)[pair] - reach[pair] + order * (2 * reach / np.maximum(pieces, 1))[pair]
+    value, assignment = sample(pair, theta)
     passed = np.zeros(len(ia), dtype=bool)
+    passed[pair[value <= limit[pair]]] = True
+    piece = np.flatnonzero(np.r_[pair[1:] == pair[:-1], False])  # samples that start a piece
+    pair, lo, hi = pair[piece], theta[piece], theta[piece + 1]
+    lo_value, hi_value, lo_assignment, hi_assignment = value[piece], value[piece + 1], assignment[piece], assignment[piece + 1]
     for level in range(levels + 1):
-        c, s = np.cos(centre), np.sin(centre)
-        velocity_term = a0[pair] - 2 * _interval_max(p0[pair] * c + q0[pair] * s, q0[pair] * c - p0[pair] * s, h0[pair], half)
-        entries = _entry_minima(a_all[pair], h_all[pair], p2_all[pair], q2_all[pair], centre, half)
-        spread = entries.min(axis=2).sum(axis=1) / n
-        alive = np.maximum(spread, floor[pair]) + velocity_term <= limit[pair]
-        if alive.any():
-            # the optimal assignment of the entries' minima bounds much tighter (measured: a cheaper
-            # dual of it, row then column reduction, listed twice the pairs for more time)
-            ks = np.flatnonzero(alive)
-            sigma = np.array([linear_sum_assignment(entries[k])[1] for k in ks])
-            rows = np.arange(n)
-            matched = entries[ks[:, None], rows, sigma].sum(axis=1) / n
-            alive[ks] = np.maximum(matched, floor[pair[ks]]) + velocity_term[ks] <= limit[pair[ks]]
-            # that assignment at its own best rotation is a distance some alignment reaches: where it
-            # is within the limit, the pair must be listed, and nothing more needs refining
-            owner = pair[ks]
-            big_p = p_all[owner[:, None], rows, sigma].sum(axis=1) / n + p0[owner]
-            big_q = q_all[owner[:, None], rows, sigma].sum(axis=1) / n + q0[owner]
-            reached = squares[owner] / n + a0[owner] - 2 * np.hypot(big_p, big_q)
-            passed[owner[reached <= limit[owner]]] = True
-            alive &= ~passed[pair]
+        alive = (_wedge_bound(total[pair], lo, hi, lo_value, hi_value) <= limit[pair]) & ~passed[pair]
+        exact = np.all(lo_assignment == hi_assignment, axis=1)
+        passed[pair[alive & exact]] = True  # that bound is reached inside the interval
+        alive &= ~exact
         if level == levels:
-            passed[pair[alive]] = True
+            passed[pair[alive]] = True  # still undecided: listed
+        if level == levels or not alive.any():
             break
-        pair, half = np.repeat(pair[alive], 2), np.repeat(half[alive] / 2, 2)
-        centre = (centre[alive][:, None] + np.array([-1.0, 1.0]) * half[::2, None]).ravel()
+        pair, lo, hi = pair[alive], lo[alive], hi[alive]
+        lo_value, hi_value, lo_assignment, hi_assignment = lo_value[alive], hi_value[alive], lo_assignment[alive], hi_assignment[alive]
+        middle = (lo + hi) / 2
+        value, assignment = sample(pair, middle)
+        passed[pair[value <= limit[pair]]] = True
+        pair, lo, hi = np.r_[pair, pair], np.r_[lo, middle], np.r_[middle, hi]
+        lo_value, hi_value = np.r_[lo_value, value], np.r_[value, hi_value]
+        lo_assignment, hi_assignment = np.r_[lo_assignment, assignment], np.r_[assignment, hi_assignment]
     return passed
 
 
-def _entry_minima(a, h, hc, hs, centre, half):
-    """min over |theta - centre| <= half of a - h cos(theta - phase), for stacks (M, N, N) and
-    intervals (M,), where hc = h cos(phase) and hs = h sin(phase): the angle nearest to the phase
-    inside the interval. With g the angle from the centre to the phase, h cos(g) and h |sin(g)|
-    are linear in hc and hs, and cos(g - half) follows from them, so no entry needs a cosine."""
-    c, s = np.cos(centre).astype(np.float32)[:, None, None], np.sin(centre).astype(np.float32)[:, None, None]
-    cos_half = np.cos(half).astype(np.float32)[:, None, None]
-    sin_half = np.sin(half).astype(np.float32)[:, None, None]
-    along = hc * c
-    along += hs * s  # h cos(g)
-    across = hs * c
-    across -= hc * s
-    np.abs(across, out=across)  # h |sin(g)|
-    inside = along >= h * cos_half  # the phase lies in the interval: the entry reaches a - h
-    along *= cos_half
-    across *= sin_half
-    along += across  # h cos(|g| - half)
-    np.copyto(along, h, where=inside)
-    return np.subtract(a, along, out=along)
-
-
-def _interval_max(p, q, magnitude, half):
-    """max over |delta| <= half (< pi / 2) of p cos(delta) + q sin(delta) (= magnitude cos(delta - phase))."""
-    inside = (p > 0) & (np.abs(q) <= p * np.tan(half))
-    return np.where(inside, magnitude, p * np.cos(half) + np.abs(q) * np.sin(half))
+def _wedge_bound(total, lo, hi, lo_value, hi_value):
+    """Lower bound on E(theta) = total - 2 g(theta) over [lo, hi] (narrower than pi), g a support
+    function, from E at the two ends: g is at most the support of the apex of the wedge
+    {<x, u(lo)> <= g(lo), <x, u(hi)> <= g(hi)}, which is |apex| where the apex lies in the
+    interval's directions, else the larger end value."""
+    half = (hi - lo) / 2
+    g1, g2 = (total - lo_value) / 2, (total - hi_value) / 2
+    with np.errstate(divide="ignore", invalid="ignore"):  # an interval of one angle has no apex
+        x, y = (g1 + g2) / (2 * np.cos(half)), (g2 - g1) / (2 * np.sin(half))  # apex, axes along the middle
+    apex = np.where(np.abs(np.arctan2(y, x)) <= half, np.hypot(x, y), np.maximum(g1, g2))
+    return total - 2 * apex
 
 
 def _checked_pairs(pairs, k) -> np.ndarray:

@@ -6,20 +6,26 @@
    `min_gap` seconds apart and at most the threshold; both directions of each minimum.
 4. ``flockkit.MotionGraph.assemble``: clips between transition frames, dead ends trimmed.
 
-Threshold. Given `threshold` it is absolute. Otherwise it is adaptive: it starts at
-`relative_threshold` times the group's mean squared radius (its mean squared distance to the center
-of mass, averaged over candidates), so it means the same for any units and group size, and
-doubles until at least max(`min_transitions`, `transitions_per_minute` per minute of recording)
-transitions survive the trimming of dead ends (up to the mean squared radius itself): like the
-paper's rule, the graph grows with the recording. With `per_second`, the paper's rule is used instead: the lowest
+Threshold. Given `threshold` it is absolute. Otherwise it is adaptive: with `wanted` =
+max(`min_transitions`, `transitions_per_minute` per minute of recording), the lowest `wanted` local
+minima are taken, and while fewer than `wanted` transitions survive the trimming of dead ends, the
+next lowest are added, as many as are missing. The threshold is the value of the last one taken
+(at most the group's mean squared radius, its mean squared distance to the center of mass
+averaged over candidates; if even that is not enough, every minimum under it is taken). Like the
+paper's rule, the graph grows with the recording, and its density is what was asked for whatever
+the units. With `per_second`, the paper's rule is used instead: the lowest
 ``ceil(per_second * duration)`` local minima, whatever their values.
 
-Pruning. With a threshold (absolute or adaptive), E is only computed for the pairs the metric's
+Pruning. With a threshold, E is only computed for the pairs the metric's
 ``pairs_within(configurations, threshold)`` lists (or, for a metric with only ``lower_bound``,
 where that bound is at most the threshold). A cell left out has E > threshold, so it can
-neither be a transition nor keep a computed cell under the threshold from being a local minimum:
-``prune=True`` and ``prune=False`` give the identical graph. The `per_second` rule needs every
-value and never prunes.
+neither be a transition nor keep a computed cell under the threshold from being a local minimum.
+The adaptive rule is decided by probing: the minima under a probe threshold are exactly the
+lowest minima of the full matrix, so the probe goes up (doubling) until they decide the rule. The
+first probe comes from strips of rows, a tenth of the matrix, probed from 0.005 times the mean
+squared radius upwards: the value under which the strips' minima, scaled to the whole matrix,
+number 1.25 times those wanted; it usually decides at once. ``prune=True`` and ``prune=False``
+give the identical graph. The `per_second` rule needs every value and never prunes.
 """
 
 from __future__ import annotations
@@ -32,6 +38,9 @@ import numpy as np
 
 import flockkit
 from flockkit.errors import ValidationError
+
+
+_FIRST_PROBE = 0.005  # where probing starts, as a fraction of the mean squared radius
 
 
 def _check(name, test, expected):
@@ -68,11 +77,9 @@ class Kovar:
         Seconds at least between the two frames of a transition.
     threshold : float, optional
         Absolute threshold on E; None: adaptive (see the module docstring).
-    relative_threshold : float
-        Adaptive start, as a fraction of the mean squared group radius.
     min_transitions, transitions_per_minute : int, float
-        The adaptive threshold doubles until at least max(min_transitions, transitions_per_minute
-        per minute of recording) transitions survive dead-end trimming.
+        The adaptive threshold keeps max(min_transitions, transitions_per_minute per minute of
+        recording) transitions after dead-end trimming (see the module docstring).
     per_second : float, optional
         Use the paper's rule instead: the lowest ceil(per_second * duration) local minima.
     blend_time : float
@@ -89,8 +96,7 @@ class Kovar:
     candidate_interval: float = attrs.field(default=0.2, validator=_check("candidate_interval", _positive, "a number > 0"))
     min_gap: float = attrs.field(default=1.0, validator=_check("min_gap", _non_negative, "a number >= 0"))
     threshold: float | None = attrs.field(default=None, validator=_check("threshold", lambda v: v is None or _positive(v), "None or a number > 0"))
-    relative_threshold: float = attrs.field(default=0.005, validator=_check("relative_threshold", _positive, "a number > 0"))
-    min_transitions: int = attrs.field(default=4, validator=_check("min_transitions", lambda v: _count(v) and v >= 1, "an integer >= 1"))
+    min_transitions: int = attrs.field(default=30, validator=_check("min_transitions", lambda v: _count(v) and v >= 1, "an integer >= 1"))
     transitions_per_minute: float = attrs.field(default=20.0, validator=_check("transitions_per_minute", _non_negative, "a number >= 0"))
     per_second: float | None = attrs.field(default=None, validator=_check("per_second", lambda v: v is None or _positive(v), "None or a number > 0"))
     blend_time: float = attrs.field(default=2.0, validator=_check("blend_time", _non_negative, "a number >= 0"))
@@ -122,15 +128,14 @@ class Kovar:
             threshold = float(max((matrix.values[ij] for ij in chosen), default=0.0))
         else:
             spread = float(np.mean([np.mean(np.sum((c.positions - c.center_of_mass()) ** 2, axis=1)) for c in configs]))
-            threshold = self.threshold if self.threshold is not None else self.relative_threshold * spread
             prune = self.prune and (callable(getattr(metric, "pairs_within", None)) or callable(getattr(metric, "lower_bound", None)))
-            wanted = max(self.min_transitions, math.ceil(self.transitions_per_minute * motion.duration / 60))
-            while True:
+            if self.threshold is not None:
+                threshold = self.threshold
                 matrix.fill(matrix.pairs_within(threshold) if prune else matrix.all_pairs())
                 chosen = [ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= threshold]
-                if self.threshold is not None or threshold >= spread or _kept(motion, frames, chosen, matrix, blend) >= wanted:
-                    break
-                threshold = min(2 * threshold, spread)
+            else:
+                wanted = max(self.min_transitions, math.ceil(self.transitions_per_minute * motion.duration / 60))
+                threshold, chosen = self._adaptive(motion, frames, far, matrix, blend, spread, wanted, prune)
         transitions = _transitions(frames, chosen, matrix, blend)
         if _kept(motion, frames, chosen, matrix, blend) == 0:
             raise ValidationError(self._no_transition_message(motion, frames, far, matrix, blend, threshold))
@@ -142,6 +147,47 @@ class Kovar:
         }
         return flockkit.MotionGraph.assemble(motion, transitions, params=params, provenance={"builder": "kovar"})
 
+
+    def _adaptive(self, motion, frames, far, matrix, blend, spread, wanted, prune):
+        """(threshold, chosen minima) by the adaptive rule (module docstring). Without pruning every
+        value is computed at once; with it, the minima under a probe threshold are exactly those of
+        the full matrix, so probing upwards until the rule is decided gives the identical result."""
+        probe = self._first_probe(motion, frames, far, matrix, blend, spread, wanted) if prune else spread
+        while True:
+            matrix.fill(matrix.pairs_within(probe) if prune else matrix.all_pairs())
+            minima = sorted((ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= probe), key=lambda ij: (matrix.values[ij], ij))
+            # the lowest minima, adding the shortfall until enough survive the trimming of dead ends
+            count = wanted
+            while count <= len(minima):
+                kept = _kept(motion, frames, minima[:count], matrix, blend)
+                if kept >= wanted:
+                    return float(matrix.values[minima[count - 1]]), minima[:count]
+                count += wanted - kept
+            if probe >= spread:
+                return spread, minima
+            probe = min(2 * probe, spread)
+
+    def _first_probe(self, motion, frames, far, matrix, blend, spread, wanted) -> float:
+        """A probe threshold likely to decide the adaptive rule at once (module docstring)."""
+        k = len(frames)
+        if not matrix.takes_rows or k < 64:
+            return _FIRST_PROBE * spread
+        strips = [(a, a + 16) for a in range(0, k - 16, 160)]
+        interior = np.zeros(k, dtype=bool)
+        for a, b in strips:
+            interior[a + 1 : b - 1] = True
+        upper = np.triu(far, 1)
+        scale = 2 * np.count_nonzero(upper) / max(np.count_nonzero(upper[interior]), 1)  # both directions
+        probe = _FIRST_PROBE * spread
+        while True:
+            matrix.fill(matrix.pairs_within(probe, ranges=strips))
+            values = sorted(matrix.values[i, j] for i, j in _local_minima(matrix.values, far) if i < j and interior[i] and matrix.values[i, j] <= probe)
+            needed = math.ceil(1.25 * wanted / scale)
+            if len(values) >= needed:
+                return float(values[needed - 1])
+            if probe >= spread:
+                return spread
+            probe = min(2 * probe, spread)
 
     def _no_transition_message(self, motion, frames, far, matrix, blend, threshold) -> str:
         """Say that no transition is left, with the smallest cost seen and a threshold that works."""
@@ -193,14 +239,21 @@ class _Matrix:
     def all_pairs(self) -> np.ndarray:
         return np.column_stack(np.triu_indices(len(self.configs), 1))
 
-    def pairs_within(self, threshold: float) -> np.ndarray:
-        """Pairs i < j the metric cannot rule out at `threshold` (its pairs_within or lower_bound)."""
+    @property
+    def takes_rows(self) -> bool:
+        """Whether the metric's pairs_within can list the pairs of some rows only."""
+        batched = getattr(self.metric, "pairs_within", None)
+        return callable(batched) and "rows" in inspect.signature(batched).parameters
+
+    def pairs_within(self, threshold: float, ranges=None) -> np.ndarray:
+        """Pairs i < j the metric cannot rule out at `threshold` (its pairs_within or lower_bound);
+        with `ranges` (only where takes_rows), those with i in one of the (start, stop) row ranges."""
         batched = getattr(self.metric, "pairs_within", None)
         if callable(batched):
-            if "rows" not in inspect.signature(batched).parameters:
+            if not self.takes_rows:
                 return np.asarray(batched(self.configs, threshold), dtype=int).reshape(-1, 2)
             # in row ranges, for the workers and for the progress bar
-            ranges = _row_ranges(len(self.configs), 4 * max(abs(self.n_jobs), 2))
+            ranges = ranges or _row_ranges(len(self.configs), 4 * max(abs(self.n_jobs), 2))
             if self.n_jobs == 1:
                 parts = (batched(self.configs, threshold, rows=rows) for rows in ranges)
             else:

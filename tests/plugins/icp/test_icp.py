@@ -159,18 +159,26 @@ def test_pairwise_rejects_bad_pairs():
         IcpHungarian().pairwise(configs, [[0, 2]])
 
 @settings(max_examples=30, deadline=None)
-@given(st.integers(0, 2**32 - 1))
-def test_entry_minima_are_the_minima_over_each_interval(seed):
-    """The branch and bound's closed form, without a cosine per entry, against dense sampling."""
-    from flockkit_icp.metric import _entry_minima
+@given(fst.configurations(min_agents=5, max_agents=5, dims=2), fst.configurations(min_agents=5, max_agents=5, dims=2), st.floats(-4, 4), st.floats(0.01, 3.0))
+def test_wedge_bound_holds_over_the_interval_and_is_reached_when_its_ends_agree(a, b, lo, width):
+    """The branch and bound's bound on E over an interval of rotations, from E at its two ends,
+    against E sampled densely inside (each sample: the optimal assignment at that rotation)."""
+    from scipy.optimize import linear_sum_assignment
 
-    rng = np.random.default_rng(seed)
-    p, q = rng.normal(size=(2, 50, 4, 4))
-    a = 2 * np.hypot(p, q) + np.abs(rng.normal(size=(50, 4, 4)))
-    h, phase = 2 * np.hypot(p, q), np.arctan2(q, p)
-    centre, half = rng.uniform(-7, 7, 50), rng.uniform(0, np.pi / 8, 50)
-    found = _entry_minima(*(x.astype(np.float32) for x in (a, h, 2 * p, 2 * q)), centre, half)
-    angles = centre[:, None] + half[:, None] * np.linspace(-1, 1, 4001)
-    sampled = (a[..., None] - h[..., None] * np.cos(angles[:, None, None, :] - phase[..., None])).min(axis=-1)
-    assert np.all(found <= sampled + 1e-5 * a)  # a lower bound, up to float32 rounding
-    np.testing.assert_allclose(found, sampled, atol=1e-4 * a.max())
+    from flockkit_icp.metric import _wedge_bound
+
+    left, right = a.positions - a.center_of_mass(), b.positions - b.center_of_mass()
+
+    def at(theta):
+        turned = right @ np.array([[np.cos(theta), -np.sin(theta)], [np.sin(theta), np.cos(theta)]]).T
+        cost = ((left[:, None, :] - turned[None, :, :]) ** 2).sum(axis=2)
+        rows, columns = linear_sum_assignment(cost)
+        return cost[rows, columns].mean(), tuple(columns)
+
+    total = ((left**2).sum() + (right**2).sum()) / len(left)
+    (lo_value, lo_assignment), (hi_value, hi_assignment) = at(lo), at(lo + width)
+    bound = float(_wedge_bound(total, lo, lo + width, lo_value, hi_value))
+    least = min(at(theta)[0] for theta in np.linspace(lo, lo + width, 1001))
+    assert bound <= least + 1e-9 * total
+    if lo_assignment == hi_assignment:
+        assert bound == pytest.approx(least, abs=1e-5 * total)

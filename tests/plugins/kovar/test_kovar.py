@@ -1,6 +1,7 @@
 import networkx as nx
 import numpy as np
 import pytest
+from scipy.spatial.distance import squareform
 
 import flockkit
 from flockkit.errors import FileFormatError, ValidationError
@@ -40,6 +41,33 @@ def test_pruning_identical_with_an_absolute_threshold(recording, graph):
         for prune in (True, False)
     )
     assert structure(pruned) == structure(full)
+
+
+def test_pruned_probing_upwards_gives_the_identical_graph(recording, graph, monkeypatch):
+    """A first probe far too low: the pruned build doubles it until the adaptive rule is decided."""
+    import flockkit_kovar.builder as kovar
+
+    monkeypatch.setattr(kovar.Kovar, "_first_probe", lambda self, *args: 1e-6)
+    assert structure(flockkit.get("builder", "kovar").build(recording, METRIC, np.random.default_rng(0))) == structure(graph)
+
+
+def test_adaptive_threshold_is_the_last_local_minimum_taken(recording):
+    """The adaptive rule takes the lowest local minima of the difference matrix until enough
+    transitions survive the trimming of dead ends: its threshold is one of them. (With the default
+    30, this short recording has too few: every minimum is taken.)"""
+    graph = flockkit.get("builder", "kovar", min_transitions=4).build(recording, METRIC, np.random.default_rng(0))
+    frames = np.arange(graph.params["candidates"]) * graph.params["stride"]
+    values = squareform(METRIC.pairwise([recording.configuration(int(f)) for f in frames]))
+    np.fill_diagonal(values, np.inf)
+    padded = np.pad(values, 1, constant_values=np.inf)
+    k = len(values)
+    neighbors = [padded[1 + di : k + 1 + di, 1 + dj : k + 1 + dj] for di in (-1, 0, 1) for dj in (-1, 0, 1) if di or dj]
+    is_min = np.all([values <= n for n in neighbors], axis=0) & (np.abs(frames[:, None] - frames[None, :]) >= 10)
+    minima = {(int(frames[i]), int(frames[j])): values[i, j] for i, j in zip(*np.nonzero(is_min))}
+    threshold = graph.params["threshold"]
+    assert threshold in minima.values()
+    assert {(t.start, t.end) for t in graph.transitions} <= {ij for ij, value in minima.items() if value <= threshold}
+    assert len(graph.transitions) >= 4
 
 
 def test_graph_is_strongly_connected_and_consistent(recording, graph):
