@@ -41,6 +41,7 @@ from flockkit.errors import ValidationError
 
 
 _FIRST_PROBE = 0.005  # where probing starts, as a fraction of the mean squared radius
+_STRIP = 48  # rows in each strip that the first probe comes from, one strip in every ten
 
 
 def _check(name, test, expected):
@@ -118,8 +119,10 @@ class Kovar:
                 "record longer motion or lower candidate_interval and blend_time"
             )
         configs = [motion.configuration(int(f)) for f in frames]
-        matrix = _Matrix(configs, metric, n_jobs=self.n_jobs, progress=self.progress)
         far = np.abs(frames[:, None] - frames[None, :]) >= max(gap, 1)
+        # nearer the diagonal than the neighbors of far cells, cells never matter: pruning skips them
+        apart = np.abs(np.subtract.outer(np.arange(len(frames)), np.arange(len(frames))))
+        matrix = _Matrix(configs, metric, n_jobs=self.n_jobs, progress=self.progress, needed=apart >= math.ceil(max(gap, 1) / stride) - 2)
         if self.per_second is not None:
             matrix.fill(matrix.all_pairs())
             count = math.ceil(self.per_second * motion.duration)
@@ -131,7 +134,10 @@ class Kovar:
             prune = self.prune and (callable(getattr(metric, "pairs_within", None)) or callable(getattr(metric, "lower_bound", None)))
             if self.threshold is not None:
                 threshold = self.threshold
-                matrix.fill(matrix.pairs_within(threshold) if prune else matrix.all_pairs())
+                if prune:
+                    matrix.fill_within(threshold)
+                else:
+                    matrix.fill(matrix.all_pairs())
                 chosen = [ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= threshold]
             else:
                 wanted = max(self.min_transitions, math.ceil(self.transitions_per_minute * motion.duration / 60))
@@ -154,7 +160,10 @@ class Kovar:
         the full matrix, so probing upwards until the rule is decided gives the identical result."""
         probe = self._first_probe(motion, frames, far, matrix, blend, spread, wanted) if prune else spread
         while True:
-            matrix.fill(matrix.pairs_within(probe) if prune else matrix.all_pairs())
+            if prune:
+                matrix.fill_within(probe)
+            else:
+                matrix.fill(matrix.all_pairs())
             minima = sorted((ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= probe), key=lambda ij: (matrix.values[ij], ij))
             # the lowest minima, adding the shortfall until enough survive the trimming of dead ends
             count = wanted
@@ -165,14 +174,14 @@ class Kovar:
                 count += wanted - kept
             if probe >= spread:
                 return spread, minima
-            probe = min(2 * probe, spread)
+            probe = min(1.5 * probe, spread)
 
     def _first_probe(self, motion, frames, far, matrix, blend, spread, wanted) -> float:
         """A probe threshold likely to decide the adaptive rule at once (module docstring)."""
         k = len(frames)
-        if not matrix.takes_rows or k < 64:
+        if not matrix.takes_rows or k < 2 * _STRIP:
             return _FIRST_PROBE * spread
-        strips = [(a, a + 16) for a in range(0, k - 16, 160)]
+        strips = [(a, a + _STRIP) for a in range(0, k - _STRIP, 10 * _STRIP)]
         interior = np.zeros(k, dtype=bool)
         for a, b in strips:
             interior[a + 1 : b - 1] = True
@@ -180,7 +189,7 @@ class Kovar:
         scale = 2 * np.count_nonzero(upper) / max(np.count_nonzero(upper[interior]), 1)  # both directions
         probe = _FIRST_PROBE * spread
         while True:
-            matrix.fill(matrix.pairs_within(probe, ranges=strips))
+            matrix.fill_within(probe, ranges=strips)
             values = sorted(matrix.values[i, j] for i, j in _local_minima(matrix.values, far) if i < j and interior[i] and matrix.values[i, j] <= probe)
             needed = math.ceil(1.25 * wanted / scale)
             if len(values) >= needed:
@@ -225,10 +234,11 @@ class _Matrix:
     """The difference matrix, computed where asked, symmetric; cells not computed hold +inf.
     Alignments are only kept for the cells that become transitions."""
 
-    def __init__(self, configs, metric, *, n_jobs, progress):
+    def __init__(self, configs, metric, *, n_jobs, progress, needed):
         k = len(configs)
-        self.configs, self.metric, self.n_jobs, self.progress = configs, metric, n_jobs, progress
+        self.configs, self.metric, self.n_jobs, self.progress, self.needed = configs, metric, n_jobs, progress, needed
         self.values = np.full((k, k), np.inf)
+        self.listed = np.full(k, -np.inf)  # per row, the threshold its pairs were listed at
         self.computed = np.zeros((k, k), dtype=bool)
         self._alignments: dict[tuple[int, int], flockkit.Alignment] = {}
 
@@ -245,15 +255,22 @@ class _Matrix:
         batched = getattr(self.metric, "pairs_within", None)
         return callable(batched) and "rows" in inspect.signature(batched).parameters
 
-    def pairs_within(self, threshold: float, ranges=None) -> np.ndarray:
-        """Pairs i < j the metric cannot rule out at `threshold` (its pairs_within or lower_bound);
-        with `ranges` (only where takes_rows), those with i in one of the (start, stop) row ranges."""
+    def fill_within(self, threshold: float, ranges=None) -> None:
+        """Compute every needed pair i < j that the metric cannot rule out at `threshold` (its
+        pairs_within or lower_bound); with `ranges` (only where takes_rows), only those with i in
+        one of the (start, stop) row ranges."""
+        pairs = self._listed(threshold, ranges)
+        self.fill(pairs[self.needed[pairs[:, 0], pairs[:, 1]]])
+
+    def _listed(self, threshold, ranges):
         batched = getattr(self.metric, "pairs_within", None)
         if callable(batched):
             if not self.takes_rows:
                 return np.asarray(batched(self.configs, threshold), dtype=int).reshape(-1, 2)
-            # in row ranges, for the workers and for the progress bar
+            # in row ranges, for the workers and for the progress bar; rows listed at this
+            # threshold or above already are left out
             ranges = ranges or _row_ranges(len(self.configs), 4 * max(abs(self.n_jobs), 2))
+            ranges = [run for a, b in ranges for run in _runs(self.listed[a:b] < threshold, a)]
             if self.n_jobs == 1:
                 parts = (batched(self.configs, threshold, rows=rows) for rows in ranges)
             else:
@@ -264,7 +281,10 @@ class _Matrix:
                 from tqdm.auto import tqdm
 
                 parts = tqdm(parts, total=len(ranges), desc=f"bounding pairs (threshold {threshold:.3g})", unit="block")
-            return np.concatenate([np.asarray(part, dtype=int).reshape(-1, 2) for part in parts])
+            pairs = np.concatenate([np.zeros((0, 2), dtype=int)] + [np.asarray(part, dtype=int).reshape(-1, 2) for part in parts])
+            for a, b in ranges:
+                self.listed[a:b] = threshold
+            return pairs
         pairs = self.all_pairs()
         bounds = np.array([self.metric.lower_bound(self.configs[i], self.configs[j]) for i, j in pairs])
         return pairs[bounds <= threshold]
@@ -320,6 +340,12 @@ def _row_ranges(k: int, count: int) -> list[tuple[int, int]]:
     cuts = np.searchsorted(done, np.linspace(0, done[-1], count + 1)[1:-1])
     edges = [0, *sorted(set(int(c) + 1 for c in cuts)), k]
     return [(a, b) for a, b in zip(edges[:-1], edges[1:]) if a < b]
+
+
+def _runs(mask: np.ndarray, offset: int) -> list[tuple[int, int]]:
+    """(start, stop) of each run of True in `mask`, counted from `offset`."""
+    edges = np.flatnonzero(np.diff(np.r_[0, mask.astype(np.int8), 0]))
+    return [(offset + int(a), offset + int(b)) for a, b in zip(edges[::2], edges[1::2])]
 
 
 def _localized(configs, pairs):
