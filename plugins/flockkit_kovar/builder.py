@@ -21,11 +21,14 @@ Pruning. With a threshold, E is only computed for the pairs the metric's
 where that bound is at most the threshold). A cell left out has E > threshold, so it can
 neither be a transition nor keep a computed cell under the threshold from being a local minimum.
 The adaptive rule is decided by probing: the minima under a probe threshold are exactly the
-lowest minima of the full matrix, so the probe goes up (doubling) until they decide the rule. The
-first probe comes from strips of rows, a tenth of the matrix, probed from 0.005 times the mean
-squared radius upwards: the value under which the strips' minima, scaled to the whole matrix,
-number 1.25 times those wanted; it usually decides at once. ``prune=True`` and ``prune=False``
-give the identical graph. The `per_second` rule needs every value and never prunes.
+lowest minima of the full matrix, so the probe goes up until they decide the rule. The first
+probe comes from strips of rows (a tenth of the matrix, in the middle of equal parts of the
+recording), probed from 0.005 times the mean squared radius upwards, doubling: the value under
+which the strips' minima, scaled to the whole matrix, number twice those wanted. It usually
+decides at once; if not, the probe goes up by a tenth at a time. Rows are never listed twice at
+the same probe, and cells nearer the diagonal than any transition's neighbors are never computed.
+``prune=True`` and ``prune=False`` give the identical graph. The `per_second` rule needs every
+value and never prunes.
 """
 
 from __future__ import annotations
@@ -41,7 +44,6 @@ from flockkit.errors import ValidationError
 
 
 _FIRST_PROBE = 0.005  # where probing starts, as a fraction of the mean squared radius
-_STRIP = 48  # rows in each strip that the first probe comes from, one strip in every ten
 
 
 def _check(name, test, expected):
@@ -158,7 +160,7 @@ class Kovar:
         """(threshold, chosen minima) by the adaptive rule (module docstring). Without pruning every
         value is computed at once; with it, the minima under a probe threshold are exactly those of
         the full matrix, so probing upwards until the rule is decided gives the identical result."""
-        probe = self._first_probe(motion, frames, far, matrix, blend, spread, wanted) if prune else spread
+        probe, step = self._first_probe(frames, far, matrix, spread, wanted) if prune else (spread, 2)
         while True:
             if prune:
                 matrix.fill_within(probe)
@@ -174,14 +176,18 @@ class Kovar:
                 count += wanted - kept
             if probe >= spread:
                 return spread, minima
-            probe = min(1.5 * probe, spread)
+            probe = min(step * probe, spread)
 
-    def _first_probe(self, motion, frames, far, matrix, blend, spread, wanted) -> float:
-        """A probe threshold likely to decide the adaptive rule at once (module docstring)."""
+    def _first_probe(self, frames, far, matrix, spread, wanted) -> tuple[float, float]:
+        """A probe threshold likely to decide the adaptive rule at once (module docstring), and the
+        factor to raise it by if it does not: small after an estimate, 2 without one."""
         k = len(frames)
-        if not matrix.takes_rows or k < 2 * _STRIP:
-            return _FIRST_PROBE * spread
-        strips = [(a, a + _STRIP) for a in range(0, k - _STRIP, 10 * _STRIP)]
+        length = int(np.clip(k // 40, 12, 48))
+        count = max(3, round(k / (10 * length)))
+        if not matrix.takes_rows or k < 2 * count * length:
+            return _FIRST_PROBE * spread, 2
+        # a strip in the middle of each of `count` equal parts of the recording
+        strips = [(int(m) - length // 2, int(m) - length // 2 + length) for m in (np.arange(count) + 0.5) * k / count]
         interior = np.zeros(k, dtype=bool)
         for a, b in strips:
             interior[a + 1 : b - 1] = True
@@ -191,11 +197,11 @@ class Kovar:
         while True:
             matrix.fill_within(probe, ranges=strips)
             values = sorted(matrix.values[i, j] for i, j in _local_minima(matrix.values, far) if i < j and interior[i] and matrix.values[i, j] <= probe)
-            needed = math.ceil(1.25 * wanted / scale)
+            needed = math.ceil(2 * wanted / scale)
             if len(values) >= needed:
-                return float(values[needed - 1])
+                return float(values[needed - 1]), 1.1
             if probe >= spread:
-                return spread
+                return spread, 2
             probe = min(2 * probe, spread)
 
     def _no_transition_message(self, motion, frames, far, matrix, blend, threshold) -> str:

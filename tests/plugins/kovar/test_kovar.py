@@ -47,8 +47,28 @@ def test_pruned_probing_upwards_gives_the_identical_graph(recording, graph, monk
     """A first probe far too low: the pruned build doubles it until the adaptive rule is decided."""
     import flockkit_kovar.builder as kovar
 
-    monkeypatch.setattr(kovar.Kovar, "_first_probe", lambda self, *args: 1e-6)
+    monkeypatch.setattr(kovar.Kovar, "_first_probe", lambda self, *args: (1e-6, 2))
     assert structure(flockkit.get("builder", "kovar").build(recording, METRIC, np.random.default_rng(0))) == structure(graph)
+
+
+def test_pruned_build_probing_from_strips_is_identical(monkeypatch):
+    """A recording long enough for the first probe to come from strips of rows (here a little low:
+    the probe goes up from it)."""
+    import flockkit_kovar.builder as kovar
+
+    recording = flockkit.simulate(n_agents=10, steps=500, seed=3)
+    steps, estimate = [], kovar.Kovar._first_probe
+
+    def spy(self, *args):
+        probe, step = estimate(self, *args)
+        steps.append(step)
+        return probe, step
+
+    monkeypatch.setattr(kovar.Kovar, "_first_probe", spy)
+    pruned = flockkit.get("builder", "kovar").build(recording, METRIC, np.random.default_rng(0))
+    full = flockkit.get("builder", "kovar", prune=False).build(recording, METRIC, np.random.default_rng(0))
+    assert steps == [1.1]  # the strips gave the estimate
+    assert structure(pruned) == structure(full) and pruned.params["evaluated"] < full.params["evaluated"]
 
 
 def test_adaptive_threshold_is_the_last_local_minimum_taken(recording):
