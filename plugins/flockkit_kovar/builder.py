@@ -22,8 +22,8 @@ where that bound is at most the threshold). A cell left out has E > threshold, s
 neither be a transition nor keep a computed cell under the threshold from being a local minimum.
 The adaptive rule is decided by probing: the minima under a probe threshold are exactly the
 lowest minima of the full matrix, so the probe goes up until they decide the rule. The first
-probe comes from strips of rows (a tenth of the matrix, in the middle of equal parts of the
-recording), probed from 0.005 times the mean squared radius upwards, doubling: the value under
+probe comes from thin strips of rows (a tenth of the rows, one in the middle of each of equal
+parts of the recording), probed from 0.02 times the mean squared radius upwards, doubling: the value under
 which the strips' minima, scaled to the whole matrix, number twice those wanted. It usually
 decides at once; if not, the probe goes up by a tenth at a time. Rows are never listed twice at
 the same probe, and cells nearer the diagonal than any transition's neighbors are never computed.
@@ -43,7 +43,7 @@ import flockkit
 from flockkit.errors import ValidationError
 
 
-_FIRST_PROBE = 0.005  # where probing starts, as a fraction of the mean squared radius
+_FIRST_PROBE = 0.02  # where probing starts, as a fraction of the mean squared radius
 
 
 def _check(name, test, expected):
@@ -182,7 +182,7 @@ class Kovar:
         """A probe threshold likely to decide the adaptive rule at once (module docstring), and the
         factor to raise it by if it does not: small after an estimate, 2 without one."""
         k = len(frames)
-        length = int(np.clip(k // 40, 12, 48))
+        length = int(np.clip(k // 100, 8, 48))
         count = max(3, round(k / (10 * length)))
         if not matrix.takes_rows or k < 2 * count * length:
             return _FIRST_PROBE * spread, 2
