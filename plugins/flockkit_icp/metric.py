@@ -16,13 +16,12 @@ bit-identical distances.
 Bounds. With V the mean velocity and d_i = v_i - V the deviations, the velocity term splits
 exactly into w |V_a - R V_b|^2 + (w/N) sum_i |d_i - R d'_M(i)|^2 (the deviations sum to zero).
 `lower_bound` drops the rotation: sorted distances to the center of mass, sorted deviation
-speeds and the difference of mean speeds. `pairs_within` (2D) keeps it: over an interval of
-angles every entry of the assignment cost has a closed-form minimum, so the mean of the row
-minima plus the interval's minimum of the mean-velocity term bounds E for every rotation in the
-interval (a quick test), and the optimal assignment of the entries' minima bounds tighter.
-Intervals whose bound exceeds the threshold are dropped and the others halved (branch and bound)
-seven times; a pair is listed when an interval survives, or as soon as the assignment found for
-one, at its own best rotation, reaches a distance within the threshold.
+speeds and the difference of mean speeds. `pairs_within` (2D) keeps it: at a fixed rotation one
+optimal assignment gives E exactly, and over an interval of rotations the values at its two ends
+bound E (E = S - 2 g with g a support function; see `_branch_and_bound`), exactly once both ends
+have the same assignment. Intervals whose bound exceeds the threshold are dropped and the others
+halved; a pair is listed as soon as a sampled rotation is within the threshold. Blocks of
+neighboring configurations are ruled out together first (the triangle inequality).
 """
 
 from __future__ import annotations
@@ -181,9 +180,7 @@ class IcpHungarian:
             mean_part = self.velocity_weight * (prepared.mean_speed[ia[part]] - prepared.mean_speed[ib[part]]) ** 2
             kept = np.flatnonzero(floor + mean_part <= limit[part])
             if prepared.dims == 2 and len(kept):
-                rounding = 1e-6 * prepared.n_agents * (prepared.scale + self.velocity_weight * prepared.speed_scale)
-                slack = limit[part][kept] + rounding[ia[part][kept]] + rounding[ib[part][kept]]
-                kept = kept[_branch_and_bound(prepared, ia[part][kept], ib[part][kept], self.velocity_weight, slack, floor[kept])]
+                kept = kept[_branch_and_bound(prepared, ia[part][kept], ib[part][kept], self.velocity_weight, limit[part][kept], floor[kept])]
             keep[s + kept] = True
         labels = (ia, ib) if blocks is None else blocks
         return np.column_stack([labels[0][keep], labels[1][keep]]).astype(int)

@@ -23,8 +23,8 @@ neither be a transition nor keep a computed cell under the threshold from being 
 The adaptive rule is decided by probing: the minima under a probe threshold are exactly the
 lowest minima of the full matrix, so the probe goes up until they decide the rule. The first
 probe comes from thin strips of rows (a tenth of the rows, one in the middle of each of equal
-parts of the recording), probed from 0.02 times the mean squared radius upwards, doubling: the value under
-which the strips' minima, scaled to the whole matrix, number twice those wanted. It usually
+parts of the recording), probed from 0.02 times the mean squared radius upwards, doubling: the
+value under which the strips' minima, scaled to the whole matrix, number twice those wanted. It usually
 decides at once; if not, the probe goes up by a tenth at a time. Rows are never listed twice at
 the same probe, and cells nearer the diagonal than any transition's neighbors are never computed.
 ``prune=True`` and ``prune=False`` give the identical graph. The `per_second` rule needs every
@@ -154,7 +154,6 @@ class Kovar:
             "evaluated": matrix.evaluated, "prune": self.prune,
         }
         return flockkit.MotionGraph.assemble(motion, transitions, params=params, provenance={"builder": "kovar"})
-
 
     def _adaptive(self, motion, frames, far, matrix, blend, spread, wanted, prune):
         """(threshold, chosen minima) by the adaptive rule (module docstring). Without pruning every
