@@ -192,11 +192,11 @@ class Kovar:
             interior[a + 1 : b - 1] = True
         upper = np.triu(far, 1)
         scale = 2 * np.count_nonzero(upper) / max(np.count_nonzero(upper[interior]), 1)  # both directions
+        needed = math.ceil(2 * wanted / scale)
         probe = _FIRST_PROBE * spread
         while True:
             matrix.fill_within(probe, ranges=strips)
             values = sorted(matrix.values[i, j] for i, j in _local_minima(matrix.values, far) if i < j and interior[i] and matrix.values[i, j] <= probe)
-            needed = math.ceil(2 * wanted / scale)
             if len(values) >= needed:
                 return float(values[needed - 1]), 1.1
             if probe >= spread:
