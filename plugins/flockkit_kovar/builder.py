@@ -121,9 +121,9 @@ class Kovar:
                 "record longer motion or lower candidate_interval and blend_time"
             )
         configs = [motion.configuration(int(f)) for f in frames]
-        far = np.abs(frames[:, None] - frames[None, :]) >= max(gap, 1)
+        apart = np.abs(np.subtract.outer(np.arange(len(frames)), np.arange(len(frames))))  # in candidates
+        far = apart * stride >= max(gap, 1)
         # nearer the diagonal than the neighbors of far cells, cells never matter: pruning skips them
-        apart = np.abs(np.subtract.outer(np.arange(len(frames)), np.arange(len(frames))))
         matrix = _Matrix(configs, metric, n_jobs=self.n_jobs, progress=self.progress, needed=apart >= math.ceil(max(gap, 1) / stride) - 2)
         if self.per_second is not None:
             matrix.fill(matrix.all_pairs())
@@ -160,6 +160,7 @@ class Kovar:
         value is computed at once; with it, the minima under a probe threshold are exactly those of
         the full matrix, so probing upwards until the rule is decided gives the identical result."""
         probe, step = self._first_probe(frames, far, matrix, spread, wanted) if prune else (spread, 2)
+        count = wanted  # a higher probe only appends minima: the counts tried stay decided
         while True:
             if prune:
                 matrix.fill_within(probe)
@@ -167,7 +168,6 @@ class Kovar:
                 matrix.fill(matrix.all_pairs())
             minima = sorted((ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= probe), key=lambda ij: (matrix.values[ij], ij))
             # the lowest minima, adding the shortfall until enough survive the trimming of dead ends
-            count = wanted
             while count <= len(minima):
                 kept = _kept(motion, frames, minima[:count], matrix, blend)
                 if kept >= wanted:
