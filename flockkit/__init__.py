@@ -1,18 +1,21 @@
 """flockkit: data-driven and constrained animation of groups of agents.
 
 The public API. Value types (``Motion``, ``Configuration``, ``State``, regions), the plugin
-lookup (``get``, ``available``, ``hookimpl``) and the convenience layer (``simulate``).
+lookup (``get``, ``resolve``, ``available``, ``hookimpl``) and declared ``Capabilities``, the
+convenience layer (``simulate``, ``build_graph``, ``walk``, ``solve``), rigid motions
+(``flockkit.rigid``) and the checks plugins share (``flockkit.validate``).
 """
 
-from . import errors, io
-from .constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
+from . import errors, io, rigid, validate
+from .constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, Problem, Region, ShapeConstraint
 from .convenience import build_graph, random_flock, simulate, walk
 from .graph import Clip, MotionGraph, Transition, Walk
 from .synthesis import synthesize, synthesize_many
 from .hookspecs import hookimpl
+from .interfaces import Capabilities, capabilities
 from .solve import Proposal, Solution, solve
 from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State, heading_axes
-from .registry import available, get
+from .registry import available, get, resolve
 
 __version__ = "0.1.0"
 
@@ -33,12 +36,16 @@ __all__ = [
     "Ball",
     "Box",
     "Polygon",
+    "Region",
     "PointConstraint",
     "ComConstraint",
     "ShapeConstraint",
     "Problem",
     "get",
+    "resolve",
     "available",
+    "Capabilities",
+    "capabilities",
     "hookimpl",
     "simulate",
     "build_graph",
@@ -49,5 +56,7 @@ __all__ = [
     "random_flock",
     "errors",
     "io",
+    "rigid",
+    "validate",
     "__version__",
 ]

@@ -51,23 +51,3 @@ def readonly_mapping(value, *, field: str) -> Mapping[str, np.ndarray]:
             raise ValidationError(f"{field} names must be Python identifiers; got {name!r}")
         converted[name] = readonly_float(array, field=f"{field}[{name!r}]")
     return MappingProxyType(converted)
-
-
-def positive_number(value, *, field: str) -> float:
-    """Return `value` as a float, raising ValidationError unless it is finite and > 0."""
-    try:
-        number = float(value)
-    except (TypeError, ValueError):
-        raise ValidationError(f"{field} must be a positive number; got {value!r}") from None
-    if not np.isfinite(number) or number <= 0:
-        raise ValidationError(f"{field} must be a finite number > 0; got {value!r}")
-    return number
-
-
-def count(value, *, field: str, minimum: int = 1) -> int:
-    """Return `value` as an int, raising ValidationError unless it is an integer >= `minimum`."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise ValidationError(f"{field} must be an integer >= {minimum}; got {value!r}")
-    if value < minimum:
-        raise ValidationError(f"{field} must be an integer >= {minimum}; got {value}")
-    return int(value)

@@ -78,12 +78,27 @@ def _cmd_simulate(args) -> int:
 
 
 def _cmd_check(args) -> int:
-    from .testing import check_plugin, checks_for
+    from .testing import check_plugin
 
     component = flockkit.get(args.kind, args.name, **_parameters(args.param))
-    check_plugin(args.kind, component, name=args.name, progress=_progress(args))
-    print(f"{args.kind} {args.name!r}: all {len(checks_for(args.kind))} checks passed")
+    report = check_plugin(args.kind, component, name=args.name, partners=_partners(args.partner), progress=_progress(args))
+    print(f"{args.kind} {args.name!r}: {report.summary()}")
     return 0
+
+
+def _partners(pairs) -> dict:
+    """--partner metric=NAME, behavior=NAME (made with dt = 0.1 s, as the kit's motions) or
+    graph=FILE.npz."""
+    partners = {}
+    for pair in pairs or ():
+        key, sep, value = pair.partition("=")
+        if not sep or key not in ("metric", "behavior", "graph"):
+            raise ValidationError(f"--partner expects metric=NAME, behavior=NAME or graph=FILE.npz; got {pair!r}")
+        if key == "graph":
+            partners[key] = flockkit.MotionGraph.load(value)
+        else:
+            partners[key] = flockkit.get(key, value, **({"dt": 0.1} if key == "behavior" else {}))
+    return partners
 
 
 def _progress(args) -> bool:
@@ -98,9 +113,7 @@ def _cmd_build(args) -> int:
         params["threshold"] = args.threshold
     if args.jobs is not None:
         params["n_jobs"] = args.jobs
-    if args.builder == "kovar":
-        params.setdefault("progress", _progress(args))
-    graph = flockkit.build_graph(motion, builder=args.builder, metric=args.metric, **params)
+    graph = flockkit.build_graph(motion, builder=args.builder, metric=args.metric, progress=_progress(args), **params)
     graph.save(output)
     stats = graph.stats()
     print(f"wrote {output}: {stats['nodes']} nodes, {stats['transitions']} transitions, {stats['fraction_kept']:.0%} of frames kept")
@@ -314,6 +327,9 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("kind", choices=KINDS)
     check.add_argument("name")
     check.add_argument("--param", action="append", metavar="KEY=VALUE", help="factory parameter, repeatable")
+    check.add_argument("--partner", action="append", metavar="KIND=NAME",
+                       help="partner component of the checks: metric=NAME (builders), behavior=NAME (proposals), "
+                            "graph=FILE.npz (walks); default: the built-in, or the kit's own graph")
     check.add_argument("--quiet", action="store_true", help="no progress bar")
     check.set_defaults(run=_cmd_check)
     return parser

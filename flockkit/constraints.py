@@ -1,9 +1,11 @@
 """Regions of space (obstacles for behavior models, regions for walks, shapes for constraints),
 the constraints of paper 004 and the Problem that gathers them.
 
-Each region offers ``contains(points)``, ``signed_distance(points)`` (negative inside) and
-``surface_normal(points)`` (the outward unit normal of the nearest boundary, the gradient of the
-signed distance), vectorized over points of shape (M, D).
+Each region (a ``Region``: ``Ball``, ``Box`` or ``Polygon``) offers ``contains(points)``,
+``signed_distance(points)`` (negative inside) and ``surface_normal(points)`` (the outward unit
+normal of the nearest boundary, the gradient of the signed distance), vectorized over points of
+shape (M, D), and ``bounds()``, ``centroid()``, ``interior_point()`` and ``sample(count, rng)``,
+so that callers never need to ask which kind of region they hold.
 """
 
 from __future__ import annotations
@@ -13,8 +15,9 @@ import functools
 import attrs
 import numpy as np
 
-from ._arrays import check_finite, count, positive_number, readonly_float
+from ._arrays import check_finite, readonly_float
 from .errors import ValidationError
+from .validate import integer, number
 
 __all__ = ["Ball", "Box", "Polygon", "Region", "PointConstraint", "ComConstraint", "ShapeConstraint", "Constraint", "Problem"]
 
@@ -29,8 +32,10 @@ def _unit(vectors: np.ndarray) -> np.ndarray:
     return np.divide(vectors, norms, out=np.zeros_like(vectors), where=norms > 1e-150)
 
 
-class _Region:
-    """Shared methods; subclasses define `dims` and `_distance_and_normal(points)`."""
+class Region:
+    """A region of space: the base of Ball, Box and Polygon.
+
+    Subclasses define `dims`, `bounds()`, `centroid()` and `_distance_and_normal(points)`."""
 
     def _points(self, points) -> np.ndarray:
         points = np.asarray(points, dtype=np.float64)
@@ -56,9 +61,36 @@ class _Region:
         """Whether each point lies inside or on the boundary."""
         return self.signed_distance(points) <= 0
 
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The corners (lower, upper) of the smallest axis-aligned box holding the region."""
+        raise NotImplementedError
+
+    def centroid(self) -> np.ndarray:
+        """The center of mass of the region's area (volume), shape (D,)."""
+        raise NotImplementedError
+
+    def interior_point(self) -> np.ndarray:
+        """A point well inside the region (its centroid, where that is inside)."""
+        return self.centroid()
+
+    def sample(self, count: int, rng: np.random.Generator) -> np.ndarray:
+        """`count` points drawn uniformly inside the region, shape (count, D), by rejection from
+        its bounding box. Raises ValidationError when the region fills too little of its box to
+        sample (a sliver: under one draw in a million lands inside)."""
+        count = integer(count, "count", minimum=0)
+        lower, upper = self.bounds()
+        points, drawn = [], 0
+        while sum(len(p) for p in points) < count:
+            batch = rng.uniform(lower, upper, size=(4 * count + 16, self.dims))
+            points.append(batch[self.contains(batch)])
+            drawn += len(batch)
+            if drawn > 1_000_000 and not sum(len(p) for p in points):
+                raise ValidationError(f"{type(self).__name__}: no sample in {drawn} draws fell inside; the region has (almost) no area")
+        return np.concatenate(points or [np.empty((0, self.dims))])[:count]
+
 
 @attrs.frozen(kw_only=True, eq=False)
-class Ball(_Region):
+class Ball(Region):
     """A disc (2D) or sphere (3D).
 
     Parameters
@@ -68,7 +100,7 @@ class Ball(_Region):
     """
 
     center: np.ndarray = _field("Ball.center")
-    radius: float = attrs.field(converter=functools.partial(positive_number, field="Ball.radius"))
+    radius: float = attrs.field(converter=functools.partial(number, field="Ball.radius", minimum=0, strict=True))
 
     def __attrs_post_init__(self):
         if self.center.shape not in ((2,), (3,)):
@@ -79,6 +111,12 @@ class Ball(_Region):
     def dims(self) -> int:
         return self.center.shape[0]
 
+    def bounds(self):
+        return self.center - self.radius, self.center + self.radius
+
+    def centroid(self):
+        return np.array(self.center)
+
     def _distance_and_normal(self, points):
         offset = points - self.center
         distance = np.linalg.norm(offset, axis=1)
@@ -88,7 +126,7 @@ class Ball(_Region):
 
 
 @attrs.frozen(kw_only=True, eq=False)
-class Box(_Region):
+class Box(Region):
     """An axis-aligned rectangle (2D) or box (3D).
 
     Parameters
@@ -114,6 +152,12 @@ class Box(_Region):
     def dims(self) -> int:
         return self.lower.shape[0]
 
+    def bounds(self):
+        return np.array(self.lower), np.array(self.upper)
+
+    def centroid(self):
+        return (self.lower + self.upper) / 2
+
     def _distance_and_normal(self, points):
         center = (self.lower + self.upper) / 2
         offset = points - center
@@ -132,7 +176,7 @@ class Box(_Region):
 
 
 @attrs.frozen(kw_only=True, eq=False)
-class Polygon(_Region):
+class Polygon(Region):
     """A simple polygon in 2D (convex or not), given by its vertices in order.
 
     Parameters
@@ -158,6 +202,21 @@ class Polygon(_Region):
     @property
     def dims(self) -> int:
         return 2
+
+    def bounds(self):
+        return self.vertices.min(axis=0), self.vertices.max(axis=0)
+
+    def centroid(self):
+        a, b = self._edges()
+        cross = a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1]
+        return ((a + b) * cross[:, None]).sum(axis=0) / (3 * cross.sum())
+
+    def interior_point(self):
+        """The point farthest inside among the vertex centroid and the centroids of the triangles
+        of the fan from vertex 0 (the area centroid of a non-convex polygon may lie outside)."""
+        v = self.vertices
+        candidates = np.vstack([v.mean(axis=0), (v[0] + v[1:-1] + v[2:]) / 3])
+        return candidates[np.argmin(self.signed_distance(candidates))]
 
     def _edges(self):
         return self.vertices, np.roll(self.vertices, -1, axis=0)
@@ -207,9 +266,6 @@ class Polygon(_Region):
         on_edge = ~normal.any(axis=1)
         normal[on_edge] = edge_normals[nearest[on_edge]]
         return distance * sign, normal
-
-
-Region = Ball | Box | Polygon
 
 
 # -- constraints (paper 004, section 3.2) ----------------------------------------------------
@@ -302,7 +358,7 @@ class ShapeConstraint:
     velocity: np.ndarray = attrs.field(default=None, converter=functools.partial(_vector, field="ShapeConstraint.velocity"))
 
     def __attrs_post_init__(self):
-        if not isinstance(self.shape, (Ball, Box, Polygon)):
+        if not isinstance(self.shape, Region):
             raise ValidationError(f"ShapeConstraint.shape must be a flockkit.Polygon, Box or Ball; got {type(self.shape).__name__}")
         if self.velocity is None:
             raise ValidationError("ShapeConstraint.velocity is required (shape (D,)): the flock's velocity inside the shape")
@@ -339,7 +395,7 @@ def _regions(value) -> tuple:
     except TypeError:
         raise ValidationError(f"Problem.obstacles must be a sequence of regions; got {type(value).__name__}") from None
     for index, item in enumerate(items):
-        if not isinstance(item, (Ball, Box, Polygon)):
+        if not isinstance(item, Region):
             raise ValidationError(f"Problem.obstacles[{index}] must be a flockkit.Ball, Box or Polygon; got {type(item).__name__}")
     return items
 
@@ -382,17 +438,17 @@ class Problem:
         livelier), as section 3.3.1 offers.
     """
 
-    n_agents: int = attrs.field(converter=lambda v: count(v, field="Problem.n_agents"))
+    n_agents: int = attrs.field(converter=lambda v: integer(v, "Problem.n_agents", minimum=1))
     dims: int = attrs.field(default=2)
-    dt: float = attrs.field(default=0.1, converter=functools.partial(positive_number, field="Problem.dt"))
-    duration: float = attrs.field(converter=functools.partial(positive_number, field="Problem.duration"))
+    dt: float = attrs.field(default=0.1, converter=functools.partial(number, field="Problem.dt", minimum=0, strict=True))
+    duration: float = attrs.field(converter=functools.partial(number, field="Problem.duration", minimum=0, strict=True))
     constraints: tuple = attrs.field(default=(), converter=_constraints)
     obstacles: tuple = attrs.field(default=(), converter=_regions)
-    flocks: int = attrs.field(default=1, converter=lambda v: count(v, field="Problem.flocks"))
-    sigma_com: float = attrs.field(default=0.1, converter=functools.partial(positive_number, field="Problem.sigma_com"))
-    shape_weight: float = attrs.field(default=10.0, converter=functools.partial(positive_number, field="Problem.shape_weight"))
-    flock_weight: float = attrs.field(default=1000.0, converter=functools.partial(positive_number, field="Problem.flock_weight"))
-    visibility: float = attrs.field(default=3.0, converter=functools.partial(positive_number, field="Problem.visibility"))
+    flocks: int = attrs.field(default=1, converter=lambda v: integer(v, "Problem.flocks", minimum=1))
+    sigma_com: float = attrs.field(default=0.1, converter=functools.partial(number, field="Problem.sigma_com", minimum=0, strict=True))
+    shape_weight: float = attrs.field(default=10.0, converter=functools.partial(number, field="Problem.shape_weight", minimum=0, strict=True))
+    flock_weight: float = attrs.field(default=1000.0, converter=functools.partial(number, field="Problem.flock_weight", minimum=0, strict=True))
+    visibility: float = attrs.field(default=3.0, converter=functools.partial(number, field="Problem.visibility", minimum=0, strict=True))
     follow: str = attrs.field(default="nearest")
 
     def __attrs_post_init__(self):

@@ -2,18 +2,19 @@
 
 from __future__ import annotations
 
-import inspect
 import math
 
 import attrs
 
 import numpy as np
 
-from ._arrays import count, positive_number
+from .validate import integer, number
 from .errors import ValidationError
 from .graph import MotionGraph, Walk
 from .motion import Motion, State
-from .registry import get
+from ._progress import progress_bar
+from .interfaces import capabilities
+from .registry import get, label, require_dims, resolve
 
 __all__ = ["simulate", "random_flock", "build_graph", "walk"]
 
@@ -27,11 +28,11 @@ def random_flock(*, n_agents: int, dims: int = 2, rng: np.random.Generator, spac
     standard deviation 0.2 per component, normalized and scaled to `speed`. No model arrays
     (``extra`` is empty), so a model starts its own (boids: zero wander).
     """
-    n_agents = count(n_agents, field="n_agents")
+    n_agents = integer(n_agents, "n_agents", minimum=1)
     if dims not in (2, 3):
         raise ValidationError(f"dims must be 2 or 3; got {dims!r}")
-    spacing = positive_number(spacing, field="spacing")
-    speed = positive_number(speed, field="speed")
+    spacing = number(spacing, "spacing", minimum=0, strict=True)
+    speed = number(speed, "speed", minimum=0, strict=True)
     unit_ball = math.pi if dims == 2 else 4.0 * math.pi / 3.0
     radius = spacing * (n_agents / unit_ball) ** (1.0 / dims)
     directions = rng.standard_normal((n_agents, dims))
@@ -45,12 +46,12 @@ def random_flock(*, n_agents: int, dims: int = 2, rng: np.random.Generator, spac
 
 
 def simulate(
-    behavior: str = "boids",
+    behavior="boids",
     *,
     n_agents: int,
     steps: int,
     dims: int = 2,
-    dt: float = 0.1,
+    dt: float | None = None,
     seed: int | None = None,
     initial: State | None = None,
     progress: bool = False,
@@ -60,25 +61,35 @@ def simulate(
 
     Parameters
     ----------
-    behavior : str
-        Name of an installed behavior model (``flockkit.available("behavior")``).
-    n_agents, steps, dims, dt
-        Flock size (>= 1), number of steps (>= 1), 2 or 3 dimensions, seconds per step.
+    behavior : str or behavior model
+        Name of an installed behavior model (``flockkit.available("behavior")``), made with `dt`
+        and `params`; or a model instance, used as it is (then `dt` and `params` stay unset).
+    n_agents, steps, dims
+        Flock size (>= 1), number of steps (>= 1), 2 or 3 dimensions (one the model declares in
+        its ``Capabilities.dims``).
+    dt : float, optional
+        Seconds per step for a model made by name (default 0.1).
     seed : int, optional
         Seeds the ``numpy.random.Generator`` used for the initial flock and the simulation; the
         same seed gives the same motion.
     initial : flockkit.State, optional
         Start here instead of at ``random_flock(n_agents=..., dims=..., rng=...)``.
     progress : bool
-        Show a progress bar (tqdm) when the model reports progress.
+        Show a progress bar (tqdm) when the model declares ``Capabilities(progress=True)``.
     **params
         Passed to the behavior model's factory with `dt`, e.g. ``cohesion_weight=2.0``.
     """
-    n_agents = count(n_agents, field="n_agents")
-    steps = count(steps, field="steps")
-    if dims not in (2, 3):
+    n_agents = integer(n_agents, "n_agents", minimum=1)
+    steps = integer(steps, "steps", minimum=1)
+    if dims not in (2, 3) or isinstance(dims, bool):
         raise ValidationError(f"dims must be 2 or 3; got {dims!r}")
-    model = get("behavior", behavior, dt=dt, **params)
+    if isinstance(behavior, str):
+        model = get("behavior", behavior, dt=0.1 if dt is None else dt, **params)
+    elif dt is not None:
+        raise ValidationError("simulate: dt is for a behavior made by name; a model instance steps its own dt")
+    else:
+        model = resolve("behavior", behavior, **params)
+    require_dims("behavior", model, dims, f"a {dims}D flock", spec=behavior)
     rng = np.random.default_rng(seed)
     if initial is None:
         initial = random_flock(n_agents=n_agents, dims=dims, rng=rng)
@@ -86,51 +97,77 @@ def simulate(
         raise ValidationError(
             f"initial state has {initial.n_agents} agents in {initial.dims}D; expected {n_agents} in {dims}D"
         )
-    if not progress or "progress" not in inspect.signature(model.forward).parameters:
+    if not (progress and capabilities(model).progress):
         return model.forward(initial, steps, rng)
-    from tqdm.auto import tqdm
-
-    with tqdm(total=steps, unit="step", desc=f"simulating {n_agents} agents") as bar:
-        return model.forward(initial, steps, rng, progress=lambda done: bar.update(done - bar.n))
+    with progress_bar(True, unit="step") as report:
+        return model.forward(initial, steps, rng, progress=report)
 
 
 def build_graph(
     motion: Motion,
     *,
-    builder: str = "kovar",
-    metric: str = "icp-hungarian",
+    builder="kovar",
+    metric="icp-hungarian",
     metric_params: dict | None = None,
     seed: int | None = None,
+    progress: bool = False,
     **params,
 ) -> MotionGraph:
     """Build a motion graph of `motion` (paper 000 section 4.3).
 
-    `params` go to the builder (for ``kovar``: ``threshold``, ``blend_time``, ``n_jobs``, ...),
-    `metric_params` to the metric (for ``icp-hungarian``: ``velocity_weight``, ...). The graph's
-    provenance records both names and parameters, the flockkit version and the seed.
+    `builder` and `metric` are installed names or instances. `params` go to a builder made by
+    name (for ``kovar``: ``threshold``, ``blend_time``, ``n_jobs``, ...), `metric_params` to a
+    metric made by name (for ``icp-hungarian``: ``velocity_weight``, ...). `progress` shows
+    progress bars when the builder declares ``Capabilities(progress=True)``. The graph's
+    provenance records both components (names, or class names of instances) and their
+    parameters, the flockkit version and the seed.
     """
     if not isinstance(motion, Motion):
         raise ValidationError(f"build_graph needs a flockkit.Motion; got {type(motion).__name__}")
     metric_params = dict(metric_params or {})
-    graph = get("builder", builder, **params).build(motion, get("metric", metric, **metric_params), np.random.default_rng(seed))
+    made = resolve("builder", builder, **params)
+    measure = resolve("metric", metric, **metric_params)
+    for kind, component, spec in (("builder", made, builder), ("metric", measure, metric)):
+        require_dims(kind, component, motion.dims, f"a {motion.dims}D motion", spec=spec)
+    rng = np.random.default_rng(seed)
+    if progress and capabilities(made).progress:
+        with progress_bar(True) as report:
+            graph = made.build(motion, measure, rng, progress=report)
+    else:
+        graph = made.build(motion, measure, rng)
     from . import __version__
 
     provenance = {
         **graph.provenance,
-        "builder": builder,
-        "builder_params": {k: v for k, v in params.items() if isinstance(v, (int, float, str, bool, type(None)))},
-        "metric": metric,
-        "metric_params": {k: v for k, v in metric_params.items() if isinstance(v, (int, float, str, bool, type(None)))},
+        "builder": label(builder),
+        "builder_params": _plain(params if isinstance(builder, str) else _fields(builder)),
+        "metric": label(metric),
+        "metric_params": _plain(metric_params if isinstance(metric, str) else _fields(metric)),
         "flockkit": __version__,
         "seed": seed,
     }
     return attrs.evolve(graph, provenance=provenance)
 
 
-def walk(graph: MotionGraph, *, strategy: str = "random", duration: float | None = None, seed: int | None = None, **params) -> Walk:
-    """A walk through `graph` with a walk strategy (``random``; ``region`` with ``region=``)
-    covering `duration` seconds (default: the length of the graph's source motion)."""
+def _fields(instance) -> dict:
+    """An attrs instance's fields (its configuration), for provenance; {} for other classes."""
+    return attrs.asdict(instance, recurse=False) if attrs.has(type(instance)) else {}
+
+
+def _plain(params: dict) -> dict:
+    """The JSON scalars among `params`, less how the work was run (``n_jobs``): equal graphs
+    built with one worker or many have equal provenance."""
+    return {k: v for k, v in params.items() if isinstance(v, (int, float, str, bool, type(None))) and k != "n_jobs"}
+
+
+def walk(graph: MotionGraph, *, strategy="random", duration: float | None = None, seed: int | None = None,
+         **params) -> Walk:
+    """A walk through `graph` with a walk strategy (an installed name with `params`: ``random``,
+    ``region`` with ``region=``; or an instance) covering `duration` seconds (default: the length
+    of the graph's source motion)."""
     if not isinstance(graph, MotionGraph):
         raise ValidationError(f"walk needs a flockkit.MotionGraph; got {type(graph).__name__}")
     duration = graph.motion.duration if duration is None else duration
-    return get("walk", strategy, **params).walk(graph, np.random.default_rng(seed), duration)
+    made = resolve("walk", strategy, **params)
+    require_dims("walk", made, graph.motion.dims, f"a {graph.motion.dims}D graph", spec=strategy)
+    return made.walk(graph, np.random.default_rng(seed), duration)

@@ -20,6 +20,7 @@ __all__ = [
     "PluginError",
     "FileFormatError",
     "MissingDependencyError",
+    "FlockkitWarning",
 ]
 
 
@@ -52,3 +53,7 @@ class FileFormatError(FlockkitError, ValueError):
 
 class MissingDependencyError(FlockkitError, ImportError):
     """An optional dependency is not installed; the message names the extra that provides it."""
+
+
+class FlockkitWarning(UserWarning):
+    """Something works, but probably not as meant: no plugin component found at all, for one."""

@@ -10,12 +10,17 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
+import attrs
 import numpy as np
+
+from .errors import ValidationError
 
 if TYPE_CHECKING:
     from .motion import Configuration, Motion, State
 
 __all__ = [
+    "Capabilities",
+    "capabilities",
     "BehaviorModel",
     "ConfigurationMetric",
     "GraphBuilder",
@@ -23,6 +28,110 @@ __all__ = [
     "ProposalMove",
     "Objective",
 ]
+
+
+def _dims(value) -> tuple[int, ...]:
+    try:
+        dims = tuple(value)
+    except TypeError:
+        dims = ()
+    if not dims or any(isinstance(d, bool) or d not in (2, 3) for d in dims) or len(set(dims)) != len(dims):
+        raise ValidationError(f"Capabilities.dims must be a non-empty tuple of distinct dimensions from (2, 3); got {value!r}")
+    return tuple(sorted(int(d) for d in dims))
+
+
+def _flag(name):
+    def check(instance, attribute, value):
+        if not isinstance(value, bool):
+            raise ValidationError(f"Capabilities.{name} must be True or False; got {value!r}")
+
+    return check
+
+
+def _reach(instance, attribute, value):
+    if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 0):
+        raise ValidationError(f"Capabilities.plausibility_reach must be None or an integer >= 0; got {value!r}")
+
+
+@attrs.frozen(kw_only=True)
+class Capabilities:
+    """What a component supports beyond the required methods of its kind: declared, never guessed.
+
+    A component declares it as a ``capabilities`` attribute (of its class or of the instance);
+    :func:`capabilities` reads it, and gives these defaults when there is none. The core, the CLI
+    and the conformance kit read only this declaration: they never look at signatures or
+    attributes to find out what a component can do. Registration checks that every operation a
+    component declares is there with the documented parameters, and that it declares only fields
+    its kind reads (`KIND_FIELDS`).
+
+    Attributes
+    ----------
+    dims : tuple of int
+        The dimensions the component handles, from (2, 3). Every kind. The kit checks only these;
+        ``simulate`` and ``solve`` refuse other dimensions with a message naming this field.
+    guide : bool
+        Behavior: ``forward`` and ``backward`` take ``guide``, a mapping of agent index to the
+        (steps + 1, D) positions that agent takes (keyframed) while the others react to it. The
+        initial trajectories of ``solve`` guide point-constrained agents along their paths.
+    obstacles : bool
+        Behavior: the factory takes ``obstacles``, a sequence of flockkit regions the model
+        avoids. ``solve`` passes a Problem's obstacles to a model it makes by name, and refuses a
+        problem with obstacles for a model without this.
+    plausibility_reach : int or None
+        Behavior: changing positions at frame f changes ``log_plausibility`` only at frames
+        f - reach .. f + reach. The sampler then re-scores only those frames after a proposal;
+        None (unknown) re-scores every frame.
+    progress : bool
+        Behavior (``forward`` and ``backward``) and builder (``build``): the operation takes
+        ``progress``, a callable ``progress(done, total, stage)`` it calls as work completes
+        (`stage` a short description; a new stage restarts the count). ``simulate`` and
+        ``build_graph`` draw a progress bar with it when asked.
+    lower_bound, pairs_within, pairwise : bool
+        Metric: it offers that method (see ``ConfigurationMetric``). Builders use ``pairs_within``
+        or else ``lower_bound`` to prune, and ``pairwise`` to compute many distances at once; the
+        kit checks each declared one.
+    """
+
+    dims: tuple = attrs.field(default=(2, 3), converter=_dims)
+    guide: bool = attrs.field(default=False, validator=_flag("guide"))
+    obstacles: bool = attrs.field(default=False, validator=_flag("obstacles"))
+    plausibility_reach: int | None = attrs.field(default=None, validator=_reach)
+    progress: bool = attrs.field(default=False, validator=_flag("progress"))
+    lower_bound: bool = attrs.field(default=False, validator=_flag("lower_bound"))
+    pairs_within: bool = attrs.field(default=False, validator=_flag("pairs_within"))
+    pairwise: bool = attrs.field(default=False, validator=_flag("pairwise"))
+
+    def declared(self) -> dict:
+        """The fields that differ from the defaults."""
+        default = Capabilities()
+        return {f.name: getattr(self, f.name) for f in attrs.fields(Capabilities) if getattr(self, f.name) != getattr(default, f.name)}
+
+
+# kind -> the Capabilities fields (besides dims) that something reads for that kind
+KIND_FIELDS: dict[str, frozenset] = {
+    "behavior": frozenset({"guide", "obstacles", "plausibility_reach", "progress"}),
+    "metric": frozenset({"lower_bound", "pairs_within", "pairwise"}),
+    "builder": frozenset({"progress"}),
+    "walk": frozenset(),
+    "proposal": frozenset(),
+    "objective": frozenset(),
+}
+
+
+def capabilities(component) -> Capabilities:
+    """The ``Capabilities`` that `component` (an instance or its class) declares, or the defaults.
+
+    Raises ValidationError if its ``capabilities`` attribute is something else."""
+    declared = getattr(component, "capabilities", None)
+    if declared is None:
+        return Capabilities()
+    if not isinstance(declared, Capabilities):
+        name = getattr(component, "__name__", None) or type(component).__name__
+        raise ValidationError(
+            f"{name}.capabilities must be a flockkit.Capabilities; got {type(declared).__name__}"
+        )
+    return declared
+
 
 
 @runtime_checkable
@@ -51,13 +160,8 @@ class BehaviorModel(Protocol):
     finite float64 arrays for finite inputs, and raise ``flockkit.errors.ValidationError`` for
     bad arguments (negative steps, a window outside the motion, unsupported dimensions).
 
-    ``forward`` and ``backward`` may also accept an optional keyword ``progress``: a callable
-    taking the number of steps completed so far. ``flockkit.simulate`` passes it when present.
-    They may also accept ``guide``: a mapping of agent index to (steps + 1, D) positions those
-    agents take (keyframed) while the others react to them; the constrained-animation initial
-    trajectories use it where offered. And a model may declare ``plausibility_reach``: how many
-    frames on each side of a changed frame its ``log_plausibility`` can change (the sampler then
-    re-scores only those).
+    Optional, declared in ``Capabilities`` (``guide``, ``obstacles``, ``plausibility_reach``,
+    ``progress``), never guessed from signatures.
     """
 
     def forward(self, initial: State, steps: int, rng: np.random.Generator) -> Motion: ...
@@ -80,15 +184,16 @@ class ConfigurationMetric(Protocol):
         the search, zero for identical configurations, invariant to rigid motion and to the order
         of agents.
 
-    Optional, used by graph builders to go faster:
+    Optional, each declared in ``Capabilities`` (``lower_bound``, ``pairs_within``,
+    ``pairwise``), used by graph builders to go faster and checked by the kit:
 
     ``lower_bound(a, b)``
         A proven lower bound on ``compare(a, b).distance``, much cheaper than `compare`.
-    ``pairs_within(configurations, threshold)``
+    ``pairs_within(configurations, threshold, *, rows=None)``
         Integer array (P, 2) of pairs (i, j), i < j, each once, including every pair whose
         ``compare`` distance is at most `threshold` (pairs left out are proven farther apart).
-        It may take ``rows=(start, stop)``: then only the pairs with start <= i < stop, so that
-        a builder can share the job among workers.
+        With ``rows=(start, stop)``, only the pairs with start <= i < stop, so that a builder can
+        share the job among workers.
     ``pairwise(configurations, pairs=None)``
         Distances (P,) of ``compare(configurations[i], configurations[j])`` for each row (i, j) of
         `pairs`; without `pairs`, every i < j in row-major order (``scipy`` ``pdist`` order).
@@ -106,7 +211,8 @@ class GraphBuilder(Protocol):
     ``build(motion, metric, rng)``
         Return a ``flockkit.MotionGraph`` whose clips are frame ranges of `motion`, whose
         transitions join configurations that `metric` finds similar, and whose every node can be
-        reached from every other (dead ends trimmed). Deterministic given `rng`.
+        reached from every other (dead ends trimmed). Deterministic given `rng`. A builder
+        that declares ``Capabilities(progress=True)`` takes ``progress`` as for behaviors.
     """
 
     def build(self, motion: Motion, metric: ConfigurationMetric, rng: np.random.Generator): ...
@@ -155,6 +261,43 @@ class Objective(Protocol):
 
     def log_terms(self, motion: Motion, problem, start: int = 0, stop: int | None = None) -> np.ndarray: ...
 
+
+class _Guided(Protocol):
+    def forward(self, initial, steps, rng, *, guide=None): ...
+
+    def backward(self, final, steps, rng, *, guide=None): ...
+
+
+class _SimulationProgress(Protocol):
+    def forward(self, initial, steps, rng, *, progress=None): ...
+
+    def backward(self, final, steps, rng, *, progress=None): ...
+
+
+class _BuildProgress(Protocol):
+    def build(self, motion, metric, rng, *, progress=None): ...
+
+
+class _LowerBound(Protocol):
+    def lower_bound(self, a, b): ...
+
+
+class _PairsWithin(Protocol):
+    def pairs_within(self, configurations, threshold, *, rows=None): ...
+
+
+class _Pairwise(Protocol):
+    def pairwise(self, configurations, pairs=None): ...
+
+
+# Capabilities field -> kind -> the methods (and parameters) a component declaring it must offer
+OPTIONAL_PROTOCOLS: dict[str, dict[str, type]] = {
+    "guide": {"behavior": _Guided},
+    "progress": {"behavior": _SimulationProgress, "builder": _BuildProgress},
+    "lower_bound": {"metric": _LowerBound},
+    "pairs_within": {"metric": _PairsWithin},
+    "pairwise": {"metric": _Pairwise},
+}
 
 # kind name -> protocol; the single table the registry and the conformance kit read.
 PROTOCOLS: dict[str, type] = {

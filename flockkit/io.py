@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ._arrays import count
+from .validate import integer
 from ._atomic import atomic_path
 from .errors import FileFormatError, ValidationError
 from .motion import Motion
@@ -53,7 +53,7 @@ def fill_gaps(positions, *, max_gap: int = DEFAULT_MAX_GAP, source: str = "posit
     that is never seen. `agent_names` and `frame_numbers` are how the message names them
     (default: their indices).
     """
-    max_gap = count(max_gap, field="max_gap", minimum=0)
+    max_gap = integer(max_gap, "max_gap", minimum=0)
     filled = np.array(positions, dtype=np.float64)
     if filled.ndim != 3:
         raise ValidationError(f"{source}: positions must have shape (T, N, D); got {filled.shape}")

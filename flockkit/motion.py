@@ -16,9 +16,10 @@ from collections.abc import Mapping
 import attrs
 import numpy as np
 
-from . import _npzfile
-from ._arrays import check_agent_array, check_finite, positive_number, readonly_float, readonly_mapping
+from . import _npzfile, rigid
+from ._arrays import check_agent_array, check_finite, readonly_float, readonly_mapping
 from .errors import FileFormatError, ValidationError
+from .validate import number
 
 __all__ = ["Motion", "Configuration", "State", "ConfigurationFrame", "Alignment", "DEFAULT_UP", "heading_axes"]
 
@@ -133,18 +134,14 @@ class Alignment:
 
     def transform(self, points) -> np.ndarray:
         """Points (..., D) of `b`'s world into `a`'s: ``points @ rotation.T + translation``."""
-        return np.asarray(points, dtype=np.float64) @ self.rotation.T + self.translation
+        return rigid.apply(self.rotation, self.translation, points)
 
     def inverse(self) -> Alignment:
         """The alignment of `a` onto `b` (same distance): what compare(b, a) would ideally return."""
         assignment = np.empty_like(self.assignment)
         assignment[self.assignment] = np.arange(len(self.assignment))
-        return Alignment(
-            distance=self.distance,
-            assignment=assignment,
-            rotation=self.rotation.T,
-            translation=-self.rotation.T @ self.translation,
-        )
+        rotation, translation = rigid.invert(self.rotation, self.translation)
+        return Alignment(distance=self.distance, assignment=assignment, rotation=rotation, translation=translation)
 
     def residual(self, a: Configuration, b: Configuration) -> float:
         """Mean squared distance between `a`'s positions and `b`'s, aligned and reassigned."""
@@ -307,7 +304,7 @@ class Motion:
     """
 
     positions: np.ndarray = _field("Motion.positions")
-    dt: float = attrs.field(converter=functools.partial(positive_number, field="Motion.dt"))
+    dt: float = attrs.field(converter=functools.partial(number, field="Motion.dt", minimum=0, strict=True))
     channels: Mapping[str, np.ndarray] = attrs.field(
         factory=dict, converter=functools.partial(readonly_mapping, field="Motion.channels")
     )

@@ -16,17 +16,32 @@ import importlib.metadata
 import inspect
 import os
 import re
+import sys
 import threading
+import warnings
 from collections.abc import Callable
 
 import attrs
 import pluggy
 
 from . import hookspecs
-from .errors import PluginError, UnknownPluginError, ValidationError
-from .interfaces import PROTOCOLS
+from .errors import FlockkitWarning, PluginError, UnknownPluginError, ValidationError
+from .interfaces import KIND_FIELDS, OPTIONAL_PROTOCOLS, PROTOCOLS, capabilities
 
-__all__ = ["Component", "Registry", "get", "available", "describe", "register", "reset", "plugin_manager", "interface_problems"]
+__all__ = [
+    "Component",
+    "Registry",
+    "get",
+    "resolve",
+    "label",
+    "require_dims",
+    "available",
+    "describe",
+    "register",
+    "reset",
+    "plugin_manager",
+    "interface_problems",
+]
 
 ENTRY_POINT_GROUP = "flockkit"
 BLOCK_VARIABLE = "FLOCKKIT_BLOCK_PLUGINS"
@@ -78,8 +93,9 @@ def _parameter_problems(expected: inspect.Signature, actual: inspect.Signature) 
     params = list(actual.parameters.values())
     kinds = {p.kind for p in params}
     positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
+    wanted_positional = [p for p in expected.parameters.values() if p.kind != p.KEYWORD_ONLY]
     problems = []
-    for index, wanted in enumerate(expected.parameters.values()):
+    for index, wanted in enumerate(wanted_positional):
         if index >= len(positional):
             if inspect.Parameter.VAR_POSITIONAL not in kinds:
                 problems.append(f"missing parameter {wanted.name!r}")
@@ -89,17 +105,24 @@ def _parameter_problems(expected: inspect.Signature, actual: inspect.Signature) 
             problems.append(f"parameter {index + 1} is named {got.name!r}; expected {wanted.name!r}")
         elif wanted.default is not inspect.Parameter.empty and got.default is inspect.Parameter.empty:
             problems.append(f"parameter {wanted.name!r} needs a default (the interface's is {wanted.default!r})")
-    for extra in positional[len(expected.parameters) :] + [p for p in params if p.kind == p.KEYWORD_ONLY]:
-        if extra.default is inspect.Parameter.empty:
+    by_name = {p.name: p for p in params if p.kind != p.POSITIONAL_ONLY}
+    for wanted in (p for p in expected.parameters.values() if p.kind == p.KEYWORD_ONLY):
+        got = by_name.get(wanted.name)
+        if got is None and inspect.Parameter.VAR_KEYWORD not in kinds:
+            problems.append(f"missing keyword parameter {wanted.name!r}")
+        elif got is not None and got.default is inspect.Parameter.empty:
+            problems.append(f"keyword parameter {wanted.name!r} needs a default (the interface's is {wanted.default!r})")
+    optional = {p.name for p in expected.parameters.values() if p.kind == p.KEYWORD_ONLY}
+    for extra in positional[len(wanted_positional) :] + [p for p in params if p.kind == p.KEYWORD_ONLY]:
+        if extra.default is inspect.Parameter.empty and extra.name not in optional:
             problems.append(f"extra parameter {extra.name!r} has no default, so callers of the interface cannot call it")
     return problems
 
 
-def interface_problems(component, kind: str) -> list[str]:
-    """What `component` (a class or an instance) lacks to honour the protocol of `kind`; [] if nothing."""
+def _method_problems(component, protocol: type) -> list[str]:
     problems = []
-    for name, expected in _protocol_methods(PROTOCOLS[kind]).items():
-        shown = f"{name}({', '.join(expected.parameters)})"
+    for name, expected in _protocol_methods(protocol).items():
+        shown = f"{name}({', '.join(_shown(p) for p in expected.parameters.values())})"
         if not callable(getattr(component, name, None)):
             problems.append(f"{shown}: missing")
             continue
@@ -108,6 +131,31 @@ def interface_problems(component, kind: str) -> list[str]:
         except (TypeError, ValueError):
             continue  # builtins without signatures: nothing to check
         problems.extend(f"{shown}: {problem}" for problem in _parameter_problems(expected, actual))
+    return problems
+
+
+def _shown(parameter: inspect.Parameter) -> str:
+    return f"{parameter.name}=" if parameter.kind == parameter.KEYWORD_ONLY else parameter.name
+
+
+def interface_problems(component, kind: str) -> list[str]:
+    """What `component` (a class or an instance) lacks to honour the protocol of `kind`, and the
+    operations its ``Capabilities`` declare; [] if nothing."""
+    problems = _method_problems(component, PROTOCOLS[kind])
+    try:
+        declared = capabilities(component).declared()
+    except ValidationError as exc:
+        return [*problems, str(exc)]
+    for field in declared:
+        if field == "dims":
+            continue
+        if field not in KIND_FIELDS[kind]:
+            users = sorted(k for k, fields in KIND_FIELDS.items() if field in fields)
+            problems.append(f"capabilities.{field} is declared, but only {' and '.join(users)} components use it")
+            continue
+        protocol = OPTIONAL_PROTOCOLS.get(field, {}).get(kind)
+        if protocol is not None:
+            problems.extend(f"{p} (capabilities.{field} is declared)" for p in _method_problems(component, protocol))
     return problems
 
 
@@ -121,27 +169,34 @@ def _interface_error(component: Component, problems: list[str]) -> PluginError:
 
 
 class Registry:
-    """The object passed to each ``flockkit_register_<kind>s`` hook."""
+    """The object passed to each ``flockkit_register_<kind>s`` hook.
 
-    def __init__(self, kind: str, plugin: str, distribution, table: dict[str, Component]):
+    The hook is called once per kind through pluggy (``pm.hook.flockkit_register_<kind>s``), so
+    hook wrappers and pluggy's call monitoring see it like any other hook call. Each component
+    still records the plugin that added it: the plugin whose hook implementation is on the call
+    stack of :meth:`add`.
+    """
+
+    def __init__(self, kind: str, table: dict[str, Component], owners: dict):
         self.kind = kind
-        self._plugin = plugin
-        self._distribution = distribution
         self._table = table
+        self._owners = owners
 
     def add(self, name: str, factory: Callable, *, description: str = "") -> None:
         """Register `factory` under `name`; ``factory(**params)`` must return a component of this kind.
 
         Raises PluginError, naming the plugin and the component, for a bad name, a name already
-        taken, a factory that is not callable, or a class without the methods of the interface.
+        taken, a factory that is not callable, or a class without the methods of the interface or
+        of the operations its ``capabilities`` declare.
         """
-        dist = self._distribution
+        plugin = _owner(self._owners, _frames(sys._getframe(1)))
+        dist = _state.distributions.get(plugin)
         component = Component(
             kind=self.kind,
             name=name,
             factory=factory,
             description=str(description),
-            plugin=self._plugin,
+            plugin=plugin,
             distribution=dist.project_name if dist else None,
             version=dist.version if dist else None,
         )
@@ -157,12 +212,57 @@ class Registry:
                 f"Uninstall one, or skip one with {BLOCK_VARIABLE}=<plugin>."
             )
         if not callable(factory):
-            raise PluginError(f"{component.origin} registers {self.kind} {name!r} with a factory that is not callable: {factory!r}")
+            raise PluginError(
+                f"{component.origin} registers {self.kind} {name!r} with a factory that is not callable: {factory!r}"
+            )
         if isinstance(factory, type):
-            problems = interface_problems(factory, self.kind)
+            problems = interface_problems(factory, self.kind) + _factory_problems(factory)
             if problems:
                 raise _interface_error(component, problems)
         self._table[name] = component
+
+
+def _factory_problems(factory) -> list[str]:
+    """What the factory lacks for the parameters its declared capabilities promise."""
+    if not capabilities(factory).obstacles:
+        return []
+    try:
+        parameters = inspect.signature(factory).parameters
+    except (TypeError, ValueError):
+        return []
+    takes_any = any(p.kind == p.VAR_KEYWORD for p in parameters.values())
+    if "obstacles" in parameters or takes_any:
+        return []
+    return ["the factory has no parameter 'obstacles' (capabilities.obstacles is declared)"]
+
+
+def _hook_owners(hook) -> dict:
+    """code object -> [(plugin name, the instance a bound hook method belongs to)], for every
+    implementation (wrappers included) of `hook`."""
+    owners: dict = {}
+    for impl in hook.get_hookimpls():
+        function = impl.function
+        code = getattr(getattr(function, "__func__", function), "__code__", None)
+        if code is not None:
+            owners.setdefault(code, []).append((impl.plugin_name, getattr(function, "__self__", None)))
+    return owners
+
+
+def _frames(frame):
+    while frame is not None:
+        yield frame
+        frame = frame.f_back
+
+
+def _owner(owners: dict, frames) -> str:
+    """The plugin whose hook implementation runs in the first of `frames` that is one ("unknown"
+    if none is): two instances of one plugin class are told apart by their `self`."""
+    for frame in frames:
+        entries = owners.get(frame.f_code)
+        if entries:
+            me = frame.f_locals.get("self")
+            return next((name for name, bound in entries if bound is me), entries[0][0])
+    return "unknown"
 
 
 @attrs.frozen
@@ -240,17 +340,32 @@ def _collect(manager: pluggy.PluginManager) -> dict[str, dict[str, Component]]:
     components: dict[str, dict[str, Component]] = {}
     for kind, hook_name in hookspecs.HOOKS.items():
         table = components[kind] = {}
-        for impl in getattr(manager.hook, hook_name).get_hookimpls():
-            registry = Registry(kind, impl.plugin_name, _state.distributions.get(impl.plugin_name), table)
-            try:
-                impl.function(**{name: registry for name in impl.argnames})
-            except PluginError:
-                raise
-            except Exception as exc:
-                raise PluginError(
-                    f"plugin {impl.plugin_name!r} failed in {hook_name}:\n  {type(exc).__name__}: {exc}"
-                ) from exc
+        hook = getattr(manager.hook, hook_name)
+        owners = _hook_owners(hook)
+        try:
+            hook(registry=Registry(kind, table, owners))
+        except PluginError:
+            raise
+        except Exception as exc:
+            innermost = [tb.tb_frame for tb in _tracebacks(exc.__traceback__)][::-1]
+            raise PluginError(
+                f"plugin {_owner(owners, innermost)!r} failed in {hook_name}:\n  {type(exc).__name__}: {exc}"
+            ) from exc
+    if not any(components.values()):
+        warnings.warn(
+            "no flockkit plugin component was found: every plugin is blocked "
+            f"({BLOCK_VARIABLE}), or flockkit runs from a source tree without install metadata "
+            "(install it: pip install -e .)",
+            FlockkitWarning,
+            stacklevel=4,
+        )
     return components
+
+
+def _tracebacks(tb):
+    while tb is not None:
+        yield tb
+        tb = tb.tb_next
 
 
 def plugin_manager() -> pluggy.PluginManager:
@@ -346,3 +461,50 @@ def get(kind: str, name: str, **params):
     if problems:
         raise _interface_error(component, problems)
     return instance
+
+
+def resolve(kind: str, spec, **params):
+    """A component of `kind`: ``get(kind, spec, **params)`` for a registered name, or `spec` itself
+    for an instance (used as it is configured: `params` are for names only).
+
+    Every public function that uses a component resolves it with this, once, in the caller's
+    process; only instances travel further (into joblib workers too). Raises ValidationError for
+    an instance that does not honour the interface of `kind`, for a class instead of an instance,
+    and for parameters given with an instance.
+    """
+    if isinstance(spec, str):
+        return get(kind, spec, **params)
+    _check_kind(kind)
+    shown = getattr(spec, "__name__", None) or type(spec).__name__
+    if isinstance(spec, type):
+        raise ValidationError(f"{kind}: got the class {shown}; pass an instance ({shown}(...)) or a registered name")
+    if params:
+        raise ValidationError(
+            f"{kind} {shown}: parameters {', '.join(sorted(params))} are for a {kind} made by name; "
+            "an instance is used as it is configured"
+        )
+    problems = interface_problems(spec, kind)
+    if problems:
+        lines = "\n".join(f"  - {p}" for p in problems)
+        raise ValidationError(
+            f"{kind} {shown} does not honour the {PROTOCOLS[kind].__name__} interface:\n{lines}"
+        )
+    return spec
+
+
+def label(spec) -> str:
+    """How a component given as `spec` (a name or an instance) is named in reports: the name, or
+    the instance's class name."""
+    return spec if isinstance(spec, str) else type(spec).__name__
+
+
+def require_dims(kind: str, component, dims: int, what: str, *, spec=None) -> None:
+    """Raise ValidationError unless `component` declares that it handles `dims` dimensions; `what`
+    names the input ("a 3D problem"), `spec` how the caller named the component (default: its class)."""
+    handled = capabilities(component).dims
+    if dims not in handled:
+        only = " and ".join(f"{d}D" for d in handled)
+        raise ValidationError(
+            f"{kind} {label(component if spec is None else spec)} handles {only} only "
+            f"(its Capabilities.dims is {handled}); got {what}"
+        )

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import rigid
 from .errors import ValidationError
 from .graph import MotionGraph, Walk
 from .motion import Motion
@@ -79,41 +80,22 @@ def _plan(graph: MotionGraph, walk: Walk):
 def _compose(walk, tables, taken, n_agents, dims):
     """Placement and correspondence of each segment: the start pose composed with the
     transitions taken, in order (M' = assignment[M])."""
-    rotation, translation = walk.pose(dims)
-    k = len(taken)
-    mappings = np.empty((k + 1, n_agents), dtype=np.int64)
+    mappings = np.empty((len(taken) + 1, n_agents), dtype=np.int64)
     mappings[0] = np.arange(n_agents)
     for step, transition in enumerate(taken, 1):
         mappings[step] = tables.assignment[transition][mappings[step - 1]]
-    if dims == 2:
-        # Plane rotations compose by adding angles: no sequential matrix products.
-        angles = np.arctan2(tables.rotation[taken, 1, 0], tables.rotation[taken, 0, 0])
-        total = np.arctan2(rotation[1, 0], rotation[0, 0]) + np.concatenate([[0.0], np.cumsum(angles)])
-        cos, sin = np.cos(total), np.sin(total)
-        rotations = np.stack([np.stack([cos, -sin], axis=1), np.stack([sin, cos], axis=1)], axis=1)
-    else:
-        rotations = np.empty((k + 1, 3, 3))
-        rotations[0] = rotation
-        for step, transition in enumerate(taken, 1):
-            rotations[step] = rotations[step - 1] @ tables.rotation[transition]
-    steps = np.einsum("kij,kj->ki", rotations[:-1], tables.translation[taken]) if k else np.zeros((0, dims))
-    translations = translation + np.concatenate([np.zeros((1, dims)), np.cumsum(steps, axis=0)])
+    rotations, translations = rigid.chain(walk.pose(dims), tables.rotation[taken], tables.translation[taken])
     return rotations, translations, mappings
 
 
 def _place(source, frames, segments, rotations, translations, mappings) -> np.ndarray:
-    """Source frames placed in the world: a flat gather, then the rotation component by component."""
+    """Source frames placed in the world: a flat gather, then each frame's segment placement."""
     t, n, d = source.shape
     flat = source.reshape(t * n, d)
     index = np.take(mappings, segments, axis=0)
     index += (frames * n)[:, None]
     gathered = np.take(flat, index.ravel(), axis=0).reshape(len(frames), n, d)  # take: much faster than [ ]
-    rotation = rotations[segments][:, None]  # (F, 1, D, D)
-    shift = translations[segments][:, None]  # (F, 1, D)
-    placed = np.empty_like(gathered)
-    for row in range(d):
-        placed[..., row] = shift[..., row] + sum(gathered[..., col] * rotation[..., row, col] for col in range(d))
-    return placed
+    return rigid.apply(rotations[segments][:, None], translations[segments][:, None], gathered)
 
 
 def _runs(starts, lengths) -> np.ndarray:

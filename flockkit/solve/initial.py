@@ -1,11 +1,11 @@
 """Initial trajectories that meet every constraint exactly (paper 004, section 3.3).
 
 The frames before the first constrained frame are simulated backward from the configuration
-there (and, when only point constraints sit there and the model can be guided, simulated again
+there (and, when only point constraints sit there and the model declares ``guide``, simulated again
 forward with those agents guided along that path). Then, window by window (see ``windows``):
 
-1. simulate forward from the window's start state (Operation 1). A model whose ``forward`` takes
-   ``guide`` simulates with the agents of spanning point sequences already on their B-spline paths,
+1. simulate forward from the window's start state (Operation 1). A model that declares
+   ``Capabilities(guide=True)`` simulates with the agents of spanning point sequences already on their B-spline paths,
    so the others react to where they really are; the simulation starts one frame early, so that
    windows join without a step that has no impulse;
 2. move the agents of point and COM sequences that span the window onto their B-spline paths,
@@ -26,19 +26,22 @@ nearest (or, with ``Problem.follow = "random"``, a random) constrained agent in 
 
 from __future__ import annotations
 
-import inspect
-
 import numpy as np
 from scipy.interpolate import CubicHermiteSpline, make_interp_spline
 from scipy.optimize import linear_sum_assignment
 
-from ..constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
+from .. import rigid
+from ..constraints import ComConstraint, PointConstraint, Problem, ShapeConstraint
 from ..convenience import random_flock
+from ..interfaces import capabilities
 from ..motion import Motion, State
 from .windows import windows
 
-_WANDER = "wander"
-_WARM_UP = 30  # steps of unconstrained simulation behind a snapshot
+# Steps of unconstrained simulation behind a snapshot: 3 s at the paper's 10 Hz, long enough for
+# a random flock to gather (paper 004, 3.3.1 starts from "a snapshot of an unconstrained flock").
+_WARM_UP = 30
+# Relaxation steps pushing shape samples apart; 5 steps of a quarter of the overlap each (our
+# choice) take the closest pairs to about 0.7 of the mean spacing.
 _RELAXATION_STEPS = 5
 
 
@@ -94,7 +97,7 @@ class _Initial:
         self.problem, self.behavior, self.rng = problem, behavior, rng
         self.dt = problem.dt
         self.paths = [_Path(track, problem) for track in problem.tracks if len(track) >= 2]
-        self.guided = "guide" in inspect.signature(behavior.forward).parameters and "guide" in inspect.signature(behavior.backward).parameters
+        self.guided = capabilities(behavior).guide
         self.by_frame: dict[int, list] = {}
         for constraint in problem.constraints:
             self.by_frame.setdefault(problem.frame(constraint.time), []).append(constraint)
@@ -169,7 +172,7 @@ class _Initial:
 
     def _guide(self, spanning, start, steps) -> dict:
         """Keyword arguments keeping point-path agents on their paths during simulation, so the
-        others react to where they really are (for models whose forward takes `guide`)."""
+        others react to where they really are (for models declaring the `guide` capability)."""
         points = [p for p in spanning if p.is_point]
         if not points or not self.guided:
             return {}
@@ -239,7 +242,7 @@ class _Initial:
         for c in (c for c in constraints if isinstance(c, PointConstraint)):
             if c.agent in fixed:
                 continue
-            rotation = _turn(velocities[c.agent], c.velocity)
+            rotation = rigid.turn(velocities[c.agent], c.velocity)
             transforms[c.agent] = (rotation, c.position - rotation @ snapshot[c.agent])
             positions[c.agent], out_velocities[c.agent] = c.position, c.velocity
         pinned = set(fixed) | {c.agent for c in constraints if isinstance(c, PointConstraint)}
@@ -248,15 +251,15 @@ class _Initial:
             free = [a for a in agents if a not in pinned]
             if not free:
                 continue
-            rotation = _turn(velocities[free].mean(axis=0), c.velocity)
-            target = c.position if isinstance(c, ComConstraint) else _centre(c.shape)
+            rotation = rigid.turn(velocities[free].mean(axis=0), c.velocity)
+            target = c.position if isinstance(c, ComConstraint) else c.shape.centroid()
             translation = target - rotation @ snapshot[free].mean(axis=0)
-            rigid = snapshot[free] @ rotation.T + translation
-            slots, slot_velocities = rigid, velocities[free] @ rotation.T
+            placed = snapshot[free] @ rotation.T + translation
+            slots, slot_velocities = placed, velocities[free] @ rotation.T
             if isinstance(c, ShapeConstraint):
                 slots = _fill(c.shape, len(free), rng)
                 slot_velocities = slot_velocities - slot_velocities.mean(axis=0) + c.velocity
-            order = _matching(slots, start_positions[free] if start_positions is not None else rigid, rng)
+            order = _matching(slots, start_positions[free] if start_positions is not None else placed, rng)
             positions[free], out_velocities[free] = slots[order], slot_velocities[order]
             if isinstance(c, ComConstraint):  # exact COM, moving only the free agents
                 positions[free] += (len(agents) * c.position - positions[agents].sum(axis=0)) / len(free)
@@ -283,48 +286,10 @@ def _blend_weights(steps: int) -> np.ndarray:
     return 3 * t**2 - 2 * t**3
 
 
-def _turn(source, target) -> np.ndarray:
-    """The smallest proper rotation taking the direction of `source` to that of `target`
-    (identity where either is too short to have a direction)."""
-    d = len(source)
-    a, b = np.linalg.norm(source), np.linalg.norm(target)
-    if a < 1e-12 or b < 1e-12:
-        return np.eye(d)
-    u, v = source / a, target / b
-    if d == 2:
-        angle = np.arctan2(u[0] * v[1] - u[1] * v[0], u @ v)
-        c, s = np.cos(angle), np.sin(angle)
-        return np.array([[c, -s], [s, c]])
-    axis = np.cross(u, v)
-    sine, cosine = np.linalg.norm(axis), float(u @ v)
-    if sine < 1e-12:
-        if cosine > 0:
-            return np.eye(3)
-        other = np.eye(3)[int(np.argmin(np.abs(u)))]  # half turn about an axis perpendicular to u
-        axis = np.cross(u, other) / np.linalg.norm(np.cross(u, other))
-        return 2 * np.outer(axis, axis) - np.eye(3)
-    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]]) / sine
-    return np.eye(3) + sine * k + (1 - cosine) * k @ k
-
-
-def _centre(shape) -> np.ndarray:
-    if isinstance(shape, Ball):
-        return np.array(shape.center)
-    if isinstance(shape, Box):
-        return (shape.lower + shape.upper) / 2
-    a, b = shape.vertices, np.roll(shape.vertices, -1, axis=0)
-    cross = a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1]
-    return ((a + b) * cross[:, None]).sum(axis=0) / (3 * cross.sum())
-
-
 def _fill(shape, count: int, rng) -> np.ndarray:
     """`count` points uniform in `shape`, pushed apart by a few relaxation steps, kept inside."""
-    lower, upper = _bounds(shape)
-    points = np.empty((0, len(lower)))
-    while len(points) < count:
-        candidates = rng.uniform(lower, upper, size=(4 * count + 16, len(lower)))
-        points = np.vstack([points, candidates[shape.contains(candidates)]])
-    points = points[:count]
+    lower, upper = shape.bounds()
+    points = shape.sample(count, rng)
     volume = np.prod(upper - lower) * np.mean(shape.contains(rng.uniform(lower, upper, size=(512, len(lower)))))
     spacing = 0.7 * (max(volume, 1e-12) / count) ** (1 / len(lower))
     for _ in range(_RELAXATION_STEPS):
@@ -336,14 +301,6 @@ def _fill(shape, count: int, rng) -> np.ndarray:
         outside = depth > -1e-9
         points[outside] -= (depth[outside] + 1e-6 * spacing)[:, None] * shape.surface_normal(points[outside])
     return points
-
-
-def _bounds(shape):
-    if isinstance(shape, Ball):
-        return shape.center - shape.radius, shape.center + shape.radius
-    if isinstance(shape, Box):
-        return np.array(shape.lower), np.array(shape.upper)
-    return shape.vertices.min(axis=0), shape.vertices.max(axis=0)
 
 
 def _matching(slots: np.ndarray, origins: np.ndarray, rng) -> np.ndarray:
@@ -365,9 +322,12 @@ def _channels(motion: Motion) -> dict:
 
 
 def _join(pieces, dt) -> Motion:
-    """Windows share their boundary frames: keep each boundary once."""
-    positions = np.concatenate([pieces[0].positions] + [p.positions[1:] for p in pieces[1:]])
-    channels = {}
-    if all(_WANDER in p.channels for p in pieces):
-        channels[_WANDER] = np.concatenate([pieces[0].channels[_WANDER]] + [p.channels[_WANDER][1:] for p in pieces[1:]])
-    return Motion(positions=positions, dt=dt, channels=channels)
+    """Windows share their boundary frames: keep each boundary once. The model channels every
+    piece carries (whatever the model names them) are joined the same way."""
+
+    def joined(arrays):
+        return np.concatenate([arrays[0]] + [a[1:] for a in arrays[1:]])
+
+    shared = set.intersection(*(set(p.channels) for p in pieces))
+    channels = {name: joined([p.channels[name] for p in pieces]) for name in sorted(shared)}
+    return Motion(positions=joined([p.positions for p in pieces]), dt=dt, channels=channels)

@@ -12,15 +12,18 @@ from __future__ import annotations
 
 import math
 from collections import Counter
+from collections.abc import Mapping
 
 import attrs
 import numpy as np
 
-from .._arrays import count
+from ..validate import integer, number
 from ..constraints import ComConstraint, PointConstraint, Problem
 from ..errors import ValidationError
 from ..motion import Motion
-from ..registry import get
+from .._progress import progress_bar
+from ..interfaces import capabilities
+from ..registry import get, label, require_dims, resolve
 from .initial import initial_trajectories
 from .windows import windows
 
@@ -138,7 +141,7 @@ class Scorer:
 
     def __init__(self, problem, behavior, objectives):
         self.problem, self.behavior, self.objectives = problem, behavior, objectives
-        self.reach = getattr(behavior, "plausibility_reach", None)
+        self.reach = capabilities(behavior).plausibility_reach
 
     def frames(self, motion: Motion, start: int = 0, stop: int | None = None) -> np.ndarray:
         stop = motion.n_frames if stop is None else stop
@@ -200,27 +203,47 @@ def run_chain(problem, behavior, objectives, moves, initial: Motion, iterations:
     return best, best_total, Trace(log_g=log_g, proposals=tuple(tried), accepted=accepted)
 
 
-def solve(problem: Problem, *, behavior="boids", iterations=1000, chains=1, seed=None, proposals=None,
-          objectives=DEFAULT_OBJECTIVES, stable=None, n_jobs=1, callback=None, progress=False) -> Solution:
+def solve(
+    problem: Problem,
+    *,
+    behavior="boids",
+    behavior_params: dict | None = None,
+    iterations=1000,
+    chains=1,
+    seed=None,
+    proposals=None,
+    objectives=DEFAULT_OBJECTIVES,
+    stable=None,
+    n_jobs=1,
+    callback=None,
+    progress=False,
+) -> Solution:
     """Constrained, plausible motion for `problem` (paper 004).
 
     Parameters
     ----------
-    behavior : str
-        Name of the behavior model, made with the problem's ``dt`` (and ``obstacles``, if any).
+    behavior : str or behavior model
+        An installed behavior model's name, made with the problem's ``dt``, `behavior_params`
+        and, for a problem with obstacles, ``obstacles`` (the model must declare
+        ``Capabilities(obstacles=True)``); or an instance, used as it is configured.
+    behavior_params : dict, optional
+        Parameters of a behavior made by name (``dt`` and ``obstacles`` come from the problem).
     iterations : int
         Sampler iterations per chain (at most, with `stable`); 0 returns the initial trajectories.
     stable : float, optional
         Stop a chain early once its running mean of log g stabilizes: the mean over the last 100
         iterations within this fraction of the mean over the 100 before.
     chains, n_jobs : int
-        Independent chains (each from its own initial trajectories), run by joblib workers.
+        Independent chains (each from its own initial trajectories), run by joblib workers. Every
+        component is resolved here, once; workers receive instances.
     seed : int, optional
-        Seeds everything: the same seed gives the same Solution.
-    proposals : dict, optional
-        Proposal name -> probability (normalized); default bump 0.6, velocity 0.3, regenerate 0.1.
-    objectives : sequence of str
-        Objective terms added to the behavior's log plausibility.
+        Seeds everything: the same seed gives the same Solution, whatever `n_jobs` is.
+    proposals : mapping or sequence, optional
+        Proposal name -> probability (normalized), or (name or instance, probability) pairs;
+        default bump 0.6, velocity 0.3, regenerate 0.1. ``Solution.acceptance`` names an
+        instance by its class.
+    objectives : sequence
+        Objective terms (names or instances) added to the behavior's log plausibility.
     callback : callable, optional
         ``callback(chain, iteration, log_g, accepted)`` after every iteration (n_jobs=1 only).
     progress : bool
@@ -228,58 +251,97 @@ def solve(problem: Problem, *, behavior="boids", iterations=1000, chains=1, seed
     """
     if not isinstance(problem, Problem):
         raise ValidationError(f"solve: problem must be a flockkit.Problem; got {type(problem).__name__}")
-    iterations = count(iterations, field="iterations", minimum=0)
-    chains = count(chains, field="chains")
+    iterations = integer(iterations, "iterations", minimum=0)
+    chains = integer(chains, "chains", minimum=1)
     if isinstance(n_jobs, bool) or not isinstance(n_jobs, int) or n_jobs == 0:
         raise ValidationError(f"n_jobs must be a non-zero integer; got {n_jobs!r}")
     if callback is not None and n_jobs != 1:
         raise ValidationError("solve: a callback runs in this process only; use n_jobs=1 with it")
-    proposals = dict(DEFAULT_PROPOSALS if proposals is None else proposals)
-    for name, probability in proposals.items():
-        if isinstance(probability, bool) or not isinstance(probability, (int, float)) or not probability >= 0:
-            raise ValidationError(f"solve: the probability of proposal {name!r} must be a number >= 0; got {probability!r}")
-    if iterations and not sum(proposals.values()) > 0:
-        raise ValidationError("solve: proposals need a positive total probability")
-    objectives = tuple(objectives)
-    if stable is not None and (isinstance(stable, bool) or not isinstance(stable, (int, float)) or not stable >= 0):
-        raise ValidationError(f"solve: stable must be None or a number >= 0; got {stable!r}")
-    _components(problem, behavior, proposals, objectives)  # fail early on unknown names
+    stable = number(stable, "solve: stable", minimum=0, optional=True)
+    model = _behavior(problem, behavior, behavior_params)
+    moves = _moves(problem, DEFAULT_PROPOSALS if proposals is None else proposals, iterations)
+    terms = [_component("objective", spec, problem) for spec in objectives]
     seeds = np.random.SeedSequence(seed).spawn(chains)
-    arguments = (problem, behavior, proposals, objectives, iterations, stable)
+    arguments = (problem, model, moves, terms, iterations, stable)
     if n_jobs == 1:
-        bar = _bar(progress, chains * iterations)
-        results = []
-        for index, chain_seed in enumerate(seeds):
-            tick = None if bar is None else (lambda done, base=index * iterations: bar.update(base + done - bar.n))
-            report = None if callback is None else (lambda i, g, a, chain=index: callback(chain, i, g, a))
-            results.append(_chain(*arguments, chain_seed, report, tick))
-        if bar is not None:
-            bar.close()
+        results = _chains_here(arguments, seeds, iterations, callback, progress)
     else:
         from joblib import Parallel, delayed
 
         results = Parallel(n_jobs=n_jobs)(delayed(_chain)(*arguments, chain_seed, None, None) for chain_seed in seeds)
     order = sorted(range(chains), key=lambda k: -results[k][1])
-    acceptance = _acceptance([r[2] for r in results])
     best = results[order[0]][0]
     return Solution(
-        motion=best, motions=tuple(results[k][0] for k in order), log_g=tuple(results[k][1] for k in order),
-        trace=tuple(r[2] for r in results), acceptance=acceptance, residuals=residuals(problem, best),
+        motion=best,
+        motions=tuple(results[k][0] for k in order),
+        log_g=tuple(results[k][1] for k in order),
+        trace=tuple(r[2] for r in results),
+        acceptance=_acceptance([r[2] for r in results]),
+        residuals=residuals(problem, best),
     )
 
 
-def _components(problem, behavior_name, proposals, objectives):
-    params = {"dt": problem.dt}
-    if problem.obstacles:
-        params["obstacles"] = problem.obstacles
-    behavior = get("behavior", behavior_name, **params)
-    moves = [(name, get("proposal", name), p) for name, p in proposals.items() if p > 0]
-    terms = [get("objective", name) for name in objectives]
-    return behavior, moves, terms
+def _chains_here(arguments, seeds, iterations, callback, progress) -> list:
+    """Every chain in this process, with the callback and one progress bar over all iterations."""
+    results = []
+    with progress_bar(progress and len(seeds) * iterations > 0) as report:
+        for index, chain_seed in enumerate(seeds):
+            tick = None if report is None else (
+                lambda done, base=index * iterations: report(base + done, len(seeds) * iterations, "sampling")
+            )
+            chain_callback = None if callback is None else (lambda i, g, a, chain=index: callback(chain, i, g, a))
+            results.append(_chain(*arguments, chain_seed, chain_callback, tick))
+    return results
 
 
-def _chain(problem, behavior_name, proposals, objectives, iterations, stable, seed, callback, progress):
-    behavior, moves, terms = _components(problem, behavior_name, proposals, objectives)
+def _behavior(problem: Problem, spec, params):
+    """The behavior model of a solve: made by name with the problem's dt (and obstacles), or the
+    given instance; it must handle the problem's dimensions and, with obstacles, declare them."""
+    params = dict(params or {})
+    if isinstance(spec, str):
+        clash = sorted({"dt", "obstacles"} & set(params))
+        if clash:
+            raise ValidationError(f"solve: behavior_params {', '.join(clash)} come from the problem; leave them out")
+        model = get("behavior", spec, dt=problem.dt, **params)
+        if problem.obstacles and capabilities(model).obstacles:
+            model = get("behavior", spec, dt=problem.dt, obstacles=problem.obstacles, **params)
+    else:
+        model = resolve("behavior", spec, **params)
+    if problem.obstacles and not capabilities(model).obstacles:
+        raise ValidationError(
+            f"solve: the problem has {len(problem.obstacles)} obstacles but behavior {label(spec)} does not avoid "
+            "obstacles (it does not declare Capabilities(obstacles=True))"
+        )
+    require_dims("behavior", model, problem.dims, f"a {problem.dims}D problem", spec=spec)
+    return model
+
+
+def _component(kind: str, spec, problem: Problem):
+    component = resolve(kind, spec)
+    require_dims(kind, component, problem.dims, f"a {problem.dims}D problem", spec=spec)
+    return component
+
+
+def _moves(problem: Problem, proposals, iterations) -> list:
+    """(label, move, probability) for each proposal with a positive probability; labels are the
+    names given, or class names of instances (numbered where two are alike)."""
+    pairs = list(proposals.items()) if isinstance(proposals, Mapping) else list(proposals)
+    moves, seen = [], Counter()
+    for index, pair in enumerate(pairs):
+        if not (isinstance(pair, tuple) and len(pair) == 2):
+            raise ValidationError(f"solve: proposals[{index}] must be a (proposal, probability) pair; got {pair!r}")
+        spec, probability = pair
+        probability = number(probability, f"solve: the probability of proposal {label(spec)!r}", minimum=0)
+        seen[label(spec)] += 1
+        name = label(spec) if seen[label(spec)] == 1 else f"{label(spec)}#{seen[label(spec)]}"
+        if probability > 0:
+            moves.append((name, _component("proposal", spec, problem), probability))
+    if iterations and not moves:
+        raise ValidationError("solve: proposals need a positive total probability")
+    return moves
+
+
+def _chain(problem, behavior, moves, terms, iterations, stable, seed, callback, progress):
     rng = np.random.default_rng(seed)
     initial = initial_trajectories(problem, behavior, rng)
     if not iterations:
@@ -301,11 +363,3 @@ def _readonly(array: np.ndarray) -> np.ndarray:
     view = array.view()
     view.setflags(write=False)
     return view
-
-
-def _bar(progress, total):
-    if not progress or not total:
-        return None
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, desc="sampling", unit="it")

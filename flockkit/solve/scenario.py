@@ -6,7 +6,8 @@
     agents = 20          # required; dims = 2, dt = 0.1, flocks = 1, sigma_com, shape_weight,
     duration = 8.0       # flock_weight, visibility and follow are optional (defaults as in Problem)
 
-    [solve]              # optional: behavior, iterations, chains, seed, stable, proposals = {bump = 0.6, ...}
+    [solve]              # optional: behavior, behavior_params = {...}, iterations, chains, seed, stable,
+                         # proposals = {bump = 0.6, ...}, objectives = [...]
     iterations = 1000
 
     [[point]]            # agent, time, position, optional velocity
@@ -31,7 +32,7 @@ from ..errors import FileFormatError, FlockkitError, ValidationError
 
 _PROBLEM_KEYS = {"agents": "n_agents", "dims": "dims", "dt": "dt", "duration": "duration", "flocks": "flocks",
                  "sigma_com": "sigma_com", "shape_weight": "shape_weight", "flock_weight": "flock_weight", "visibility": "visibility", "follow": "follow"}
-_SOLVE_KEYS = {"behavior", "iterations", "chains", "seed", "proposals", "objectives", "stable"}
+_SOLVE_KEYS = {"behavior", "behavior_params", "iterations", "chains", "seed", "proposals", "objectives", "stable"}
 _CONSTRAINT_KEYS = {"point": {"agent", "time", "position", "velocity"}, "com": {"agents", "time", "position", "velocity"},
                     "shape": {"agents", "time", "velocity", "polygon", "box", "ball"}}
 

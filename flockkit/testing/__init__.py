@@ -1,11 +1,12 @@
 """flockkit.testing: the conformance kit for plugins, modelled on scikit-learn's ``check_estimator``.
 
-Run every check of a kind on a component::
+Run every check of a kind that applies to a component::
 
     import flockkit
     from flockkit.testing import check_plugin
 
-    check_plugin("behavior", flockkit.get("behavior", "boids"))
+    report = check_plugin("behavior", flockkit.get("behavior", "boids"))
+    print(report.passed, report.skipped)
 
 or one pytest test per check::
 
@@ -15,22 +16,45 @@ or one pytest test per check::
     def test_conformance(component, check):
         check(component)
 
+Which checks apply follows the component's declared ``flockkit.Capabilities``, as scikit-learn's
+estimator tags do: a 2D-only model is checked on 2D flocks only, and the checks of an optional
+operation it does not declare are skipped with the reason, never counted as passed. Checks that
+need a partner component take it from `partners`: a ``metric`` for builders, a ``behavior`` (with
+dt = 0.1 s) for proposals, a ``graph`` for walks. The defaults are the built-in ``icp-hungarian``
+and ``boids`` where installed, and the kit's own graph (``flockkit.testing.inputs``); no check
+needs a built-in when its partners are given.
+
 Hypothesis strategies for flockkit values are in ``flockkit.testing.strategies``.
 """
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Callable, Mapping
 
-from ..interfaces import PROTOCOLS
+import attrs
+
+from ..errors import ValidationError
+from ..interfaces import PROTOCOLS, capabilities
 from ..registry import interface_problems
-from . import behavior, builder, metric, objective, proposal, strategies, walk
+from . import behavior, builder, inputs, metric, objective, proposal, strategies, walk
+from ._expect import PARTNER_KINDS, default_partner, skip_reason
 
-__all__ = ["check_plugin", "parametrize_with_checks", "checks_for", "check_interface", "strategies"]
+__all__ = [
+    "check_plugin",
+    "parametrize_with_checks",
+    "checks_for",
+    "skipped_checks",
+    "check_interface",
+    "CheckReport",
+    "inputs",
+    "strategies",
+]
 
 
 def check_interface(name, component, *, kind):
-    """The component has every method of its kind's protocol, with compatible signatures."""
+    """The component has every method of its kind's protocol, with compatible signatures, and every
+    operation its capabilities declare."""
     problems = interface_problems(component, kind)
     assert not problems, f"{name} does not honour the {PROTOCOLS[kind].__name__} interface:\n" + "\n".join(
         f"  - {p}" for p in problems
@@ -47,50 +71,154 @@ _KIND_CHECKS = {
 }
 
 
-def checks_for(kind: str) -> tuple:
-    """The checks of `kind`, each a callable ``check(name, component)``, the interface check first."""
+def _all_checks(kind: str) -> tuple:
     if kind not in PROTOCOLS:
-        raise ValueError(f"unknown plugin kind {kind!r}; the kinds are {', '.join(PROTOCOLS)}")
+        raise ValidationError(f"unknown plugin kind {kind!r}; the kinds are {', '.join(PROTOCOLS)}")
     interface = functools.partial(check_interface, kind=kind)
     functools.update_wrapper(interface, check_interface)
     return (interface, *_KIND_CHECKS.get(kind, ()))
+
+
+def _bound(check, partners: Mapping) -> Callable:
+    """`check` with the partners it takes filled in, keeping its name."""
+    wanted = {k: partners[k] for k in getattr(check, "partners", ()) if k in partners}
+    if not wanted:
+        return check
+    bound = functools.partial(check, **wanted)
+    functools.update_wrapper(bound, check)
+    return bound
+
+
+def _partners(kind: str, given: Mapping | None) -> dict:
+    """The partner components of `kind`'s checks: those given, else the defaults (which raise a
+    ValidationError naming what to pass when no default is installed)."""
+    given = dict(given or {})
+    unknown = set(given) - set(PARTNER_KINDS)
+    if unknown:
+        raise ValidationError(f"unknown partners {sorted(unknown)}; the kit's partners are {', '.join(PARTNER_KINDS)}")
+    needed = {p for check in _all_checks(kind) for p in getattr(check, "partners", ())}
+    found = {p: given[p] for p in needed if p in given}
+    found.update({p: default_partner(p, kind) for p in needed - set(given) if PARTNER_KINDS[p] is not None})
+    return found
+
+
+def checks_for(kind: str, component=None, *, partners: Mapping | None = None) -> tuple:
+    """The checks of `kind`, each a callable ``check(name, component)``, the interface check first.
+
+    With a `component`, only the checks that apply to what it declares, with their partner
+    components bound (see the module docstring); :func:`skipped_checks` says why the others
+    were left out. Without one, every check of the kind (partners then default when called)."""
+    checks = _all_checks(kind)
+    if component is None:
+        return checks
+    declared = capabilities(component)
+    bound = _partners(kind, partners)
+    return tuple(_bound(check, bound) for check in checks if skip_reason(check, declared) is None)
+
+
+def skipped_checks(kind: str, component) -> dict[str, str]:
+    """Check name -> why it does not apply to `component` (what it does not declare)."""
+    declared = capabilities(component)
+    reasons = {check.__name__: skip_reason(check, declared) for check in _all_checks(kind)}
+    return {name: reason for name, reason in reasons.items() if reason is not None}
+
+
+@attrs.frozen(kw_only=True)
+class CheckReport:
+    """What :func:`check_plugin` found: the checks passed, skipped (with the reason) and failed as
+    expected (with the reason given)."""
+
+    passed: tuple = ()
+    skipped: Mapping = attrs.field(factory=dict)
+    expected_failures: Mapping = attrs.field(factory=dict)
+
+    def summary(self) -> str:
+        parts = [f"{len(self.passed)} passed"]
+        if self.skipped:
+            parts.append(f"{len(self.skipped)} skipped ({'; '.join(f'{k}: {v}' for k, v in self.skipped.items())})")
+        if self.expected_failures:
+            parts.append(f"{len(self.expected_failures)} failed as expected ({', '.join(self.expected_failures)})")
+        return ", ".join(parts)
 
 
 def _name_of(component) -> str:
     return getattr(component, "__name__", None) or type(component).__name__
 
 
-def check_plugin(kind: str, component, *, name: str | None = None, progress: bool = False) -> None:
-    """Run every check of `kind` on `component` (a configured instance).
+def _expected(expected_failed_checks, component) -> dict:
+    if expected_failed_checks is None:
+        return {}
+    found = expected_failed_checks(component) if callable(expected_failed_checks) else expected_failed_checks
+    return dict(found or {})
 
-    Raises AssertionError naming the first failed check and the plugin; an unexpected exception
-    inside a check counts as that check failing. `progress` shows a bar over the checks.
+
+def check_plugin(
+    kind: str,
+    component,
+    *,
+    name: str | None = None,
+    partners: Mapping | None = None,
+    expected_failed_checks=None,
+    progress: bool = False,
+) -> CheckReport:
+    """Run every check of `kind` that applies to `component` (a configured instance).
+
+    Raises AssertionError naming the first failed check and the plugin (an unexpected exception
+    inside a check counts as that check failing), or naming a check listed in
+    `expected_failed_checks` (check name -> reason, or a callable taking the component and
+    returning that) that passed. Returns a CheckReport. `progress` shows a bar over the checks.
     """
     name = name or _name_of(component)
-    checks = checks_for(kind)
+    expected = _expected(expected_failed_checks, component)
+    checks = checks_for(kind, component, partners=partners)
     if progress:
         from tqdm.auto import tqdm
 
         checks = tqdm(checks, desc=f"checking {kind} {name}", unit="check")
+    passed, failed_as_expected = [], {}
     for check in checks:
         try:
             check(name, component)
         except Exception as exc:  # noqa: BLE001 - every failure is reported the same way
+            if check.__name__ in expected:
+                failed_as_expected[check.__name__] = expected[check.__name__]
+                continue
             raise AssertionError(f"{check.__name__} failed for {kind} {name!r}: {type(exc).__name__}: {exc}") from exc
+        if check.__name__ in expected:
+            raise AssertionError(
+                f"{check.__name__} passed for {kind} {name!r} although it is listed in expected_failed_checks "
+                f"({expected[check.__name__]}); remove it from the list"
+            )
+        passed.append(check.__name__)
+    return CheckReport(passed=tuple(passed), skipped=skipped_checks(kind, component), expected_failures=failed_as_expected)
 
 
-def parametrize_with_checks(components):
+def parametrize_with_checks(components, *, partners: Mapping | None = None, expected_failed_checks=None):
     """A pytest parametrize mark over (component, check) for every check of each component.
 
     `components` holds ``(kind, component)`` pairs. The decorated test receives `component` and a
-    `check` to call as ``check(component)``; test ids read ``<kind>:<name>-<check>``.
+    `check` to call as ``check(component)``; test ids read ``<kind>:<name>-<check>``. Checks that
+    do not apply to a component's declared capabilities are marked skipped with the reason;
+    `expected_failed_checks` (check name -> reason, or a callable taking the component and
+    returning that) marks known failures as strict xfail. `partners` as for :func:`check_plugin`.
     """
     import pytest
 
-    params, ids = [], []
+    params = []
     for kind, component in components:
         name = _name_of(component)
-        for check in checks_for(kind):
-            params.append((component, functools.partial(check, name)))
-            ids.append(f"{kind}:{name}-{check.__name__}")
-    return pytest.mark.parametrize("component, check", params, ids=ids)
+        expected = _expected(expected_failed_checks, component)
+        applicable = {c.__name__: c for c in checks_for(kind, component, partners=partners)}
+        skipped = skipped_checks(kind, component)
+        for check in _all_checks(kind):
+            check_name = check.__name__
+            marks = []
+            if check_name in skipped:
+                marks.append(pytest.mark.skip(reason=skipped[check_name]))
+                run = check
+            else:
+                run = applicable[check_name]
+            if check_name in expected:
+                marks.append(pytest.mark.xfail(reason=expected[check_name], strict=True))
+            params.append(pytest.param(component, functools.partial(run, name), marks=marks, id=f"{kind}:{name}-{check_name}"))
+    return pytest.mark.parametrize("component, check", params)

@@ -1,8 +1,17 @@
-"""What the checks share."""
+"""What the checks share: expected errors, which checks apply, partner components, input dimensions."""
 
 from __future__ import annotations
 
+import contextlib
+
 from ..errors import ValidationError
+from ..interfaces import capabilities
+
+# partner name -> the kind of component it is
+PARTNER_KINDS = {"metric": "metric", "behavior": "behavior", "graph": None}
+# the built-in partners used where none is given (convenience defaults, as for flockkit.build_graph)
+_DEFAULT_NAMES = {"metric": "icp-hungarian", "behavior": "boids"}
+KIT_DT = 0.1  # seconds per frame of every motion the kit makes, and of a behavior partner
 
 
 def expect_validation_error(call, description: str) -> None:
@@ -14,3 +23,79 @@ def expect_validation_error(call, description: str) -> None:
     except Exception as exc:  # noqa: BLE001 - the wrong error type is the failure we report
         raise AssertionError(f"{description} raised {type(exc).__name__}, not ValidationError") from exc
     raise AssertionError(f"{description} raised nothing; expected ValidationError")
+
+
+def applies_when(field: str):
+    """Mark a check as applying only to components whose Capabilities declare `field`."""
+
+    def mark(check):
+        check.requires = field
+        return check
+
+    return mark
+
+
+def needs(*partners: str):
+    """Mark a check as taking these partner components as keyword arguments."""
+
+    def mark(check):
+        check.partners = partners
+        return check
+
+    return mark
+
+
+def skip_reason(check, declared) -> str | None:
+    """Why `check` does not apply to a component declaring `declared`, or None if it does."""
+    field = getattr(check, "requires", None)
+    if field is None or getattr(declared, field) not in (False, None):
+        return None
+    return f"the component does not declare Capabilities.{field} (this check is of that optional operation)"
+
+
+def default_partner(partner: str, kind: str):
+    """The default partner `partner` (a metric or behavior) for `kind`'s checks: the built-in;
+    ValidationError naming what to pass when it is not installed. (A walk's default graph is the
+    kit's own, made by each check in the walk's dimension.)"""
+    from ..registry import available, get
+
+    name = _DEFAULT_NAMES[partner]
+    if name not in available(PARTNER_KINDS[partner]):
+        raise ValidationError(
+            f"the {kind} checks need a {partner}: pass partners={{'{partner}': ...}} (the default, the built-in "
+            f"{name!r}, is not installed or is blocked)"
+        )
+    return get(PARTNER_KINDS[partner], name, dt=KIT_DT) if partner == "behavior" else get(PARTNER_KINDS[partner], name)
+
+
+def partner(value, name: str, kind: str):
+    """`value` if given, else the default partner."""
+    return default_partner(name, kind) if value is None else value
+
+
+def dims_of(component) -> tuple[int, ...]:
+    """The dimensions to check `component` in: those it declares."""
+    return capabilities(component).dims
+
+
+@contextlib.contextmanager
+def on_input(name: str, component, dims: int, what: str):
+    """Turn an exception raised while `component` handles a `dims`-D input into an AssertionError
+    that says so and, where declaring fewer dimensions would explain it, which declaration to add."""
+    try:
+        yield
+    except AssertionError as exc:
+        raise AssertionError(f"{exc} (on {what} in {dims}D)") from exc
+    except Exception as exc:  # noqa: BLE001 - reported as this check failing, with the input
+        raise AssertionError(f"{type(exc).__name__}: {exc} (on {what} in {dims}D){_hint(name, component, dims)}") from exc
+
+
+def _hint(name, component, dims) -> str:
+    declared = dims_of(component)
+    others = tuple(d for d in declared if d != dims)
+    if not others:
+        return ""
+    return (
+        f". If {name} handles only {' and '.join(f'{d}D' for d in others)}, declare it: "
+        f"capabilities = flockkit.Capabilities(dims={others!r})"
+    )

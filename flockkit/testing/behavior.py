@@ -1,7 +1,9 @@
 """Conformance checks for behavior models (``flockkit.interfaces.BehaviorModel``).
 
 Each check is ``check_<property>(name, model)`` and raises AssertionError saying what is wrong.
-They run on a few fixed flocks (2D and 3D, one agent to a hundred) so results are reproducible.
+They run on a few fixed flocks (one agent to a hundred) in the dimensions the model declares, so
+results are reproducible; the checks of ``guide``, ``progress`` and ``plausibility_reach`` run
+only for models that declare them.
 """
 
 from __future__ import annotations
@@ -10,15 +12,33 @@ import numpy as np
 
 from ..convenience import random_flock
 from ..motion import Motion, State
-from ._expect import expect_validation_error
+from ._expect import applies_when, dims_of, expect_validation_error, on_input
 
 STEPS = 12
 SEED = 20031
+# flock sizes per dimension: a lone agent, a small flock, and one large enough for spatial search
+_SIZES = {2: (1, 12, 100), 3: (1, 8, 30)}
 
 
-def _flocks() -> list[State]:
-    rng = np.random.default_rng(SEED)
-    return [random_flock(n_agents=n, dims=d, rng=rng) for n, d in ((1, 2), (12, 2), (8, 3), (100, 2))]
+def _flocks(model) -> list[State]:
+    """The fixed flocks in the model's declared dimensions."""
+    return [
+        random_flock(n_agents=n, dims=d, rng=np.random.default_rng(SEED + 100 * d + n))
+        for d in dims_of(model)
+        for n in _SIZES[d]
+    ]
+
+
+def _flock(model) -> State:
+    """One small flock in the model's first declared dimension."""
+    d = dims_of(model)[0]
+    return random_flock(n_agents=_SIZES[d][1], dims=d, rng=np.random.default_rng(SEED + 100 * d))
+
+
+def _each(name, model):
+    """(flock, context) for every fixed flock; the context names the flock in failures."""
+    for state in _flocks(model):
+        yield state, on_input(name, model, state.dims, f"a flock of {state.n_agents}")
 
 
 def _forward(model, state, steps=STEPS, seed=0) -> Motion:
@@ -46,38 +66,50 @@ def _close(a, b, scale=1.0) -> bool:
 
 def check_forward_shape(name, model):
     """forward returns a finite float64 Motion of steps + 1 frames with the state's agents and dims."""
-    for state in _flocks():
-        for steps in (0, 1, STEPS):
-            _check_motion(name, _forward(model, state, steps), state, steps, "forward")
+    for state, context in _each(name, model):
+        with context:
+            for steps in (0, 1, STEPS):
+                _check_motion(name, _forward(model, state, steps), state, steps, "forward")
 
 
 def check_backward_shape(name, model):
     """backward returns a finite float64 Motion of steps + 1 frames with the state's agents and dims."""
-    for state in _flocks():
-        for steps in (0, 1, STEPS):
-            _check_motion(name, _backward(model, state, steps), state, steps, "backward")
+    for state, context in _each(name, model):
+        with context:
+            for steps in (0, 1, STEPS):
+                _check_motion(name, _backward(model, state, steps), state, steps, "backward")
 
 
 def check_forward_starts_at_initial(name, model):
     """The first frame of forward has the initial positions exactly, and its velocities."""
-    for state in _flocks():
-        motion = _forward(model, state)
-        assert np.array_equal(motion.positions[0], state.positions), f"{name}.forward: frame 0 positions differ from the initial state"
-        assert _close(motion.velocities()[0], state.velocities), f"{name}.forward: frame 0 velocities differ from the initial state"
+    for state, context in _each(name, model):
+        with context:
+            motion = _forward(model, state)
+            assert np.array_equal(motion.positions[0], state.positions), (
+                f"{name}.forward: frame 0 positions differ from the initial state"
+            )
+            assert _close(motion.velocities()[0], state.velocities), (
+                f"{name}.forward: frame 0 velocities differ from the initial state"
+            )
 
 
 def check_backward_ends_at_final(name, model):
     """The last frame of backward has the final positions exactly, and its velocities."""
-    for state in _flocks():
-        motion = _backward(model, state)
-        assert np.array_equal(motion.positions[-1], state.positions), f"{name}.backward: last frame positions differ from the final state"
-        scale = float(np.abs(state.positions).max()) / motion.dt
-        assert _close(motion.velocities()[-1], state.velocities, scale), f"{name}.backward: last frame velocities differ from the final state"
+    for state, context in _each(name, model):
+        with context:
+            motion = _backward(model, state)
+            assert np.array_equal(motion.positions[-1], state.positions), (
+                f"{name}.backward: last frame positions differ from the final state"
+            )
+            scale = float(np.abs(state.positions).max()) / motion.dt
+            assert _close(motion.velocities()[-1], state.velocities, scale), (
+                f"{name}.backward: last frame velocities differ from the final state"
+            )
 
 
 def check_deterministic(name, model):
     """The same seeded Generator gives the same motion, forward and backward."""
-    state = _flocks()[1]
+    state = _flock(model)
     for operation in (_forward, _backward):
         first, second = operation(model, state, seed=7), operation(model, state, seed=7)
         assert first == second, f"{name}: two {operation.__name__[1:]} runs with the same seed differ"
@@ -98,7 +130,7 @@ def _unchanged(before, after) -> bool:
 
 def check_inputs_unchanged(name, model):
     """forward, backward and log_plausibility leave their inputs as they were."""
-    state = _flocks()[1]
+    state = _flock(model)
     motion = _forward(model, state)
     for label, value, call in (
         ("forward", state, lambda: _forward(model, state)),
@@ -112,26 +144,29 @@ def check_inputs_unchanged(name, model):
 
 def check_rejects_negative_steps(name, model):
     """A negative step count raises flockkit.errors.ValidationError."""
-    state = _flocks()[1]
+    state = _flock(model)
     for label, call in (("forward", model.forward), ("backward", model.backward)):
         expect_validation_error(lambda: call(state, -1, np.random.default_rng(0)), f"{name}.{label}(steps=-1)")
 
 
 def check_log_plausibility_finite(name, model):
     """log_plausibility of a forward motion is a finite float64 array with one entry per frame."""
-    for state in _flocks():
-        motion = _forward(model, state)
-        values = np.asarray(model.log_plausibility(motion))
-        assert values.shape == (motion.n_frames,), f"{name}.log_plausibility returned shape {values.shape}; expected ({motion.n_frames},)"
-        assert values.dtype == np.float64, f"{name}.log_plausibility returned dtype {values.dtype}"
-        assert np.all(np.isfinite(values)), f"{name}.log_plausibility is not finite on a forward motion: {values}"
+    for state, context in _each(name, model):
+        with context:
+            motion = _forward(model, state)
+            values = np.asarray(model.log_plausibility(motion))
+            assert values.shape == (motion.n_frames,), (
+                f"{name}.log_plausibility returned shape {values.shape}; expected ({motion.n_frames},)"
+            )
+            assert values.dtype == np.float64, f"{name}.log_plausibility returned dtype {values.dtype}"
+            assert np.all(np.isfinite(values)), f"{name}.log_plausibility is not finite on a forward motion: {values}"
 
 
 def check_log_plausibility_prefers_forward(name, model):
     """On average a forward motion is more plausible than the same motion with positional noise."""
     rng = np.random.default_rng(SEED)
     clean, noisy = [], []
-    for index, state in enumerate(_flocks()):
+    for index, state in enumerate(_flocks(model)):
         motion = _forward(model, state, steps=30, seed=index)
         step = np.linalg.norm(np.diff(motion.positions, axis=0), axis=-1)
         noise = rng.normal(0.0, 0.25 * float(np.median(step)), motion.positions.shape)
@@ -147,26 +182,86 @@ def check_log_plausibility_prefers_forward(name, model):
 def check_log_plausibility_window(name, model):
     """log_plausibility(motion, start, stop) equals log_plausibility(motion)[start:stop]."""
     rng = np.random.default_rng(SEED)
-    for state in _flocks():
-        motion = _forward(model, state, steps=20)
-        full = np.asarray(model.log_plausibility(motion))
-        t = motion.n_frames
-        windows = [(0, t), (0, 0), (t, t), (0, 1), (t - 1, t), (1, 3)]
-        windows += [tuple(sorted(int(i) for i in rng.integers(0, t + 1, 2))) for _ in range(6)]
-        for start, stop in windows:
-            part = np.asarray(model.log_plausibility(motion, start, stop))
-            scale = max(1.0, float(np.abs(full).max(initial=0.0)))
-            assert part.shape == (stop - start,) and _close(part, full[start:stop], scale), (
-                f"{name}.log_plausibility(motion, {start}, {stop}) differs from the full evaluation's slice"
-            )
+    for state, context in _each(name, model):
+        with context:
+            motion = _forward(model, state, steps=20)
+            full = np.asarray(model.log_plausibility(motion))
+            t = motion.n_frames
+            windows = [(0, t), (0, 0), (t, t), (0, 1), (t - 1, t), (1, 3)]
+            windows += [tuple(sorted(int(i) for i in rng.integers(0, t + 1, 2))) for _ in range(6)]
+            for start, stop in windows:
+                part = np.asarray(model.log_plausibility(motion, start, stop))
+                scale = max(1.0, float(np.abs(full).max(initial=0.0)))
+                assert part.shape == (stop - start,) and _close(part, full[start:stop], scale), (
+                    f"{name}.log_plausibility(motion, {start}, {stop}) differs from the full evaluation's slice"
+                )
 
 
 def check_rejects_bad_window(name, model):
     """A window outside the motion raises flockkit.errors.ValidationError."""
-    motion = _forward(model, _flocks()[1])
+    motion = _forward(model, _flock(model))
     for start, stop in ((3, 2), (0, motion.n_frames + 1), (-1, 2)):
         expect_validation_error(
             lambda: model.log_plausibility(motion, start, stop), f"{name}.log_plausibility(start={start}, stop={stop})"
+        )
+
+
+@applies_when("guide")
+def check_guide(name, model):
+    """A model declaring ``guide`` keeps each guided agent on its path (frames 1.. of forward, and
+    all but the last of backward, whose path is given in forward time) and lets the others move."""
+    state = _flock(model)
+    rng = np.random.default_rng(SEED + 1)
+    path = state.positions[0] + np.cumsum(rng.normal(0.1, 0.05, (STEPS + 1, state.dims)), axis=0)
+    forward = model.forward(state, STEPS, np.random.default_rng(0), guide={0: path})
+    assert np.allclose(forward.positions[1:, 0], path[1:], rtol=0, atol=1e-9), (
+        f"{name}.forward(guide={{0: path}}) does not keep agent 0 on its path"
+    )
+    backward = model.backward(state, STEPS, np.random.default_rng(0), guide={0: path})
+    assert np.allclose(backward.positions[:-1, 0], path[:-1], rtol=0, atol=1e-9), (
+        f"{name}.backward(guide={{0: path}}) does not keep agent 0 on its path"
+    )
+
+
+@applies_when("progress")
+def check_progress(name, model):
+    """A model declaring ``progress`` reports (done, total, stage) as it simulates, done rising to
+    total, and simulates the same motion as without a report."""
+    state = _flock(model)
+    for label, operation in (("forward", model.forward), ("backward", model.backward)):
+        calls = []
+        reported = operation(state, STEPS, np.random.default_rng(3), progress=lambda *args: calls.append(args))
+        assert calls, f"{name}.{label}(progress=...) never called progress"
+        done = [c[0] for c in calls]
+        assert all(len(c) == 3 and isinstance(c[2], str) for c in calls), (
+            f"{name}.{label} must call progress(done, total, stage); got {calls[0]}"
+        )
+        assert done == sorted(done) and done[-1] == calls[-1][1], (
+            f"{name}.{label}: progress must rise to its total; got done {done[:3]}... of {calls[-1][1]}"
+        )
+        assert reported == operation(state, STEPS, np.random.default_rng(3)), (
+            f"{name}.{label} simulates another motion when it reports progress"
+        )
+
+
+@applies_when("plausibility_reach")
+def check_plausibility_reach(name, model):
+    """A change at one frame changes log_plausibility only within the declared reach of it."""
+    from ..interfaces import capabilities
+
+    reach = capabilities(model).plausibility_reach
+    state = _flock(model)
+    motion = _forward(model, state, steps=24)
+    before = np.asarray(model.log_plausibility(motion))
+    for frame in (1, 12, motion.n_frames - 2):
+        positions = np.array(motion.positions)
+        positions[frame, 0] += 0.05
+        after = np.asarray(model.log_plausibility(Motion(positions=positions, dt=motion.dt, channels=motion.channels)))
+        outside = np.abs(np.arange(motion.n_frames) - frame) > reach
+        changed = np.flatnonzero(outside & ~np.isclose(after, before, rtol=1e-12, atol=1e-12))
+        assert not len(changed), (
+            f"{name} declares plausibility_reach={reach}, but moving agent 0 at frame {frame} changes "
+            f"log_plausibility at frame {int(changed[0])}"
         )
 
 
@@ -182,4 +277,7 @@ CHECKS = (
     check_log_plausibility_prefers_forward,
     check_log_plausibility_window,
     check_rejects_bad_window,
+    check_guide,
+    check_progress,
+    check_plausibility_reach,
 )

@@ -1,21 +1,21 @@
 """Conformance checks for configuration metrics (``flockkit.interfaces.ConfigurationMetric``).
 
 Each check is ``check_<property>(name, metric)`` and raises AssertionError saying what is wrong.
-They compare configurations of simulated flocks (2D and 3D, one agent to fifteen), so results are
-reproducible; rigid copies are made with rotations in general position.
+They compare configurations of random flocks (one agent to fifteen, in the dimensions the metric
+declares), so results are reproducible; rigid copies are made with rotations in general position.
+The checks of ``lower_bound``, ``pairs_within`` and ``pairwise`` run only where declared.
 """
 
 from __future__ import annotations
-
-import inspect
 
 import numpy as np
 
 from ..convenience import random_flock
 from ..motion import Alignment, Configuration
-from ._expect import expect_validation_error
+from ._expect import applies_when, dims_of, expect_validation_error, on_input
 
 SEED = 4205
+_SIZES = {2: (1, 6, 15), 3: (5, 12)}  # agents per configuration, per dimension
 
 
 def _rotation(dims: int, rng) -> np.ndarray:
@@ -26,9 +26,12 @@ def _rotation(dims: int, rng) -> np.ndarray:
     return q
 
 
-def _configurations() -> list[Configuration]:
-    rng = np.random.default_rng(SEED)
-    return [random_flock(n_agents=n, dims=d, rng=rng).configuration() for n, d in ((1, 2), (6, 2), (15, 2), (5, 3), (12, 3))]
+def _configurations(metric) -> list[Configuration]:
+    return [
+        random_flock(n_agents=n, dims=d, rng=np.random.default_rng(SEED + 100 * d + n)).configuration()
+        for d in dims_of(metric)
+        for n in _SIZES[d]
+    ]
 
 
 def _rigid_copy(config: Configuration, rng) -> Configuration:
@@ -40,12 +43,18 @@ def _rigid_copy(config: Configuration, rng) -> Configuration:
     )
 
 
-def _pairs():
-    configs = _configurations()
+def _pairs(metric):
     rng = np.random.default_rng(SEED + 1)
-    for config in configs:
+    for config in _configurations(metric):
         other = random_flock(n_agents=config.n_agents, dims=config.dims, rng=rng).configuration()
         yield config, other
+
+
+def _each(name, metric, items):
+    """(item, context) where the context names the configurations' size in failures."""
+    for item in items:
+        first = item[0] if isinstance(item, tuple) else item
+        yield item, on_input(name, metric, first.dims, f"configurations of {first.n_agents} agents")
 
 
 def _scale(config: Configuration) -> float:
@@ -54,37 +63,40 @@ def _scale(config: Configuration) -> float:
 
 def check_compare_returns_alignment(name, metric):
     """compare returns a flockkit.Alignment sized for the configurations."""
-    for a, b in _pairs():
-        found = metric.compare(a, b)
-        assert isinstance(found, Alignment), f"{name}.compare returned {type(found).__name__}, not a flockkit.Alignment"
-        assert found.assignment.shape == (a.n_agents,) and found.rotation.shape == (a.dims, a.dims), (
-            f"{name}.compare returned an alignment for {found.assignment.shape[0]} agents in {found.rotation.shape[0]}D; "
-            f"expected {a.n_agents} in {a.dims}D"
-        )
+    for (a, b), context in _each(name, metric, _pairs(metric)):
+        with context:
+            found = metric.compare(a, b)
+            assert isinstance(found, Alignment), f"{name}.compare returned {type(found).__name__}, not a flockkit.Alignment"
+            assert found.assignment.shape == (a.n_agents,) and found.rotation.shape == (a.dims, a.dims), (
+                f"{name}.compare returned an alignment for {found.assignment.shape[0]} agents in "
+                f"{found.rotation.shape[0]}D; expected {a.n_agents} in {a.dims}D"
+            )
 
 
 def check_identical_is_zero(name, metric):
     """A configuration is at distance zero from itself."""
-    for config in _configurations():
-        distance = metric.compare(config, config).distance
-        assert distance <= 1e-9 * _scale(config), f"{name}.compare(a, a).distance = {distance}; expected 0"
+    for config, context in _each(name, metric, _configurations(metric)):
+        with context:
+            distance = metric.compare(config, config).distance
+            assert distance <= 1e-9 * _scale(config), f"{name}.compare(a, a).distance = {distance}; expected 0"
 
 
 def check_rigid_and_permutation_invariant(name, metric):
     """A rotated, translated and reordered copy is at distance zero, and the alignment maps it back."""
     rng = np.random.default_rng(SEED + 2)
-    for config in _configurations():
-        copy = _rigid_copy(config, rng)
-        found = metric.compare(config, copy)
-        tolerance = 1e-8 * _scale(config)
-        assert found.distance <= tolerance, f"{name}: a rigid, reordered copy is at distance {found.distance}; expected 0"
-        residual = found.residual(config, copy)
-        assert residual <= tolerance, f"{name}: the alignment leaves the copy {residual} away (mean squared); expected 0"
+    for config, context in _each(name, metric, _configurations(metric)):
+        with context:
+            copy = _rigid_copy(config, rng)
+            found = metric.compare(config, copy)
+            tolerance = 1e-8 * _scale(config)
+            assert found.distance <= tolerance, f"{name}: a rigid, reordered copy is at distance {found.distance}; expected 0"
+            residual = found.residual(config, copy)
+            assert residual <= tolerance, f"{name}: the alignment leaves the copy {residual} away (mean squared); expected 0"
 
 
 def check_distance_covers_alignment(name, metric):
     """The distance is at least the mean squared position residual of the alignment it returns."""
-    for a, b in _pairs():
+    for a, b in _pairs(metric):
         found = metric.compare(a, b)
         residual = found.residual(a, b)
         assert found.distance >= residual - 1e-9 * _scale(a), (
@@ -92,32 +104,30 @@ def check_distance_covers_alignment(name, metric):
         )
 
 
+@applies_when("lower_bound")
 def check_lower_bound(name, metric):
-    """lower_bound(a, b), where offered, never exceeds compare(a, b).distance."""
-    if not callable(getattr(metric, "lower_bound", None)):
-        return
+    """lower_bound(a, b) never exceeds compare(a, b).distance."""
     rng = np.random.default_rng(SEED + 3)
-    for a, b in [*_pairs(), *((c, _rigid_copy(c, rng)) for c in _configurations())]:
+    for a, b in [*_pairs(metric), *((c, _rigid_copy(c, rng)) for c in _configurations(metric))]:
         bound, distance = float(metric.lower_bound(a, b)), metric.compare(a, b).distance
         assert np.isfinite(bound) and bound <= distance + 1e-9 * _scale(a), (
             f"{name}.lower_bound = {bound} exceeds compare's distance {distance}"
         )
 
 
-def _close_configurations() -> list[Configuration]:
-    """Configurations of one simulated flock a few steps apart: some pairs are close, some not."""
-    from ..convenience import simulate
+def _close_configurations(metric) -> list[Configuration]:
+    """Configurations of the kit's recording a few frames apart: some pairs are close, some not."""
+    from .inputs import recording
 
-    motion = simulate(n_agents=6, steps=60, seed=SEED)
+    motion = recording(n_agents=6, seconds=6.0, dims=dims_of(metric)[0], seed=SEED)
     return [motion.configuration(t) for t in range(0, 60, 4)]
 
 
+@applies_when("pairs_within")
 def check_pairs_within(name, metric):
-    """pairs_within(configurations, threshold), where offered, lists every pair i < j whose
-    compare distance is at most the threshold, each once."""
-    if not callable(getattr(metric, "pairs_within", None)):
-        return
-    configs = _close_configurations()
+    """pairs_within(configurations, threshold) lists every pair i < j whose compare distance is at
+    most the threshold, each once; with rows=(start, stop), those with start <= i < stop."""
+    configs = _close_configurations(metric)
     pairs = np.column_stack(np.triu_indices(len(configs), 1))
     distances = np.array([metric.compare(configs[i], configs[j]).distance for i, j in pairs])
     for threshold in np.quantile(distances, [0.1, 0.5]):
@@ -129,21 +139,20 @@ def check_pairs_within(name, metric):
         )
         missing = [(int(i), int(j)) for (i, j), d in zip(pairs, distances) if d <= threshold and (i, j) not in listed_set]
         assert not missing, f"{name}.pairs_within(threshold={threshold:.4g}) leaves out {missing[:3]} although compare finds them within it"
-        if "rows" in inspect.signature(metric.pairs_within).parameters:
-            split = len(configs) // 3
-            parts = [np.asarray(metric.pairs_within(configs, float(threshold), rows=rows)).reshape(-1, 2) for rows in ((0, split), (split, len(configs)))]
-            assert {(int(i), int(j)) for part in parts for i, j in part} == listed_set and all(
-                start <= i < stop for part, (start, stop) in zip(parts, ((0, split), (split, len(configs)))) for i, _ in part
-            ), f"{name}.pairs_within(rows=...) over two row ranges does not give the same pairs as without rows"
+        split = len(configs) // 3
+        ranges = ((0, split), (split, len(configs)))
+        parts = [np.asarray(metric.pairs_within(configs, float(threshold), rows=rows)).reshape(-1, 2) for rows in ranges]
+        assert {(int(i), int(j)) for part in parts for i, j in part} == listed_set and all(
+            start <= i < stop for part, (start, stop) in zip(parts, ranges) for i, _ in part
+        ), f"{name}.pairs_within(rows=...) over two row ranges does not give the same pairs as without rows"
 
 
+@applies_when("pairwise")
 def check_pairwise(name, metric):
-    """pairwise(configurations, pairs), where offered, gives compare's distances: for the listed
-    pairs, and without `pairs` for every i < j in row-major (pdist) order."""
-    if not callable(getattr(metric, "pairwise", None)):
-        return
+    """pairwise(configurations, pairs) gives compare's distances: for the listed pairs, and
+    without `pairs` for every i < j in row-major (pdist) order."""
     rng = np.random.default_rng(SEED + 4)
-    configs = [random_flock(n_agents=6, dims=2, rng=rng).configuration() for _ in range(4)]
+    configs = [random_flock(n_agents=6, dims=dims_of(metric)[0], rng=rng).configuration() for _ in range(4)]
     pairs = np.array([[2, 0], [1, 3], [0, 1]])
     for given, expected_pairs in ((pairs, pairs), (None, np.column_stack(np.triu_indices(4, 1)))):
         found = np.asarray(metric.pairwise(configs) if given is None else metric.pairwise(configs, given))
@@ -155,13 +164,13 @@ def check_pairwise(name, metric):
 
 def check_deterministic(name, metric):
     """The same pair gives the same alignment twice."""
-    for a, b in _pairs():
+    for a, b in _pairs(metric):
         assert metric.compare(a, b) == metric.compare(a, b), f"{name}.compare gives different alignments for the same pair"
 
 
 def check_inputs_unchanged(name, metric):
     """compare leaves both configurations as they were."""
-    for a, b in _pairs():
+    for a, b in _pairs(metric):
         before = [x.copy() for x in (a.positions, a.velocities, b.positions, b.velocities)]
         metric.compare(a, b)
         after = (a.positions, a.velocities, b.positions, b.velocities)
@@ -171,11 +180,13 @@ def check_inputs_unchanged(name, metric):
 def check_rejects_mismatched_sizes(name, metric):
     """Configurations of different sizes or dimensions raise flockkit.errors.ValidationError."""
     rng = np.random.default_rng(SEED + 5)
-    base = random_flock(n_agents=5, dims=2, rng=rng).configuration()
-    for other in (random_flock(n_agents=6, dims=2, rng=rng).configuration(), random_flock(n_agents=5, dims=3, rng=rng).configuration()):
+    d = dims_of(metric)[0]
+    base = random_flock(n_agents=5, dims=d, rng=rng).configuration()
+    others = (random_flock(n_agents=6, dims=d, rng=rng), random_flock(n_agents=5, dims=5 - d, rng=rng))
+    for other in (o.configuration() for o in others):
         expect_validation_error(
             lambda: metric.compare(base, other),
-            f"{name}.compare of {base.n_agents} agents in 2D with {other.n_agents} in {other.dims}D",
+            f"{name}.compare of {base.n_agents} agents in {d}D with {other.n_agents} in {other.dims}D",
         )
 
 

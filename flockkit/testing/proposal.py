@@ -1,8 +1,10 @@
 """Conformance checks for proposal moves (``flockkit.interfaces.ProposalMove``).
 
-Each check is ``check_<property>(name, move)`` and raises AssertionError saying what is wrong. They
-call the move many times on the initial trajectories of a problem with point, COM and shape
-constraints (2D and 3D), and look at every proposal it makes.
+Each check is ``check_<property>(name, move, *, behavior=None)`` and raises AssertionError saying
+what is wrong. They call the move many times on the initial trajectories of a problem with point,
+COM and shape constraints (in each dimension the move declares), made with the partner
+`behavior` (a model stepping dt = 0.1 s; default: the built-in ``boids``, where installed), and
+look at every proposal it makes.
 """
 
 from __future__ import annotations
@@ -10,15 +12,15 @@ from __future__ import annotations
 import numpy as np
 
 from ..constraints import Ball, ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
-from ..registry import get
 from ..solve import Proposal, ProposalContext, initial_trajectories, windows
-from ..solve.sampler import Scorer, pinned_frames
+from ..solve.sampler import pinned_frames
+from ._expect import dims_of, needs, partner
 
 SEED = 5077
 TRIES = 40
 
 
-def _cases():
+def _problems() -> dict[int, Problem]:
     square = Polygon(vertices=[[6.0, -2.0], [10.0, -2.0], [10.0, 2.0], [6.0, 2.0]])
     planar = Problem(n_agents=8, duration=3.0, constraints=[
         *(PointConstraint(agent=2, time=t, position=[t * 2.0, 0.5 * t]) for t in (0.5, 1.5, 2.5)),
@@ -30,31 +32,41 @@ def _cases():
         PointConstraint(agent=4, time=1.2, position=[2.0, 1.0, 0.5], velocity=[1.0, 0.0, 0.0]),
         ShapeConstraint(agents=[1, 2], time=2.0, shape=Ball(center=[3.0, 0.0, 0.0], radius=1.5), velocity=[1.0, 0.0, 0.0]),
     ])
+    return {2: planar, 3: spatial}
+
+
+def _cases(move, behavior):
+    """(problem, initial trajectories, context) per dimension the move declares."""
+    behavior = partner(behavior, "behavior", "proposal")
     found = []
-    for problem in (planar, spatial):
-        behavior = get("behavior", "boids", dt=problem.dt)
+    for dims in dims_of(move):
+        problem = _problems()[dims]
         motion = initial_trajectories(problem, behavior, np.random.default_rng(SEED))
-        scores = Scorer(problem, behavior, [get("objective", n) for n in ("com", "shape", "flocks")]).frames(motion)
-        context = ProposalContext(problem=problem, behavior=behavior, windows=tuple(windows(problem)), scores=scores, pinned=pinned_frames(problem))
+        scores = np.asarray(behavior.log_plausibility(motion), dtype=np.float64)
+        context = ProposalContext(
+            problem=problem, behavior=behavior, windows=tuple(windows(problem)), scores=scores,
+            pinned=pinned_frames(problem),
+        )
         found.append((problem, motion, context))
     return found
 
 
-def _proposals(move, cases=None):
+def _proposals(move, behavior, cases=None):
     """(problem, current, proposal) for each proposal made in TRIES calls per case."""
     rng = np.random.default_rng(SEED)
-    for problem, motion, context in cases or _cases():
+    for problem, motion, context in cases or _cases(move, behavior):
         for _ in range(TRIES):
             proposal = move.propose(motion, context, rng)
             if proposal is not None:
                 yield problem, motion, proposal
 
 
-def check_returns_proposals(name, move):
+@needs("behavior")
+def check_returns_proposals(name, move, *, behavior=None):
     """propose returns a flockkit.Proposal (or None), for a motion of the current's shape, and
     proposes something at least sometimes. (A Motion's positions are finite by construction.)"""
     made = 0
-    for _, current, proposal in _proposals(move):
+    for _, current, proposal in _proposals(move, behavior):
         assert isinstance(proposal, Proposal), f"{name}.propose returned {type(proposal).__name__}, not a flockkit.Proposal or None"
         shape = proposal.motion.positions.shape
         assert shape == current.positions.shape, f"{name} proposed a motion of shape {shape}; the current one is {current.positions.shape}"
@@ -63,18 +75,20 @@ def check_returns_proposals(name, move):
     assert made, f"{name}.propose returned None every time"
 
 
-def check_keeps_point_constraints(name, move):
+@needs("behavior")
+def check_keeps_point_constraints(name, move, *, behavior=None):
     """Every point-constrained agent stays exactly at its constrained position (to 1e-9)."""
-    for problem, _, proposal in _proposals(move):
+    for problem, _, proposal in _proposals(move, behavior):
         for c in problem.constraints:
             if isinstance(c, PointConstraint):
                 error = np.abs(proposal.motion.positions[problem.frame(c.time), c.agent] - c.position).max()
                 assert error <= 1e-9, f"{name} moved agent {c.agent} {error:.3g} off its point constraint at t={c.time:g}"
 
 
-def check_reports_changes(name, move):
+@needs("behavior")
+def check_reports_changes(name, move, *, behavior=None):
     """Every changed value lies at frames start <= t < stop and at the reported agents."""
-    for _, current, proposal in _proposals(move):
+    for _, current, proposal in _proposals(move, behavior):
         changed = np.any(proposal.motion.positions != current.positions, axis=2)
         frames, agents = np.nonzero(changed)
         outside = (frames < proposal.start) | (frames >= proposal.stop) | ~np.isin(agents, proposal.agents)
@@ -84,11 +98,12 @@ def check_reports_changes(name, move):
         )
 
 
-def check_input_unchanged(name, move):
+@needs("behavior")
+def check_input_unchanged(name, move, *, behavior=None):
     """propose leaves the current motion as it was."""
-    cases = _cases()
+    cases = _cases(move, behavior)
     before = [motion.positions.copy() for _, motion, _ in cases]
-    for _ in _proposals(move, cases):
+    for _ in _proposals(move, behavior, cases):
         pass
     for (_, motion, _), positions in zip(cases, before):
         assert np.array_equal(positions, motion.positions), f"{name}.propose changed the current motion"

@@ -27,7 +27,6 @@ The rules (each a dimensionless vector of order 1), over the neighbors an agent 
 
 from __future__ import annotations
 
-import functools
 import math
 
 import attrs
@@ -35,48 +34,29 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 import flockkit
+from flockkit import validate
 from flockkit.errors import ValidationError
 
 _WANDER = "wander"
 
 
-def _positive(name):
-    def check(instance, attribute, value):
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-            raise ValidationError(f"boids parameter {name} must be a finite number > 0; got {value!r}")
-
-    return check
-
-
-def _non_negative(name):
-    def check(instance, attribute, value):
-        if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-            raise ValidationError(f"boids parameter {name} must be a finite number >= 0; got {value!r}")
-
-    return check
-
-
-def _number(name, check, default):
-    return attrs.field(default=default, converter=functools.partial(_to_float, name=name), validator=check(name))
-
-
-def _to_float(value, name):
-    if isinstance(value, bool):
-        raise ValidationError(f"boids parameter {name} must be a number; got {value!r}")
-    try:
-        return float(value)
-    except (TypeError, ValueError):
-        raise ValidationError(f"boids parameter {name} must be a number; got {value!r}") from None
-
-
 def _obstacles(value):
     obstacles = tuple(value)
     for index, obstacle in enumerate(obstacles):
-        if not isinstance(obstacle, (flockkit.Ball, flockkit.Box, flockkit.Polygon)):
+        if not isinstance(obstacle, flockkit.Region):
             raise ValidationError(
-                f"boids parameter obstacles[{index}] must be a flockkit.Ball, Box or Polygon; got {type(obstacle).__name__}"
+                f"boids parameter obstacles[{index}] must be a flockkit region (Ball, Box or Polygon); "
+                f"got {type(obstacle).__name__}"
             )
     return obstacles
+
+
+def _positive(default):
+    return validate.parameter("boids", default=default, minimum=0, strict=True)
+
+
+def _non_negative(default):
+    return validate.parameter("boids", default=default, minimum=0)
 
 
 def _unit(vectors: np.ndarray) -> np.ndarray:
@@ -114,31 +94,30 @@ class Boids:
         N x N distance matrix (faster for small flocks).
     """
 
-    dt: float = _number("dt", _positive, 0.1)
-    perception_radius: float = _number("perception_radius", _positive, 3.0)
-    separation_radius: float = _number("separation_radius", _positive, 0.8)
-    field_of_view: float = _number("field_of_view", _positive, 300.0)
-    target_speed: float = _number("target_speed", _positive, 1.0)
-    acceleration: float = _number("acceleration", _positive, 4.0)
-    separation_weight: float = _number("separation_weight", _non_negative, 1.5)
-    cohesion_weight: float = _number("cohesion_weight", _non_negative, 3.0)
-    alignment_weight: float = _number("alignment_weight", _non_negative, 3.0)
-    avoidance_weight: float = _number("avoidance_weight", _non_negative, 3.0)
-    speed_weight: float = _number("speed_weight", _non_negative, 6.0)
-    wander_weight: float = _number("wander_weight", _positive, 1.0)
-    wander_sigma: float = _number("wander_sigma", _positive, 0.125)
-    avoid_distance: float = _number("avoid_distance", _positive, 1.5)
+    dt: float = _positive(0.1)
+    perception_radius: float = _positive(3.0)
+    separation_radius: float = _positive(0.8)
+    field_of_view: float = _positive(300.0)
+    target_speed: float = _positive(1.0)
+    acceleration: float = _positive(4.0)
+    separation_weight: float = _non_negative(1.5)
+    cohesion_weight: float = _non_negative(3.0)
+    alignment_weight: float = _non_negative(3.0)
+    avoidance_weight: float = _non_negative(3.0)
+    speed_weight: float = _non_negative(6.0)
+    wander_weight: float = _positive(1.0)
+    wander_sigma: float = _positive(0.125)
+    avoid_distance: float = _positive(1.5)
     obstacles: tuple = attrs.field(default=(), converter=_obstacles)
-    kdtree_above: int = 128
+    kdtree_above: int = validate.parameter("boids", default=128, kind="integer", minimum=0)
 
-    # a change at frame f alters the inferred impulses at frames f - 1 .. f + 2 (see log_plausibility)
-    plausibility_reach = 2
+    # A change at frame f alters the inferred impulses at frames f - 1 .. f + 2 (see
+    # log_plausibility), so scores within 2 frames of a change.
+    capabilities = flockkit.Capabilities(guide=True, obstacles=True, plausibility_reach=2, progress=True)
 
     def __attrs_post_init__(self):
         if self.field_of_view > 360:
             raise ValidationError(f"boids parameter field_of_view must be in (0, 360] degrees; got {self.field_of_view}")
-        if isinstance(self.kdtree_above, bool) or not isinstance(self.kdtree_above, int) or self.kdtree_above < 0:
-            raise ValidationError(f"boids parameter kdtree_above must be an integer >= 0; got {self.kdtree_above!r}")
 
     # -- the three operations -------------------------------------------------------------
 
@@ -236,19 +215,10 @@ class Boids:
         return _unit(rng.standard_normal(state.positions.shape))
 
     def _window(self, motion, start, stop) -> tuple[int, int]:
-        if not isinstance(motion, flockkit.Motion):
-            raise ValidationError(f"boids: motion must be a flockkit.Motion; got {type(motion).__name__}")
+        start, stop = validate.window(motion, start, stop, owner="boids")
         if not math.isclose(motion.dt, self.dt, rel_tol=1e-9):
             raise ValidationError(f"boids: motion.dt is {motion.dt} s but this model steps dt = {self.dt} s")
-        stop = motion.n_frames if stop is None else stop
-        for name, value in (("start", start), ("stop", stop)):
-            if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-                raise ValidationError(f"boids: {name} must be an integer frame index; got {value!r}")
-        if not 0 <= start <= stop <= motion.n_frames:
-            raise ValidationError(
-                f"boids: window start={start}, stop={stop} must satisfy 0 <= start <= stop <= {motion.n_frames} (the frame count)"
-            )
-        return int(start), int(stop)
+        return start, stop
 
     def _guide(self, guide, steps, state) -> dict:
         if guide is None:
@@ -284,7 +254,7 @@ class Boids:
             # Continue from the velocity the positions imply, exactly as inference will see it.
             velocity = (positions[t + 1] - positions[t]) / self.dt
             if progress is not None:
-                progress(t + 1)
+                progress(t + 1, steps, "simulating")
         if steps:
             wander[steps] = wander[steps - 1]
         return positions, wander
@@ -397,6 +367,4 @@ class _SparsePairs:
 
 
 def _steps(steps) -> int:
-    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
-        raise ValidationError(f"steps must be an integer >= 0; got {steps!r}")
-    return int(steps)
+    return validate.integer(steps, "boids: steps", minimum=0)

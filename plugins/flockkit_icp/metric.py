@@ -33,29 +33,12 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 import flockkit
+from flockkit import rigid, validate
 from flockkit.errors import ValidationError
 
 _CHUNK = 256  # pairs searched together: bounds the (pairs x starts x N x N) cost array
 _BOUND_CHUNK = 2048  # pairs bounded together
 _BLOCK_SIZES = (9, 3, 1)  # pairs_within rules out pairs of blocks of neighbors, coarse to fine
-
-
-def _positive(name):
-    def check(instance, attribute, value):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-            raise ValidationError(f"icp-hungarian parameter {name} must be a finite number > 0; got {value!r}")
-
-    return check
-
-
-def _non_negative_number(instance, attribute, value):
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-        raise ValidationError(f"icp-hungarian parameter velocity_weight must be a finite number >= 0; got {value!r}")
-
-
-def _iterations(instance, attribute, value):
-    if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-        raise ValidationError(f"icp-hungarian parameter max_iterations must be an integer >= 1; got {value!r}")
 
 
 @attrs.frozen(kw_only=True)
@@ -78,10 +61,12 @@ class IcpHungarian:
         World up for the 3D configuration-space start.
     """
 
-    velocity_weight: float = attrs.field(default=0.25, validator=_non_negative_number)
-    max_iterations: int = attrs.field(default=50, validator=_iterations)
-    tolerance: float = attrs.field(default=1e-10, validator=_positive("tolerance"))
+    velocity_weight: float = validate.parameter("icp-hungarian", default=0.25, minimum=0)
+    max_iterations: int = validate.parameter("icp-hungarian", default=50, kind="integer", minimum=1)
+    tolerance: float = validate.parameter("icp-hungarian", default=1e-10, minimum=0, strict=True)
     up: tuple = attrs.field(default=flockkit.DEFAULT_UP, converter=tuple)
+
+    capabilities = flockkit.Capabilities(lower_bound=True, pairs_within=True, pairwise=True)
 
     def compare(self, a: flockkit.Configuration, b: flockkit.Configuration) -> flockkit.Alignment:
         """The alignment of `b` onto `a` with the smallest distance found (see the module docstring)."""
@@ -132,8 +117,7 @@ class IcpHungarian:
         best rotation), no pair of those two blocks can be within the threshold. Blocks of 9, then
         3, then single configurations."""
         configurations = self._check_many(configurations)
-        if isinstance(threshold, bool) or not isinstance(threshold, (int, float)) or not threshold >= 0:
-            raise ValidationError(f"icp-hungarian.pairs_within: threshold must be a number >= 0; got {threshold!r}")
+        validate.number(threshold, "icp-hungarian.pairs_within: threshold", minimum=0)
         k = len(configurations)
         first, stop = (0, k) if rows is None else (int(rows[0]), int(rows[1]))
         if not 0 <= first <= stop <= k:
@@ -198,7 +182,7 @@ class IcpHungarian:
         w = self.velocity_weight
         source = np.concatenate([prepared.centered[ib], math.sqrt(w) * prepared.velocities[ib]], axis=1)
         target = np.concatenate([prepared.centered[ia], math.sqrt(w) * prepared.velocities[ia]], axis=1)
-        rotation = _kabsch(target, source)
+        rotation = rigid.kabsch(target, source)
         return np.sqrt(((target - _rotate(source, rotation)) ** 2).sum(axis=(1, 2)) / prepared.n_agents)
 
     # -- internals -------------------------------------------------------------------------
@@ -273,7 +257,11 @@ class IcpHungarian:
             active, assignment = active[going], assignment[going]
             if not len(active):
                 break
-            rotation[active] = _kabsch(pa[active], _gather(pb[active], assignment), va[active], _gather(vb[active], assignment), w)
+            target, source = pa[active], _gather(pb[active], assignment)
+            if w:  # the velocity term as extra rows weighted by root(w)
+                target = np.concatenate([target, root * va[active]], axis=1)
+                source = np.concatenate([source, root * _gather(vb[active], assignment)], axis=1)
+            rotation[active] = rigid.kabsch(target, source)
         return best, best_assignment, best_rotation
 
 
@@ -322,10 +310,8 @@ def _half_turns(d: int) -> list[np.ndarray]:
 
 
 def _rotate(points, rotation):
-    """points @ rotation.T for stacks (M, N, D) and (M, D, D), elementwise, so a pair's result does
-    not depend on the batch it is in."""
-    d = points.shape[2]
-    return np.stack([sum(points[:, :, k] * rotation[:, e, k, None] for k in range(d)) for e in range(d)], axis=2)
+    """points @ rotation.T for stacks (M, N, D) and (M, D, D)."""
+    return rigid.rotate(rotation[:, None], points)
 
 
 def _pair_costs(x, y):
@@ -341,23 +327,6 @@ def _pair_costs(x, y):
 
 def _gather(points, assignment):
     return np.take_along_axis(points, assignment[:, :, None], axis=1)
-
-
-def _kabsch(target, source, target_velocities=None, source_velocities=None, w=0.0):
-    """Proper rotations R (M, D, D) minimizing sum |target - R source|^2 (+ w for velocities)."""
-    cross = (source[:, :, :, None] * target[:, :, None, :]).sum(axis=1)  # sum_i s_i t_i^T
-    if w:
-        cross = cross + w * (source_velocities[:, :, :, None] * target_velocities[:, :, None, :]).sum(axis=1)
-    if target.shape[2] == 2:
-        angle = np.arctan2(cross[:, 0, 1] - cross[:, 1, 0], cross[:, 0, 0] + cross[:, 1, 1])
-        c, s = np.cos(angle), np.sin(angle)
-        return np.stack([np.stack([c, -s], axis=1), np.stack([s, c], axis=1)], axis=1)
-    u, _, vt = np.linalg.svd(cross)
-    v = np.transpose(vt, (0, 2, 1))
-    signs = np.ones((len(cross), 3))
-    flip = np.linalg.det(v @ np.transpose(u, (0, 2, 1))) < 0
-    signs[flip, -1] = -1.0
-    return (v * signs[:, None, :]) @ np.transpose(u, (0, 2, 1))
 
 
 def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=12) -> np.ndarray:

@@ -33,41 +33,17 @@ value and never prunes.
 
 from __future__ import annotations
 
-import inspect
 import math
 
 import attrs
 import numpy as np
 
 import flockkit
+from flockkit import validate
 from flockkit.errors import ValidationError
 
 
 _FIRST_PROBE = 0.02  # where probing starts, as a fraction of the mean squared radius
-
-
-def _check(name, test, expected):
-    def validator(instance, attribute, value):
-        if not test(value):
-            raise ValidationError(f"kovar parameter {name} must be {expected}; got {value!r}")
-
-    return validator
-
-
-def _number(value) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-
-
-def _positive(value) -> bool:
-    return _number(value) and value > 0
-
-
-def _non_negative(value) -> bool:
-    return _number(value) and value >= 0
-
-
-def _count(value) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
 
 
 @attrs.frozen(kw_only=True)
@@ -88,27 +64,31 @@ class Kovar:
     blend_time : float
         Seconds over which synthesis blends across a transition.
     prune : bool
-        Skip exact evaluations the metric's lower bound rules out.
+        Skip exact evaluations the metric's declared ``pairs_within`` (or ``lower_bound``) rules out.
     n_jobs : int
         joblib workers for the difference matrix (-1: all cores); a Dask cluster can run them
         through joblib's dask backend.
-    progress : bool
-        Show a progress bar over the difference matrix.
     """
 
-    candidate_interval: float = attrs.field(default=0.2, validator=_check("candidate_interval", _positive, "a number > 0"))
-    min_gap: float = attrs.field(default=1.0, validator=_check("min_gap", _non_negative, "a number >= 0"))
-    threshold: float | None = attrs.field(default=None, validator=_check("threshold", lambda v: v is None or _positive(v), "None or a number > 0"))
-    min_transitions: int = attrs.field(default=30, validator=_check("min_transitions", lambda v: _count(v) and v >= 1, "an integer >= 1"))
-    transitions_per_minute: float = attrs.field(default=20.0, validator=_check("transitions_per_minute", _non_negative, "a number >= 0"))
-    per_second: float | None = attrs.field(default=None, validator=_check("per_second", lambda v: v is None or _positive(v), "None or a number > 0"))
-    blend_time: float = attrs.field(default=2.0, validator=_check("blend_time", _non_negative, "a number >= 0"))
-    prune: bool = attrs.field(default=True, validator=_check("prune", lambda v: isinstance(v, bool), "True or False"))
-    n_jobs: int = attrs.field(default=1, validator=_check("n_jobs", lambda v: _count(v) and v != 0, "a non-zero integer"))
-    progress: bool = attrs.field(default=False, validator=_check("progress", lambda v: isinstance(v, bool), "True or False"))
+    candidate_interval: float = validate.parameter("kovar", default=0.2, minimum=0, strict=True)
+    min_gap: float = validate.parameter("kovar", default=1.0, minimum=0)
+    threshold: float | None = validate.parameter("kovar", default=None, minimum=0, strict=True, optional=True)
+    min_transitions: int = validate.parameter("kovar", default=30, kind="integer", minimum=1)
+    transitions_per_minute: float = validate.parameter("kovar", default=20.0, minimum=0)
+    per_second: float | None = validate.parameter("kovar", default=None, minimum=0, strict=True, optional=True)
+    blend_time: float = validate.parameter("kovar", default=2.0, minimum=0)
+    prune: bool = validate.parameter("kovar", default=True, kind="flag")
+    n_jobs: int = attrs.field(default=1)
 
-    def build(self, motion: flockkit.Motion, metric, rng: np.random.Generator) -> flockkit.MotionGraph:
-        """The motion graph of `motion` under `metric` (deterministic; `rng` is not needed)."""
+    capabilities = flockkit.Capabilities(progress=True)
+
+    def __attrs_post_init__(self):
+        if validate.integer(self.n_jobs, "kovar parameter n_jobs") == 0:
+            raise ValidationError("kovar parameter n_jobs must be a non-zero integer; got 0")
+
+    def build(self, motion: flockkit.Motion, metric, rng: np.random.Generator, *, progress=None) -> flockkit.MotionGraph:
+        """The motion graph of `motion` under `metric` (deterministic; `rng` is not needed).
+        `progress(done, total, stage)` is called as pairs are bounded and distances computed."""
         if not isinstance(motion, flockkit.Motion):
             raise ValidationError(f"kovar: motion must be a flockkit.Motion; got {type(motion).__name__}")
         stride = max(1, round(self.candidate_interval / motion.dt))
@@ -124,7 +104,7 @@ class Kovar:
         apart = np.abs(np.subtract.outer(np.arange(len(frames)), np.arange(len(frames))))  # in candidates
         far = apart * stride >= max(gap, 1)
         # nearer the diagonal than the neighbors of far cells, cells never matter: pruning skips them
-        matrix = _Matrix(configs, metric, n_jobs=self.n_jobs, progress=self.progress, needed=apart >= math.ceil(max(gap, 1) / stride) - 2)
+        matrix = _Matrix(configs, metric, n_jobs=self.n_jobs, progress=progress, needed=apart >= math.ceil(max(gap, 1) / stride) - 2)
         if self.per_second is not None:
             matrix.fill(matrix.all_pairs())
             count = math.ceil(self.per_second * motion.duration)
@@ -133,7 +113,8 @@ class Kovar:
             threshold = float(max((matrix.values[ij] for ij in chosen), default=0.0))
         else:
             spread = float(np.mean([np.mean(np.sum((c.positions - c.center_of_mass()) ** 2, axis=1)) for c in configs]))
-            prune = self.prune and (callable(getattr(metric, "pairs_within", None)) or callable(getattr(metric, "lower_bound", None)))
+            offers = flockkit.capabilities(metric)
+            prune = self.prune and (offers.pairs_within or offers.lower_bound)
             if self.threshold is not None:
                 threshold = self.threshold
                 if prune:
@@ -183,7 +164,7 @@ class Kovar:
         k = len(frames)
         length = int(np.clip(k // 100, 8, 48))
         count = max(3, round(k / (10 * length)))
-        if not matrix.takes_rows or k < 2 * count * length:
+        if not matrix.offers.pairs_within or k < 2 * count * length:
             return _FIRST_PROBE * spread, 2
         # a strip in the middle of each of `count` equal parts of the recording
         strips = [(int(m) - length // 2, int(m) - length // 2 + length) for m in (np.arange(count) + 0.5) * k / count]
@@ -242,6 +223,7 @@ class _Matrix:
     def __init__(self, configs, metric, *, n_jobs, progress, needed):
         k = len(configs)
         self.configs, self.metric, self.n_jobs, self.progress, self.needed = configs, metric, n_jobs, progress, needed
+        self.offers = flockkit.capabilities(metric)
         self.values = np.full((k, k), np.inf)
         self.listed = np.full(k, -np.inf)  # per row, the threshold its pairs were listed at
         self.computed = np.zeros((k, k), dtype=bool)
@@ -254,42 +236,36 @@ class _Matrix:
     def all_pairs(self) -> np.ndarray:
         return np.column_stack(np.triu_indices(len(self.configs), 1))
 
-    @property
-    def takes_rows(self) -> bool:
-        """Whether the metric's pairs_within can list the pairs of some rows only."""
-        batched = getattr(self.metric, "pairs_within", None)
-        return callable(batched) and "rows" in inspect.signature(batched).parameters
-
     def fill_within(self, threshold: float, ranges=None) -> None:
         """Compute every needed pair i < j that the metric cannot rule out at `threshold` (its
-        pairs_within or lower_bound); with `ranges` (only where takes_rows), only those with i in
-        one of the (start, stop) row ranges."""
+        declared pairs_within or lower_bound); with `ranges` (only with pairs_within), only those
+        with i in one of the (start, stop) row ranges."""
         pairs = self._listed(threshold, ranges)
         self.fill(pairs[self.needed[pairs[:, 0], pairs[:, 1]]])
 
     def _listed(self, threshold, ranges):
-        batched = getattr(self.metric, "pairs_within", None)
-        if callable(batched):
-            if not self.takes_rows:
-                return np.asarray(batched(self.configs, threshold), dtype=int).reshape(-1, 2)
-            # in row ranges, for the workers and for the progress bar; rows listed at this
+        if self.offers.pairs_within:
+            # in row ranges, for the workers and for the progress report; rows listed at this
             # threshold or above already are left out
             ranges = ranges or _row_ranges(len(self.configs), 4 * max(abs(self.n_jobs), 2))
             ranges = [run for a, b in ranges for run in _runs(self.listed[a:b] < threshold, a)]
+            batched = self.metric.pairs_within
             if self.n_jobs == 1:
                 parts = (batched(self.configs, threshold, rows=rows) for rows in ranges)
             else:
                 from joblib import Parallel, delayed
 
-                parts = Parallel(n_jobs=self.n_jobs, return_as="generator")(delayed(batched)(self.configs, threshold, rows=rows) for rows in ranges)
-            if self.progress:
-                from tqdm.auto import tqdm
-
-                parts = tqdm(parts, total=len(ranges), desc=f"bounding pairs (threshold {threshold:.3g})", unit="block")
-            pairs = np.concatenate([np.zeros((0, 2), dtype=int)] + [np.asarray(part, dtype=int).reshape(-1, 2) for part in parts])
+                parts = Parallel(n_jobs=self.n_jobs, return_as="generator")(
+                    delayed(batched)(self.configs, threshold, rows=rows) for rows in ranges
+                )
+            found = [np.zeros((0, 2), dtype=int)]
+            for done, part in enumerate(parts, 1):
+                found.append(np.asarray(part, dtype=int).reshape(-1, 2))
+                if self.progress is not None:
+                    self.progress(done, len(ranges), f"bounding pairs (threshold {threshold:.3g})")
             for a, b in ranges:
                 self.listed[a:b] = threshold
-            return pairs
+            return np.concatenate(found)
         pairs = self.all_pairs()
         bounds = np.array([self.metric.lower_bound(self.configs[i], self.configs[j]) for i, j in pairs])
         return pairs[bounds <= threshold]
@@ -313,29 +289,25 @@ class _Matrix:
 
 
 def _distances(metric, configs, pairs, n_jobs, progress) -> np.ndarray:
-    """metric distances of `pairs`, in chunks (the metric's batched `pairwise` where it has one),
-    through joblib when n_jobs != 1, with an optional progress bar."""
+    """metric distances of `pairs`, in chunks (the metric's declared batched `pairwise` where it
+    has one), through joblib when n_jobs != 1, reporting `progress(done, total, stage)`."""
     size = int(np.clip(len(pairs) // (8 * max(n_jobs, 1)), 64, 4096)) if n_jobs != 1 else 1024
     chunks = [pairs[s : s + size] for s in range(0, len(pairs), size)]
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=len(pairs), desc="difference matrix", unit="pair")
     if n_jobs == 1:
         results = (_chunk_distances(metric, configs, chunk) for chunk in chunks)
     else:
         from joblib import Parallel, delayed
 
         # each job gets only the configurations its chunk uses
-        results = Parallel(n_jobs=n_jobs, return_as="generator")(delayed(_chunk_distances)(metric, *_localized(configs, chunk)) for chunk in chunks)
-    found = []
+        results = Parallel(n_jobs=n_jobs, return_as="generator")(
+            delayed(_chunk_distances)(metric, *_localized(configs, chunk)) for chunk in chunks
+        )
+    found, done = [], 0
     for chunk, distances in zip(chunks, results):
         found.append(distances)
-        if bar is not None:
-            bar.update(len(chunk))
-    if bar is not None:
-        bar.close()
+        done += len(chunk)
+        if progress is not None:
+            progress(done, len(pairs), "difference matrix")
     return np.concatenate(found)
 
 
@@ -359,9 +331,8 @@ def _localized(configs, pairs):
 
 
 def _chunk_distances(metric, configs, pairs) -> np.ndarray:
-    batched = getattr(metric, "pairwise", None)
-    if callable(batched):
-        return np.asarray(batched(configs, pairs), dtype=np.float64)
+    if flockkit.capabilities(metric).pairwise:
+        return np.asarray(metric.pairwise(configs, pairs), dtype=np.float64)
     return np.array([metric.compare(configs[i], configs[j]).distance for i, j in pairs])
 
 

@@ -14,6 +14,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 import flockkit
+from flockkit import validate
 from flockkit.errors import ValidationError
 
 
@@ -26,13 +27,7 @@ def _window(motion, problem, start, stop) -> tuple[int, int]:
         raise ValidationError(
             f"objective: the motion has {motion.n_agents} agents in {motion.dims}D, the problem {problem.n_agents} in {problem.dims}D"
         )
-    stop = motion.n_frames if stop is None else stop
-    for name, value in (("start", start), ("stop", stop)):
-        if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-            raise ValidationError(f"objective: {name} must be an integer frame; got {value!r}")
-    if not 0 <= start <= stop <= motion.n_frames:
-        raise ValidationError(f"objective: window [{start}, {stop}) is not inside the motion's {motion.n_frames} frames")
-    return int(start), int(stop)
+    return validate.window(motion, start, stop, owner="objective")
 
 
 def _active(problem, kind, start, stop):

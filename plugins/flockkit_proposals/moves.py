@@ -10,16 +10,8 @@ import attrs
 import numpy as np
 
 import flockkit
-from flockkit.errors import ValidationError
+from flockkit import validate
 from flockkit.solve import Proposal, initial_trajectories, regenerate
-
-
-def _positive(name):
-    def check(instance, attribute, value):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
-            raise ValidationError(f"proposal parameter {name} must be a finite number > 0; got {value!r}")
-
-    return check
 
 
 def _segment(context, n_frames, rng, short_probability):
@@ -48,9 +40,9 @@ class Bump:
     and scales with its sample spacing. A bump reaching past the motion is applied to the
     trajectory extended along its end velocities, and the part outside is dropped."""
 
-    size: float = attrs.field(default=0.05, validator=_positive("size"))
-    max_bumps: int = attrs.field(default=3)
-    short_probability: float = attrs.field(default=0.8)
+    size: float = validate.parameter("proposal", default=0.05, minimum=0, strict=True)
+    max_bumps: int = validate.parameter("proposal", default=3, kind="integer", minimum=1)
+    short_probability: float = validate.parameter("proposal", default=0.8, minimum=0, maximum=1)
 
     def propose(self, current, context, rng):
         positions = np.array(current.positions)
@@ -84,8 +76,8 @@ class Retime:
     s ~ N(0, spread * r), r the segment's path length. Same path, same total distance, ends fixed;
     None when the offset would make the agent go backwards."""
 
-    spread: float = attrs.field(default=0.025, validator=_positive("spread"))
-    short_probability: float = attrs.field(default=0.8)
+    spread: float = validate.parameter("proposal", default=0.025, minimum=0, strict=True)
+    short_probability: float = validate.parameter("proposal", default=0.8, minimum=0, maximum=1)
 
     def propose(self, current, context, rng):
         n_frames = current.n_frames
@@ -119,7 +111,7 @@ class Regenerate:
     """With probability `everything`, new initial trajectories for the whole problem; otherwise 1
     to 3 contiguous windows rebuilt, held to the current motion at their ends."""
 
-    everything: float = attrs.field(default=0.5)
+    everything: float = validate.parameter("proposal", default=0.5, minimum=0, maximum=1)
 
     def propose(self, current, context, rng):
         problem, behavior = context.problem, context.behavior

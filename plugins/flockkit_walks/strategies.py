@@ -12,6 +12,7 @@ import attrs
 import numpy as np
 
 import flockkit
+from flockkit import rigid, validate
 from flockkit.errors import ValidationError
 
 
@@ -21,15 +22,13 @@ def _check_graph(graph) -> None:
 
 
 def _check_duration(duration) -> float:
-    if isinstance(duration, bool) or not isinstance(duration, (int, float)) or not math.isfinite(duration) or duration <= 0:
-        raise ValidationError(f"walk duration must be a number of seconds > 0; got {duration!r}")
-    return float(duration)
+    return validate.number(duration, "walk duration (seconds)", minimum=0, strict=True)
 
 
 def _start_node(graph, start, rng) -> int:
     if start is None:
         return int(rng.integers(len(graph.nodes)))
-    if isinstance(start, bool) or not isinstance(start, int) or not 0 <= start < len(graph.nodes):
+    if start >= len(graph.nodes):
         raise ValidationError(f"walk start must be a node index in 0..{len(graph.nodes) - 1}; got {start!r}")
     return start
 
@@ -38,16 +37,11 @@ def _frames_of(graph, edge) -> int:
     return graph.clips[edge[1]].n_frames - 1 if edge[0] == "clip" else 0
 
 
-def _optional_start(instance, attribute, value):
-    if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 0):
-        raise ValidationError(f"walk parameter start must be None or a node index >= 0; got {value!r}")
-
-
 @attrs.frozen(kw_only=True)
 class RandomWalk:
     """Uniformly random edges from `start` (None: a random node) until `duration` seconds are played."""
 
-    start: int | None = attrs.field(default=None, validator=_optional_start)
+    start: int | None = validate.parameter("walk", default=None, kind="integer", minimum=0, optional=True)
 
     def walk(self, graph: flockkit.MotionGraph, rng: np.random.Generator, duration: float) -> flockkit.Walk:
         _check_graph(graph)
@@ -65,21 +59,9 @@ class RandomWalk:
 
 
 def _region(value):
-    if not isinstance(value, (flockkit.Ball, flockkit.Box, flockkit.Polygon)):
-        raise ValidationError(f"walk parameter region must be a flockkit.Ball, Box or Polygon; got {type(value).__name__}")
+    if not isinstance(value, flockkit.Region):
+        raise ValidationError(f"walk parameter region must be a flockkit region (Ball, Box or Polygon); got {type(value).__name__}")
     return value
-
-
-def _anchor(region) -> np.ndarray:
-    """A point well inside the region: its center, or for a polygon the interior point farthest
-    from the boundary among the vertex centroid and the triangle centroids of its fan."""
-    if isinstance(region, flockkit.Ball):
-        return np.array(region.center)
-    if isinstance(region, flockkit.Box):
-        return (region.lower + region.upper) / 2
-    v = region.vertices
-    candidates = np.vstack([v.mean(axis=0), (v[0] + v[1:-1] + v[2:]) / 3])
-    return candidates[np.argmin(region.signed_distance(candidates))]
 
 
 @attrs.frozen(kw_only=True)
@@ -104,15 +86,9 @@ class RegionWalk:
     """
 
     region: object = attrs.field(converter=_region)
-    horizon: float = attrs.field(default=3.0)
-    start: int | None = attrs.field(default=None, validator=_optional_start)
-    budget: int = attrs.field(default=2000)
-
-    def __attrs_post_init__(self):
-        if isinstance(self.horizon, bool) or not isinstance(self.horizon, (int, float)) or not self.horizon > 0:
-            raise ValidationError(f"walk parameter horizon must be a number of seconds > 0; got {self.horizon!r}")
-        if isinstance(self.budget, bool) or not isinstance(self.budget, int) or self.budget < 1:
-            raise ValidationError(f"walk parameter budget must be an integer >= 1; got {self.budget!r}")
+    horizon: float = validate.parameter("walk", default=3.0, minimum=0, strict=True)
+    start: int | None = validate.parameter("walk", default=None, kind="integer", minimum=0, optional=True)
+    budget: int = validate.parameter("walk", default=2000, kind="integer", minimum=1)
 
     def walk(self, graph: flockkit.MotionGraph, rng: np.random.Generator, duration: float) -> flockkit.Walk:
         _check_graph(graph)
@@ -122,7 +98,7 @@ class RegionWalk:
         com = graph.motion.center_of_mass()
         node = _start_node(graph, self.start, rng)
         rotation = np.eye(graph.motion.dims)
-        translation = _anchor(self.region) - com[graph.nodes[node]]
+        translation = self.region.interior_point() - com[graph.nodes[node]]
         if not self.region.contains(com[graph.nodes[node]] + translation):
             raise ValidationError("the region cannot hold the group's center of mass even at the start")
         search = _Search(graph, self.region, com, math.ceil(self.horizon / graph.motion.dt), self.budget)
@@ -166,7 +142,7 @@ def _advance(graph, edge, rotation, translation):
     if edge[0] == "clip":
         return rotation, translation
     a = graph.transitions[edge[1]].alignment
-    return rotation @ a.rotation, rotation @ a.translation + translation
+    return rigid.compose((rotation, translation), (a.rotation, a.translation))
 
 
 class _Search:

@@ -4,7 +4,7 @@ import pytest
 import flockkit
 from flockkit import ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
 from flockkit.errors import UnknownPluginError, ValidationError
-from flockkit.solve.sampler import Scorer, _components
+from flockkit.solve.sampler import Scorer
 
 
 def small_problem():
@@ -16,7 +16,8 @@ def small_problem():
 
 
 def full_score(problem, motion):
-    behavior, _, terms = _components(problem, "boids", {}, ("com", "shape", "flocks"))
+    behavior = flockkit.get("behavior", "boids", dt=problem.dt)
+    terms = [flockkit.get("objective", name) for name in ("com", "shape", "flocks")]
     return Scorer(problem, behavior, terms).frames(motion).sum()
 
 

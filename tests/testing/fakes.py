@@ -8,6 +8,7 @@ import numpy as np
 
 import flockkit
 from flockkit.errors import ValidationError
+from flockkit.testing.inputs import recording
 
 
 class RandomVelocity:
@@ -54,6 +55,38 @@ class RandomVelocity:
             noise = (velocities[t] - velocities[t - 1]) / self.sigma
             values[t - start] = -0.5 * float(np.sum(noise**2)) - noise.size * 0.5 * math.log(2 * math.pi)
         return values
+
+
+class Declaring(RandomVelocity):
+    """RandomVelocity with every optional operation a behavior can declare, done right: guided
+    agents, progress reports, and its plausibility's reach (frame t reads frames t - 1 .. t + 1)."""
+
+    capabilities = flockkit.Capabilities(guide=True, progress=True, plausibility_reach=1)
+
+    def _run(self, x0, v0, steps, rng, guide=None, progress=None):
+        positions = np.empty((steps + 1, *x0.shape))
+        positions[0] = x0
+        velocity = np.array(v0)
+        for t in range(steps):
+            if t > 0:
+                velocity = velocity + self.sigma * rng.standard_normal(x0.shape)
+            positions[t + 1] = positions[t] + velocity * self.dt
+            for agent, path in (guide or {}).items():
+                positions[t + 1, agent] = path[t + 1]
+            velocity = (positions[t + 1] - positions[t]) / self.dt
+            if progress is not None:
+                progress(t + 1, steps, "simulating")
+        return positions
+
+    def forward(self, initial, steps, rng, *, guide=None, progress=None):
+        self._steps(steps)
+        return flockkit.Motion(positions=self._run(initial.positions, initial.velocities, steps, rng, guide, progress), dt=self.dt)
+
+    def backward(self, final, steps, rng, *, guide=None, progress=None):
+        self._steps(steps)
+        reversed_guide = {a: np.asarray(p)[::-1] for a, p in (guide or {}).items()}
+        positions = self._run(final.positions, -final.velocities, steps, rng, reversed_guide, progress)
+        return flockkit.Motion(positions=positions[::-1], dt=self.dt)
 
 
 class MissingMethod:
@@ -137,6 +170,28 @@ class WindowUnchecked(RandomVelocity):
         return np.resize(full[max(start, 0) : stop], max(stop - start, 0))
 
 
+class IgnoresGuide(Declaring):
+    def forward(self, initial, steps, rng, *, guide=None, progress=None):
+        return super().forward(initial, steps, rng, progress=progress)
+
+
+class SilentProgress(Declaring):
+    def forward(self, initial, steps, rng, *, guide=None, progress=None):
+        return super().forward(initial, steps, rng, guide=guide)
+
+
+class ReachTooShort(Declaring):
+    """Declares a reach of 1, but scores each frame with its neighbors' velocity changes too."""
+
+    def log_plausibility(self, motion, start=0, stop=None):
+        full = RandomVelocity.log_plausibility(self, motion)
+        smeared = full + np.roll(full, 1) + np.roll(full, -1)
+        stop = motion.n_frames if stop is None else stop
+        if not 0 <= start <= stop <= motion.n_frames:
+            raise ValidationError(f"window {start}:{stop} outside 0..{motion.n_frames}")
+        return smeared[start:stop]
+
+
 # check name -> a fake that breaks exactly that check
 BROKEN = {
     "check_interface": MissingMethod,
@@ -151,6 +206,9 @@ BROKEN = {
     "check_log_plausibility_prefers_forward": PrefersNoise,
     "check_log_plausibility_window": WindowIgnored,
     "check_rejects_bad_window": WindowUnchecked,
+    "check_guide": IgnoresGuide,
+    "check_progress": SilentProgress,
+    "check_plausibility_reach": ReachTooShort,
 }
 
 
@@ -161,6 +219,8 @@ from flockkit_icp import IcpHungarian  # noqa: E402
 
 class _Wrapped:
     """Delegates to the built-in metric; subclasses change one thing."""
+
+    capabilities = flockkit.Capabilities(lower_bound=True, pairs_within=True, pairwise=True)
 
     def __init__(self):
         self.inner = IcpHungarian()
@@ -294,6 +354,15 @@ class _KovarBased:
         return self.inner.build(motion, metric, rng)
 
 
+class SilentBuilder(_KovarBased):
+    """Declares progress and takes the keyword, but never reports."""
+
+    capabilities = flockkit.Capabilities(progress=True)
+
+    def build(self, motion, metric, rng, *, progress=None):
+        return super().build(motion, metric, rng)
+
+
 class NoBuild:
     def make(self, motion, metric, rng):
         return None
@@ -339,7 +408,7 @@ class MutatesMotion(_KovarBased):
 class AcceptsArrays(_KovarBased):
     def build(self, motion, metric, rng):
         if not isinstance(motion, flockkit.Motion):
-            motion = flockkit.simulate(n_agents=6, steps=120, seed=11)
+            motion = recording(n_agents=6, seconds=12.0, seed=11)
         return super().build(motion, metric, rng)
 
 
@@ -351,6 +420,7 @@ BROKEN_BUILDERS = {
     "check_deterministic": RandomSubset,
     "check_inputs_unchanged": MutatesMotion,
     "check_rejects_bad_motion": AcceptsArrays,
+    "check_progress": SilentBuilder,
 }
 
 

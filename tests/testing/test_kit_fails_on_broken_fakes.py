@@ -8,7 +8,7 @@ from hypothesis.errors import InvalidArgument
 from flockkit.testing import check_plugin, checks_for, parametrize_with_checks
 from flockkit.testing import strategies as fst
 
-from .fakes import BROKEN_BY_KIND, ComTerm, IcpHungarian, Kovar, RandomVelocity, RandomWalk, Retime
+from .fakes import BROKEN_BY_KIND, ComTerm, Declaring, IcpHungarian, Kovar, RandomVelocity, RandomWalk, Retime
 
 CASES = [(kind, name) for kind, fakes in BROKEN_BY_KIND.items() for name in sorted(fakes)]
 
@@ -23,7 +23,15 @@ def test_every_check_has_a_broken_fake(kind):
 
 
 @parametrize_with_checks(
-    [("behavior", RandomVelocity()), ("metric", IcpHungarian()), ("builder", Kovar()), ("walk", RandomWalk()), ("objective", ComTerm()), ("proposal", Retime())]
+    [
+        ("behavior", RandomVelocity()),
+        ("behavior", Declaring()),
+        ("metric", IcpHungarian()),
+        ("builder", Kovar()),
+        ("walk", RandomWalk()),
+        ("objective", ComTerm()),
+        ("proposal", Retime()),
+    ]
 )
 def test_correct_components_pass(component, check):
     check(component)
@@ -50,7 +58,7 @@ def test_checks_for_unknown_kind():
 
 def test_parametrize_ids_name_kind_component_and_check():
     mark = parametrize_with_checks([("behavior", RandomVelocity())])
-    ids = mark.kwargs["ids"]
+    ids = [param.id for param in mark.args[1]]
     assert ids[0] == "behavior:RandomVelocity-check_interface"
     assert len(ids) == len(checks_for("behavior"))
 

@@ -1,0 +1,88 @@
+"""Inputs the conformance kit makes itself, so that checking a component needs no built-in plugin.
+
+``recording`` is a group motion written down in closed form; ``graph`` is a motion graph over it
+whose transitions are known exactly. Both are deterministic, and cached per process.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+
+import numpy as np
+
+from .. import rigid
+from ..graph import MotionGraph
+from ..motion import Alignment, Motion
+
+__all__ = ["recording", "graph", "WOBBLE_PERIOD"]
+
+# The group circles the origin once every LAP seconds while its members wobble about their places
+# every WOBBLE_PERIOD seconds. The two periods are incommensurate, so a configuration recurs up
+# to a rigid motion (a turn about the origin) every WOBBLE_PERIOD seconds, not in place.
+LAP = 9.0
+WOBBLE_PERIOD = 2.3
+_RADIUS = 4.0  # of the circle the group's center follows, in length units
+
+
+def recording(*, n_agents: int = 6, seconds: float = 12.0, dims: int = 2, dt: float = 0.1, seed: int = 0) -> Motion:
+    """A group of `n_agents` circling the origin (in the xy plane, radius 4, about 2.8 length units
+    per second), its members holding places about one unit apart in the group's heading frame, each
+    wobbling on its own ellipse every ``WOBBLE_PERIOD`` seconds (and, in 3D, up and down).
+
+    Frames WOBBLE_PERIOD seconds apart are the same configuration up to a turn about the origin,
+    exactly, so the motion has transitions for a builder to find and for ``graph`` to take. Each
+    call returns a new Motion (a check may hand it to a component that breaks it)."""
+    return Motion(positions=_positions(n_agents, seconds, dims, dt, seed), dt=dt)
+
+
+@functools.lru_cache(maxsize=16)
+def _positions(n_agents, seconds, dims, dt, seed) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    t = np.arange(round(seconds / dt) + 1) * dt
+    places = rng.normal(0.0, 1.0, (n_agents, dims))
+    axes = rng.normal(0.0, 0.25, (n_agents, dims))
+    phases = rng.uniform(0.0, 2 * math.pi, n_agents)
+    wobble = 2 * math.pi * t[:, None] / WOBBLE_PERIOD + phases  # (T, N)
+    local = places + np.sin(wobble)[..., None] * axes + np.cos(wobble)[..., None] * axes[:, ::-1]
+    angle = 2 * math.pi * t / LAP
+    turn = np.zeros((len(t), dims, dims))
+    turn[:, :2, :2] = [[[math.cos(a), -math.sin(a)], [math.sin(a), math.cos(a)]] for a in angle]
+    if dims == 3:
+        turn[:, 2, 2] = 1.0
+    center = np.zeros((len(t), dims))
+    center[:, 0], center[:, 1] = _RADIUS * np.cos(angle), _RADIUS * np.sin(angle)
+    # the group's frame: x along the heading (tangent to the circle), so local x points ahead
+    heading = rigid.rotate(turn, np.eye(dims)[1])
+    frame = np.zeros_like(turn)
+    frame[:, :, 0] = heading
+    frame[:, :2, 1] = np.stack([-heading[:, 1], heading[:, 0]], axis=1)
+    if dims == 3:
+        frame[:, 2, 2] = 1.0
+    positions = center[:, None, :] + rigid.rotate(frame[:, None], local)
+    positions.setflags(write=False)
+    return positions
+
+
+@functools.lru_cache(maxsize=4)
+def graph(*, dims: int = 2) -> MotionGraph:
+    """A motion graph over ``recording(n_agents=6, seconds=12, dims=dims)`` with a transition each
+    way between every other frame and the frame WOBBLE_PERIOD seconds later (the same
+    configuration, turned): made without any metric or builder, each alignment exact."""
+    motion = recording(dims=dims)
+    lag = round(WOBBLE_PERIOD / motion.dt)
+    blend = 5
+    transitions = []
+    for start in range(0, motion.n_frames - lag - blend - 1, 2):
+        for a, b in ((start, start + lag), (start + lag, start)):
+            transitions.append((a, b, _alignment(motion, a, b), blend))
+    return MotionGraph.assemble(motion, transitions, params={"lag": lag}, provenance={"builder": "flockkit.testing"})
+
+
+def _alignment(motion: Motion, a: int, b: int) -> Alignment:
+    """The alignment of configuration b onto a with agents kept: Kabsch on the centered positions."""
+    x, y = motion.positions[a], motion.positions[b]
+    rotation = rigid.kabsch(x - x.mean(axis=0), y - y.mean(axis=0))
+    translation = x.mean(axis=0) - rigid.rotate(rotation, y.mean(axis=0))
+    residual = float(np.mean(np.sum((x - rigid.apply(rotation, translation, y)) ** 2, axis=1)))
+    return Alignment(distance=residual, assignment=np.arange(motion.n_agents), rotation=rotation, translation=translation)

@@ -1,0 +1,108 @@
+"""Checks of numbers, counts and frame windows with messages that name the field: the core uses
+them, and plugins import them instead of writing their own.
+
+Each raises ``flockkit.errors.ValidationError`` (a ``ValueError``) saying what was expected::
+
+    import attrs
+    from flockkit import validate
+
+    @attrs.frozen(kw_only=True)
+    class Drift:
+        dt: float = validate.parameter("drift", default=0.1, minimum=0, strict=True)
+        sigma: float = validate.parameter("drift", default=0.1, minimum=0, strict=True)
+
+        def log_plausibility(self, motion, start=0, stop=None):
+            start, stop = validate.window(motion, start, stop, owner="drift")
+            ...
+"""
+
+from __future__ import annotations
+
+import math
+
+import attrs
+import numpy as np
+
+from .errors import ValidationError
+
+__all__ = ["number", "integer", "flag", "window", "parameter"]
+
+_NO_DEFAULT = object()
+
+
+def _bound(minimum, strict, maximum=None) -> str:
+    low = "" if minimum is None else f" {'>' if strict else '>='} {minimum:g}"
+    return low + ("" if maximum is None else f"{' and' if low else ''} <= {maximum:g}")
+
+
+def number(value, field: str, *, minimum=None, strict: bool = False, maximum=None, optional: bool = False) -> float | None:
+    """`value` as a float: a finite real number (not a bool, not a string) at least `minimum`
+    (above it with `strict`) and at most `maximum`; None passes through with `optional`."""
+    if value is None and optional:
+        return None
+    ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
+    if ok:
+        value = float(value)
+        ok = math.isfinite(value) and (minimum is None or (value > minimum if strict else value >= minimum))
+        ok = ok and (maximum is None or value <= maximum)
+    if not ok:
+        expected = f"a finite number{_bound(minimum, strict, maximum)}"
+        raise ValidationError(f"{field} must be {'None or ' if optional else ''}{expected}; got {value!r}")
+    return value
+
+
+def integer(value, field: str, *, minimum=None, optional: bool = False) -> int | None:
+    """`value` as an int: an integer (not a bool, not a float) at least `minimum`; None passes
+    through with `optional`."""
+    if value is None and optional:
+        return None
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or (minimum is not None and value < minimum):
+        expected = f"an integer{_bound(minimum, False)}"
+        raise ValidationError(f"{field} must be {'None or ' if optional else ''}{expected}; got {value!r}")
+    return int(value)
+
+
+def flag(value, field: str) -> bool:
+    """`value`, which must be True or False."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise ValidationError(f"{field} must be True or False; got {value!r}")
+    return bool(value)
+
+
+def window(motion, start, stop, *, owner: str) -> tuple[int, int]:
+    """The frame window (start, stop) of `motion`, ``stop=None`` meaning its end, checked as every
+    windowed operation (``log_plausibility``, ``log_terms``) must: integers with
+    0 <= start <= stop <= n_frames. `owner` names the component in the message."""
+    from .motion import Motion
+
+    if not isinstance(motion, Motion):
+        raise ValidationError(f"{owner}: motion must be a flockkit.Motion; got {type(motion).__name__}")
+    stop = motion.n_frames if stop is None else stop
+    start, stop = integer(start, f"{owner}: start"), integer(stop, f"{owner}: stop")
+    if not 0 <= start <= stop <= motion.n_frames:
+        raise ValidationError(
+            f"{owner}: window start={start}, stop={stop} must satisfy 0 <= start <= stop <= {motion.n_frames} "
+            "(the frame count)"
+        )
+    return start, stop
+
+
+def parameter(owner: str, *, default=_NO_DEFAULT, kind: str = "number", minimum=None, strict: bool = False,
+              maximum=None, optional: bool = False):
+    """An ``attrs.field`` for a component parameter, checked on construction with the messages of
+    :func:`number`, :func:`integer` or :func:`flag` (`kind`), named "<owner> parameter <name>"."""
+    if kind not in ("number", "integer", "flag"):
+        raise ValueError(f"kind must be 'number', 'integer' or 'flag'; got {kind!r}")
+
+    def check(instance, attribute, value):
+        field = f"{owner} parameter {attribute.name}"
+        if kind == "flag":
+            flag(value, field)
+        elif kind == "integer":
+            integer(value, field, minimum=minimum, optional=optional)
+        else:
+            number(value, field, minimum=minimum, strict=strict, maximum=maximum, optional=optional)
+
+    if default is _NO_DEFAULT:
+        return attrs.field(validator=check)
+    return attrs.field(default=default, validator=check)
