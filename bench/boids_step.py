@@ -6,8 +6,9 @@
 Per N (2D): the mean time of one step over a run (after a warm-up run from the same documented
 random flock), the peak memory traced by tracemalloc during a 10-step run and that peak per agent
 (constant per agent = memory linear in N), and the mean number of neighbors each agent perceives
-(within the perception radius, before the field of view: the work per agent). Mesa's BoidFlockers runs at its own default density (100 agents per
-100 x 100, vision 10), with its width and height scaled with sqrt(N).
+(within the perception radius, before the field of view: the work per agent). Mesa's BoidFlockers
+runs at its own default density (100 agents per 100 x 100, vision 10), with its width and height
+scaled with sqrt(N).
 """
 
 from __future__ import annotations
@@ -52,7 +53,11 @@ def mesa_case(n: int, steps: int):
     for _ in range(steps):
         model.step()
     per_step = (time.perf_counter() - begin) / steps * 1e3
-    neighbors = np.mean([len(agent.neighbors) for agent in model.agents]) if hasattr(next(iter(model.agents)), "neighbors") else float("nan")
+    neighbors = (
+        np.mean([len(agent.neighbors) for agent in model.agents])
+        if hasattr(next(iter(model.agents)), "neighbors")
+        else float("nan")
+    )
     return per_step, neighbors
 
 
@@ -67,8 +72,10 @@ def main():
         mesa_version = mesa.__version__
     except ImportError:
         mesa_version = None
-    print(f"python {platform.python_version()}, numpy {np.__version__}, flockkit {flockkit.__version__}, "
-          f"mesa {mesa_version or 'not installed (run bench/run)'}; {platform.machine()}, {platform.processor() or '?'}")
+    print(
+        f"python {platform.python_version()}, numpy {np.__version__}, flockkit {flockkit.__version__}, "
+        f"mesa {mesa_version or 'not installed (run bench/run)'}; {platform.machine()}, {platform.processor() or '?'}"
+    )
     header = f"{'N':>6} {'flockkit ms/step':>17} {'target':>7} {'peak MB':>8} {'B/agent':>8} {'neighbors':>9}"
     if mesa_version:
         header += f" {'mesa ms/step':>13} {'mesa nbrs':>9} {'speed-up':>9}"
@@ -77,7 +84,8 @@ def main():
         steps = max(10, min(500, 20000 // n))
         per_step, peak, neighbors = flockkit_case(n, steps)
         target = TARGETS_MS.get(n)
-        row = f"{n:>6} {per_step:>17.3f} {(f'<={target:g}' if target else '-'):>7} {peak / 2**20:>8.2f} {peak / n:>8.0f} {neighbors:>9.1f}"
+        bar = f"<={target:g}" if target else "-"
+        row = f"{n:>6} {per_step:>17.3f} {bar:>7} {peak / 2**20:>8.2f} {peak / n:>8.0f} {neighbors:>9.1f}"
         if mesa_version and n <= args.mesa_max:
             mesa_ms, mesa_neighbors = mesa_case(n, max(5, min(100, 2000 // n)))
             row += f" {mesa_ms:>13.3f} {mesa_neighbors:>9.1f} {mesa_ms / per_step:>8.1f}x"

@@ -34,13 +34,19 @@ def main():
         graph = builder.build(recording, metric, np.random.default_rng(0))
         results[prune] = (time.perf_counter() - begin, graph)
     (full_time, full), (pruned_time, pruned) = results[False], results[True]
-    same = list(full.nodes) == list(pruned.nodes) and full.clips == pruned.clips and full.transitions == pruned.transitions
+    same = (
+        list(full.nodes) == list(pruned.nodes) and full.clips == pruned.clips and full.transitions == pruned.transitions
+    )
     cells = pruned.params["candidates"] * (pruned.params["candidates"] - 1) // 2
-    print(f"{args.agents} agents, {pruned.params['candidates']} candidates ({cells} cells), n_jobs={args.jobs}; "
-          f"threshold {pruned.params['threshold']:.4g}, {len(pruned.transitions)} transitions; identical graphs: {same}")
+    print(
+        f"{args.agents} agents, {pruned.params['candidates']} candidates ({cells} cells), n_jobs={args.jobs}; "
+        f"threshold {pruned.params['threshold']:.4g}, {len(pruned.transitions)} transitions; identical graphs: {same}"
+    )
     print(f"prune=False: {full_time:.1f} s, {full.params['evaluated']} exact evaluations")
-    print(f"default    : {pruned_time:.1f} s, {pruned.params['evaluated']} exact evaluations "
-          f"({full_time / pruned_time:.2f}x faster)")
+    print(
+        f"default    : {pruned_time:.1f} s, {pruned.params['evaluated']} exact evaluations "
+        f"({full_time / pruned_time:.2f}x faster)"
+    )
 
 
 if __name__ == "__main__":

@@ -32,7 +32,9 @@ def main():
     recording = flockkit.simulate(n_agents=args.agents, steps=args.candidates * 2 + 25, seed=1)
     metric = flockkit.get("metric", "icp-hungarian")
     # the lowest minima, a few more than wanted: dead-end trimming removes some
-    builder = flockkit.get("builder", "kovar", per_second=1.02 * args.transitions / recording.duration, n_jobs=args.jobs)
+    builder = flockkit.get(
+        "builder", "kovar", per_second=1.02 * args.transitions / recording.duration, n_jobs=args.jobs
+    )
     begin = time.perf_counter()
     graph = builder.build(recording, metric, np.random.default_rng(0))
     seconds = time.perf_counter() - begin
@@ -46,10 +48,18 @@ def main():
     own = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
     worker = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1024
     stats = graph.stats()
-    print(f"{args.agents} agents, 2D, {graph.params['candidates']} candidates ({recording.duration:.0f} s of recording), n_jobs={args.jobs}")
-    print(f"built in {seconds:.1f} s: {stats['transitions']} transitions, {stats['nodes']} nodes, "
-          f"{stats['fraction_kept']:.0%} of frames kept, threshold {graph.params['threshold']:.4g}")
-    print(f"graph file {size:.1f} MB; peak memory {own:.0f} MB in the build's process, {worker:.0f} MB in the largest worker")
+    print(
+        f"{args.agents} agents, 2D, {graph.params['candidates']} candidates ({recording.duration:.0f} s of "
+        f"recording), n_jobs={args.jobs}"
+    )
+    print(
+        f"built in {seconds:.1f} s: {stats['transitions']} transitions, {stats['nodes']} nodes, "
+        f"{stats['fraction_kept']:.0%} of frames kept, threshold {graph.params['threshold']:.4g}"
+    )
+    print(
+        f"graph file {size:.1f} MB; peak memory {own:.0f} MB in the build's process, {worker:.0f} MB in the largest "
+        "worker"
+    )
 
 
 if __name__ == "__main__":

@@ -10,12 +10,12 @@ from . import errors, io, rigid, validate
 from .constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, Problem, Region, ShapeConstraint
 from .convenience import build_graph, random_flock, simulate, walk
 from .graph import Clip, MotionGraph, Transition, Walk
-from .synthesis import synthesize, synthesize_many
 from .hookspecs import hookimpl
 from .interfaces import Capabilities, capabilities
-from .solve import Proposal, Solution, solve
 from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State, heading_axes
 from .registry import available, get, resolve
+from .solve import Proposal, Solution, solve
+from .synthesis import synthesize, synthesize_many
 
 __version__ = "0.1.0"
 

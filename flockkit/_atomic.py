@@ -14,7 +14,9 @@ def atomic_path(path):
     from the suffix, like matplotlib and USD, still can); on success it replaces `path`, and on
     failure it is removed."""
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent if str(path.parent) else ".")
+    fd, tmp = tempfile.mkstemp(
+        prefix=f".{path.name}.", suffix=path.suffix, dir=path.parent if str(path.parent) else "."
+    )
     os.close(fd)
     tmp = Path(tmp)
     try:

@@ -81,7 +81,9 @@ def _cmd_check(args) -> int:
     from .testing import check_plugin
 
     component = flockkit.get(args.kind, args.name, **_parameters(args.param))
-    report = check_plugin(args.kind, component, name=args.name, partners=_partners(args.partner), progress=_progress(args))
+    report = check_plugin(
+        args.kind, component, name=args.name, partners=_partners(args.partner), progress=_progress(args)
+    )
     print(f"{args.kind} {args.name!r}: {report.summary()}")
     return 0
 
@@ -116,7 +118,10 @@ def _cmd_build(args) -> int:
     graph = flockkit.build_graph(motion, builder=args.builder, metric=args.metric, progress=_progress(args), **params)
     graph.save(output)
     stats = graph.stats()
-    print(f"wrote {output}: {stats['nodes']} nodes, {stats['transitions']} transitions, {stats['fraction_kept']:.0%} of frames kept")
+    print(
+        f"wrote {output}: {stats['nodes']} nodes, {stats['transitions']} transitions, {stats['fraction_kept']:.0%} of "
+        "frames kept"
+    )
     return 0
 
 
@@ -135,7 +140,8 @@ def _region(text: str):
     if kind == "polygon" and len(values) >= 6 and len(values) % 2 == 0:
         return flockkit.Polygon(vertices=[values[i : i + 2] for i in range(0, len(values), 2)])
     raise ValidationError(
-        f"--region {text!r}: expected box:x0,y0,x1,y1 (or 6 numbers in 3D), ball:cx,cy[,cz],r or polygon:x0,y0,x1,y1,x2,y2,..."
+        f"--region {text!r}: expected box:x0,y0,x1,y1 (or 6 numbers in 3D), ball:cx,cy[,cz],r or "
+        "polygon:x0,y0,x1,y1,x2,y2,..."
     )
 
 
@@ -162,10 +168,28 @@ def _cmd_info(args) -> int:
             motion = flockkit.Motion.load(args.file)
         except FileFormatError:
             raise not_graph from None
-        print(json.dumps({"kind": "motion", "frames": motion.n_frames, "agents": motion.n_agents, "dims": motion.dims,
-                          "dt": motion.dt, "seconds": motion.duration, "channels": sorted(motion.channels)}, indent=2))
+        print(
+            json.dumps(
+                {
+                    "kind": "motion",
+                    "frames": motion.n_frames,
+                    "agents": motion.n_agents,
+                    "dims": motion.dims,
+                    "dt": motion.dt,
+                    "seconds": motion.duration,
+                    "channels": sorted(motion.channels),
+                },
+                indent=2,
+            )
+        )
         return 0
-    print(json.dumps({"kind": "graph", **graph.stats(), "params": graph.params, "provenance": graph.provenance}, indent=2, default=str))
+    print(
+        json.dumps(
+            {"kind": "graph", **graph.stats(), "params": graph.params, "provenance": graph.provenance},
+            indent=2,
+            default=str,
+        )
+    )
     return 0
 
 
@@ -181,7 +205,10 @@ def _cmd_solve(args) -> int:
     solution.motion.save(output)
     rates = ", ".join(f"{name} {rate:.0%}" for name, rate in sorted(solution.acceptance.items())) or "none"
     print(f"wrote {output}: {solution.motion!r}")
-    print(f"log g {solution.log_g[0]:.6g}; largest constraint residual {max(solution.residuals, default=0.0):.3g}; accepted: {rates}")
+    print(
+        f"log g {solution.log_g[0]:.6g}; largest constraint residual {max(solution.residuals, default=0.0):.3g}; "
+        f"accepted: {rates}"
+    )
     return 0
 
 
@@ -191,9 +218,11 @@ def _cmd_demo(args) -> int:
     begin = time.perf_counter()
     summary = run_demo(args.output, data=args.data, progress=_progress(args))
     graph = summary["graph"]
-    print(f"graph: {graph['nodes']} nodes, {graph['transitions']} transitions; come-from-behind: largest residual "
-          f"{max(summary['come-from-behind']['residuals']):.3g}; sticklebacks: "
-          f"{'built' if isinstance(summary['sticklebacks'], dict) else summary['sticklebacks']}")
+    print(
+        f"graph: {graph['nodes']} nodes, {graph['transitions']} transitions; come-from-behind: largest residual "
+        f"{max(summary['come-from-behind']['residuals']):.3g}; sticklebacks: "
+        f"{'built' if isinstance(summary['sticklebacks'], dict) else summary['sticklebacks']}"
+    )
     print(f"done in {time.perf_counter() - begin:.0f} s; everything is in {Path(args.output).resolve()}")
     return 0
 
@@ -237,101 +266,153 @@ def _cmd_import(args) -> int:
     return 0
 
 
+def _output(parser, help: str) -> None:
+    parser.add_argument("-o", "--output", required=True, help=help)
+
+
+def _quiet(parser) -> None:
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def _param(parser, what: str) -> None:
+    parser.add_argument("--param", action="append", metavar="KEY=VALUE", help=f"{what} parameter, repeatable")
+
+
+def _plugins_arguments(parser) -> None:
+    parser.add_argument("--kind", choices=KINDS, help="only this kind")
+
+
+def _simulate_arguments(parser) -> None:
+    parser.add_argument("--agents", type=int, required=True, help="number of agents (>= 1)")
+    parser.add_argument("--steps", type=int, required=True, help="number of steps (>= 1)")
+    parser.add_argument("--dims", type=int, default=2, choices=(2, 3), help="2 or 3 dimensions (default 2)")
+    parser.add_argument("--dt", type=float, default=0.1, help="seconds per step (default 0.1)")
+    parser.add_argument("--seed", type=int, default=None, help="random seed; the same seed gives the same motion")
+    parser.add_argument("--behavior", default="boids", help="behavior model (default boids)")
+    _param(parser, "behavior")
+    _output(parser, "motion file to write (.npz)")
+    parser.add_argument("--picture", help="also draw the trajectories (.png, .pdf or .svg; needs flockkit[viz])")
+    _quiet(parser)
+
+
+def _build_arguments(parser) -> None:
+    parser.add_argument("motion", help="motion file (.npz, from simulate or import)")
+    _output(parser, "graph file to write (.npz)")
+    parser.add_argument("--metric", default="icp-hungarian", help="configuration metric (default icp-hungarian)")
+    parser.add_argument("--builder", default="kovar", help="graph builder (default kovar)")
+    parser.add_argument("--threshold", type=float, help="absolute transition threshold (default: adaptive)")
+    parser.add_argument("--jobs", type=int, help="parallel workers (-1: all cores)")
+    _param(parser, "builder")
+    _quiet(parser)
+
+
+def _walk_arguments(parser) -> None:
+    parser.add_argument("graph", help="graph file (.npz, from build)")
+    parser.add_argument("--duration", type=float, required=True, help="seconds of motion to synthesize")
+    parser.add_argument("--strategy", default="random", help="walk strategy (default random; region needs --region)")
+    parser.add_argument(
+        "--region", help="box:x0,y0,x1,y1 | ball:cx,cy,r | polygon:x0,y0,x1,y1,... (for --strategy region)"
+    )
+    parser.add_argument("--seed", type=int, default=None, help="random seed")
+    _param(parser, "strategy")
+    _output(parser, "motion file to write (.npz)")
+
+
+def _info_arguments(parser) -> None:
+    parser.add_argument("file", help="a .npz written by flockkit")
+
+
+def _solve_arguments(parser) -> None:
+    parser.add_argument("scenario", help="scenario file (.toml; see examples/scenarios)")
+    _output(parser, "motion file to write (.npz)")
+    parser.add_argument("--iterations", type=int, help="sampler iterations (default: the scenario's, else 1000)")
+    parser.add_argument("--chains", type=int, help="independent chains")
+    parser.add_argument("--seed", type=int, help="random seed")
+    parser.add_argument("--jobs", type=int, default=1, help="parallel workers for chains")
+    _quiet(parser)
+
+
+def _demo_arguments(parser) -> None:
+    parser.add_argument("-o", "--output", default="flockkit-demo", help="folder to write into (./flockkit-demo)")
+    parser.add_argument("--data", help="folder of the shared captures (default: ../shared/data when present)")
+    _quiet(parser)
+
+
+def _render_arguments(parser) -> None:
+    parser.add_argument("motion", help="motion file (.npz)")
+    _output(parser, "out.png | out.pdf | out.svg | out.gif | out.mp4 (needs flockkit[viz])")
+    parser.add_argument("--scenario", help="also draw this scenario's constraints and obstacles (.toml)")
+    _quiet(parser)
+
+
+def _export_arguments(parser) -> None:
+    parser.add_argument("motion", help="motion file (.npz)")
+    _output(parser, "out.csv | out.json | out.usda | out.usdc")
+
+
+def _import_arguments(parser) -> None:
+    parser.add_argument("table", help="long (frame, agent, x, y[, z]) or wide (frame, x1, y1, x2, y2, ...) table")
+    _output(parser, "motion file to write (.npz)")
+    parser.add_argument("--format", choices=("long", "wide"), default="long", help="table layout (default long)")
+    rate = parser.add_mutually_exclusive_group(required=True)
+    rate.add_argument("--fps", type=float, help="frames per second of the capture")
+    rate.add_argument("--dt", type=float, help="seconds per frame of the capture")
+    parser.add_argument("--dims", type=int, default=2, choices=(2, 3), help="2 or 3 coordinates per agent")
+    parser.add_argument(
+        "--max-gap", type=int, default=flockkit.io.DEFAULT_MAX_GAP, help="longest run of missing frames to fill"
+    )
+
+
+def _check_arguments(parser) -> None:
+    parser.add_argument("kind", choices=KINDS)
+    parser.add_argument("name")
+    _param(parser, "factory")
+    parser.add_argument(
+        "--partner",
+        action="append",
+        metavar="KIND=NAME",
+        help="partner component of the checks: metric=NAME (builders), behavior=NAME (proposals), "
+        "graph=FILE.npz (walks); default: the built-in, or the kit's own graph",
+    )
+    _quiet(parser)
+
+
+# command -> (help, arguments, run), in the order `flockkit --help` lists them
+COMMANDS = {
+    "plugins": ("list installed plugin components", _plugins_arguments, _cmd_plugins),
+    "simulate": ("simulate a flock and write its motion (.npz)", _simulate_arguments, _cmd_simulate),
+    "build": ("build a motion graph from a motion (.npz)", _build_arguments, _cmd_build),
+    "walk": ("walk a motion graph and write the synthesized motion (.npz)", _walk_arguments, _cmd_walk),
+    "info": ("describe a graph or motion file", _info_arguments, _cmd_info),
+    "solve": ("solve a constrained-animation scenario (.toml) and write the motion", _solve_arguments, _cmd_solve),
+    "demo": (
+        "the tour: graph, synthesis, constrained flock, real fish; pictures and a summary",
+        _demo_arguments,
+        _cmd_demo,
+    ),
+    "render": (
+        "draw a motion: a still (.png/.pdf/.svg) or an animation (.gif/.mp4)",
+        _render_arguments,
+        _cmd_render,
+    ),
+    "export": (
+        "write a motion as CSV, JSON or USD (.usda/.usdc, needs flockkit[usd])",
+        _export_arguments,
+        _cmd_export,
+    ),
+    "import": ("read a captured-motion table (CSV/TSV) into a motion (.npz)", _import_arguments, _cmd_import),
+    "check": ("run the conformance kit on an installed plugin component", _check_arguments, _cmd_check),
+}
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="flockkit", description="Animate flocks, schools, herds and small crowds.")
     parser.add_argument("--version", action="version", version=f"flockkit {flockkit.__version__}")
     commands = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-
-    plugins = commands.add_parser("plugins", help="list installed plugin components")
-    plugins.add_argument("--kind", choices=KINDS, help="only this kind")
-    plugins.set_defaults(run=_cmd_plugins)
-
-    simulate = commands.add_parser("simulate", help="simulate a flock and write its motion (.npz)")
-    simulate.add_argument("--agents", type=int, required=True, help="number of agents (>= 1)")
-    simulate.add_argument("--steps", type=int, required=True, help="number of steps (>= 1)")
-    simulate.add_argument("--dims", type=int, default=2, choices=(2, 3), help="2 or 3 dimensions (default 2)")
-    simulate.add_argument("--dt", type=float, default=0.1, help="seconds per step (default 0.1)")
-    simulate.add_argument("--seed", type=int, default=None, help="random seed; the same seed gives the same motion")
-    simulate.add_argument("--behavior", default="boids", help="behavior model (default boids)")
-    simulate.add_argument("--param", action="append", metavar="KEY=VALUE", help="behavior parameter, repeatable")
-    simulate.add_argument("-o", "--output", required=True, help="motion file to write (.npz)")
-    simulate.add_argument("--picture", help="also draw the trajectories (.png, .pdf or .svg; needs flockkit[viz])")
-    simulate.add_argument("--quiet", action="store_true", help="no progress bar")
-    simulate.set_defaults(run=_cmd_simulate)
-
-    build = commands.add_parser("build", help="build a motion graph from a motion (.npz)")
-    build.add_argument("motion", help="motion file (.npz, from simulate or import)")
-    build.add_argument("-o", "--output", required=True, help="graph file to write (.npz)")
-    build.add_argument("--metric", default="icp-hungarian", help="configuration metric (default icp-hungarian)")
-    build.add_argument("--builder", default="kovar", help="graph builder (default kovar)")
-    build.add_argument("--threshold", type=float, help="absolute transition threshold (default: adaptive)")
-    build.add_argument("--jobs", type=int, help="parallel workers (-1: all cores)")
-    build.add_argument("--param", action="append", metavar="KEY=VALUE", help="builder parameter, repeatable")
-    build.add_argument("--quiet", action="store_true", help="no progress bar")
-    build.set_defaults(run=_cmd_build)
-
-    walk = commands.add_parser("walk", help="walk a motion graph and write the synthesized motion (.npz)")
-    walk.add_argument("graph", help="graph file (.npz, from build)")
-    walk.add_argument("--duration", type=float, required=True, help="seconds of motion to synthesize")
-    walk.add_argument("--strategy", default="random", help="walk strategy (default random; region needs --region)")
-    walk.add_argument("--region", help="box:x0,y0,x1,y1 | ball:cx,cy,r | polygon:x0,y0,x1,y1,... (for --strategy region)")
-    walk.add_argument("--seed", type=int, default=None, help="random seed")
-    walk.add_argument("--param", action="append", metavar="KEY=VALUE", help="strategy parameter, repeatable")
-    walk.add_argument("-o", "--output", required=True, help="motion file to write (.npz)")
-    walk.set_defaults(run=_cmd_walk)
-
-    info = commands.add_parser("info", help="describe a graph or motion file")
-    info.add_argument("file", help="a .npz written by flockkit")
-    info.set_defaults(run=_cmd_info)
-
-    solve = commands.add_parser("solve", help="solve a constrained-animation scenario (.toml) and write the motion")
-    solve.add_argument("scenario", help="scenario file (.toml; see examples/scenarios)")
-    solve.add_argument("-o", "--output", required=True, help="motion file to write (.npz)")
-    solve.add_argument("--iterations", type=int, help="sampler iterations (default: the scenario's, else 1000)")
-    solve.add_argument("--chains", type=int, help="independent chains")
-    solve.add_argument("--seed", type=int, help="random seed")
-    solve.add_argument("--jobs", type=int, default=1, help="parallel workers for chains")
-    solve.add_argument("--quiet", action="store_true", help="no progress bar")
-    solve.set_defaults(run=_cmd_solve)
-
-    demo = commands.add_parser("demo", help="the tour: graph, synthesis, constrained flock, real fish; pictures and a summary")
-    demo.add_argument("-o", "--output", default="flockkit-demo", help="folder to write into (default ./flockkit-demo)")
-    demo.add_argument("--data", help="folder of the shared captures (default: ../shared/data when present)")
-    demo.add_argument("--quiet", action="store_true", help="no progress bars")
-    demo.set_defaults(run=_cmd_demo)
-
-    render = commands.add_parser("render", help="draw a motion: a still (.png/.pdf/.svg) or an animation (.gif/.mp4)")
-    render.add_argument("motion", help="motion file (.npz)")
-    render.add_argument("-o", "--output", required=True, help="out.png | out.pdf | out.svg | out.gif | out.mp4 (needs flockkit[viz])")
-    render.add_argument("--scenario", help="also draw this scenario's constraints and obstacles (.toml)")
-    render.add_argument("--quiet", action="store_true", help="no progress bar")
-    render.set_defaults(run=_cmd_render)
-
-    export = commands.add_parser("export", help="write a motion as CSV, JSON or USD (.usda/.usdc, needs flockkit[usd])")
-    export.add_argument("motion", help="motion file (.npz)")
-    export.add_argument("-o", "--output", required=True, help="out.csv | out.json | out.usda | out.usdc")
-    export.set_defaults(run=_cmd_export)
-
-    importer = commands.add_parser("import", help="read a captured-motion table (CSV/TSV) into a motion (.npz)")
-    importer.add_argument("table", help="long (frame, agent, x, y[, z]) or wide (frame, x1, y1, x2, y2, ...) table")
-    importer.add_argument("-o", "--output", required=True, help="motion file to write (.npz)")
-    importer.add_argument("--format", choices=("long", "wide"), default="long", help="table layout (default long)")
-    rate = importer.add_mutually_exclusive_group(required=True)
-    rate.add_argument("--fps", type=float, help="frames per second of the capture")
-    rate.add_argument("--dt", type=float, help="seconds per frame of the capture")
-    importer.add_argument("--dims", type=int, default=2, choices=(2, 3), help="2 or 3 coordinates per agent")
-    importer.add_argument("--max-gap", type=int, default=flockkit.io.DEFAULT_MAX_GAP, help="longest run of missing frames to fill")
-    importer.set_defaults(run=_cmd_import)
-
-    check = commands.add_parser("check", help="run the conformance kit on an installed plugin component")
-    check.add_argument("kind", choices=KINDS)
-    check.add_argument("name")
-    check.add_argument("--param", action="append", metavar="KEY=VALUE", help="factory parameter, repeatable")
-    check.add_argument("--partner", action="append", metavar="KIND=NAME",
-                       help="partner component of the checks: metric=NAME (builders), behavior=NAME (proposals), "
-                            "graph=FILE.npz (walks); default: the built-in, or the kit's own graph")
-    check.add_argument("--quiet", action="store_true", help="no progress bar")
-    check.set_defaults(run=_cmd_check)
+    for name, (help, arguments, run) in COMMANDS.items():
+        command = commands.add_parser(name, help=help)
+        arguments(command)
+        command.set_defaults(run=run)
     return parser
 
 

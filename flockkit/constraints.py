@@ -19,7 +19,17 @@ from ._arrays import check_finite, readonly_float
 from .errors import ValidationError
 from .validate import integer, number
 
-__all__ = ["Ball", "Box", "Polygon", "Region", "PointConstraint", "ComConstraint", "ShapeConstraint", "Constraint", "Problem"]
+__all__ = [
+    "Ball",
+    "Box",
+    "Polygon",
+    "Region",
+    "PointConstraint",
+    "ComConstraint",
+    "ShapeConstraint",
+    "Constraint",
+    "Problem",
+]
 
 
 def _field(name: str):
@@ -41,7 +51,8 @@ class Region:
         points = np.asarray(points, dtype=np.float64)
         if points.ndim == 0 or points.shape[-1] != self.dims:
             raise ValidationError(
-                f"points for a {self.dims}D {type(self).__name__} must have shape (..., {self.dims}); got {points.shape}"
+                f"points for a {self.dims}D {type(self).__name__} must have shape (..., {self.dims}); got "
+                f"{points.shape}"
             )
         return points.reshape(-1, self.dims)
 
@@ -73,6 +84,11 @@ class Region:
         """A point well inside the region (its centroid, where that is inside)."""
         return self.centroid()
 
+    def outline(self) -> np.ndarray:
+        """The region's outline in the x-y plane (its cross-section through the centroid in 3D) as
+        (K, 2) vertices of a closed polygon, for drawing."""
+        raise NotImplementedError
+
     def sample(self, count: int, rng: np.random.Generator) -> np.ndarray:
         """`count` points drawn uniformly inside the region, shape (count, D), by rejection from
         its bounding box. Raises ValidationError when the region fills too little of its box to
@@ -85,7 +101,9 @@ class Region:
             points.append(batch[self.contains(batch)])
             drawn += len(batch)
             if drawn > 1_000_000 and not sum(len(p) for p in points):
-                raise ValidationError(f"{type(self).__name__}: no sample in {drawn} draws fell inside; the region has (almost) no area")
+                raise ValidationError(
+                    f"{type(self).__name__}: no sample in {drawn} draws fell inside; the region has (almost) no area"
+                )
         return np.concatenate(points or [np.empty((0, self.dims))])[:count]
 
 
@@ -117,6 +135,10 @@ class Ball(Region):
     def centroid(self):
         return np.array(self.center)
 
+    def outline(self):
+        angle = np.linspace(0.0, 2 * np.pi, 65)[:-1]
+        return self.center[:2] + self.radius * np.stack([np.cos(angle), np.sin(angle)], axis=1)
+
     def _distance_and_normal(self, points):
         offset = points - self.center
         distance = np.linalg.norm(offset, axis=1)
@@ -141,12 +163,15 @@ class Box(Region):
     def __attrs_post_init__(self):
         if self.lower.shape not in ((2,), (3,)) or self.upper.shape != self.lower.shape:
             raise ValidationError(
-                f"Box.lower and Box.upper must both have shape (2,) or (3,); got {self.lower.shape} and {self.upper.shape}"
+                f"Box.lower and Box.upper must both have shape (2,) or (3,); got {self.lower.shape} and "
+                f"{self.upper.shape}"
             )
         check_finite(self.lower, field="Box.lower")
         check_finite(self.upper, field="Box.upper")
         if not np.all(self.lower < self.upper):
-            raise ValidationError(f"Box.lower must be below Box.upper in every coordinate; got {self.lower} and {self.upper}")
+            raise ValidationError(
+                f"Box.lower must be below Box.upper in every coordinate; got {self.lower} and {self.upper}"
+            )
 
     @property
     def dims(self) -> int:
@@ -157,6 +182,10 @@ class Box(Region):
 
     def centroid(self):
         return (self.lower + self.upper) / 2
+
+    def outline(self):
+        (x0, y0), (x1, y1) = self.lower[:2], self.upper[:2]
+        return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
 
     def _distance_and_normal(self, points):
         center = (self.lower + self.upper) / 2
@@ -197,7 +226,9 @@ class Polygon(Region):
             raise ValidationError("Polygon.vertices enclose no area; expected a simple polygon")
         crossing = self._crossing_edges()
         if crossing is not None:
-            raise ValidationError(f"Polygon.vertices: edges {crossing[0]} and {crossing[1]} cross; expected a simple polygon")
+            raise ValidationError(
+                f"Polygon.vertices: edges {crossing[0]} and {crossing[1]} cross; expected a simple polygon"
+            )
 
     @property
     def dims(self) -> int:
@@ -210,6 +241,9 @@ class Polygon(Region):
         a, b = self._edges()
         cross = a[:, 0] * b[:, 1] - b[:, 0] * a[:, 1]
         return ((a + b) * cross[:, None]).sum(axis=0) / (3 * cross.sum())
+
+    def outline(self):
+        return np.array(self.vertices)
 
     def interior_point(self):
         """The point farthest inside among the vertex centroid and the centroids of the triangles
@@ -230,7 +264,9 @@ class Polygon(Region):
         k = len(a)
 
         def orient(p, q, r):
-            return np.sign((q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0]))
+            return np.sign(
+                (q[..., 0] - p[..., 0]) * (r[..., 1] - p[..., 1]) - (q[..., 1] - p[..., 1]) * (r[..., 0] - p[..., 0])
+            )
 
         i, j = np.triu_indices(k, 1)
         adjacent = (j == i + 1) | ((i == 0) & (j == k - 1))
@@ -297,8 +333,14 @@ def _agents(value, *, field: str):
     try:
         agents = tuple(value)
     except TypeError:
-        raise ValidationError(f"{field} must be None (all agents) or a sequence of agent indices; got {value!r}") from None
-    if not agents or any(isinstance(a, bool) or not isinstance(a, (int, np.integer)) or a < 0 for a in agents) or len(set(agents)) != len(agents):
+        raise ValidationError(
+            f"{field} must be None (all agents) or a sequence of agent indices; got {value!r}"
+        ) from None
+    if (
+        not agents
+        or any(isinstance(a, bool) or not isinstance(a, (int, np.integer)) or a < 0 for a in agents)
+        or len(set(agents)) != len(agents)
+    ):
         raise ValidationError(f"{field} must be a non-empty sequence of distinct agent indices >= 0; got {value!r}")
     return tuple(int(a) for a in agents)
 
@@ -320,7 +362,9 @@ class PointConstraint:
     agent: int = attrs.field(converter=_agent)
     time: float = attrs.field(converter=functools.partial(_time, field="PointConstraint.time"))
     position: np.ndarray = attrs.field(converter=functools.partial(_vector, field="PointConstraint.position"))
-    velocity: np.ndarray | None = attrs.field(default=None, converter=functools.partial(_vector, field="PointConstraint.velocity"))
+    velocity: np.ndarray | None = attrs.field(
+        default=None, converter=functools.partial(_vector, field="PointConstraint.velocity")
+    )
 
     def __attrs_post_init__(self):
         _same_dims(self, "position", "velocity")
@@ -334,10 +378,14 @@ class ComConstraint:
     (standard deviation ``Problem.sigma_com``). `velocity` as for PointConstraint.
     """
 
-    agents: tuple[int, ...] | None = attrs.field(default=None, converter=functools.partial(_agents, field="ComConstraint.agents"))
+    agents: tuple[int, ...] | None = attrs.field(
+        default=None, converter=functools.partial(_agents, field="ComConstraint.agents")
+    )
     time: float = attrs.field(converter=functools.partial(_time, field="ComConstraint.time"))
     position: np.ndarray = attrs.field(converter=functools.partial(_vector, field="ComConstraint.position"))
-    velocity: np.ndarray | None = attrs.field(default=None, converter=functools.partial(_vector, field="ComConstraint.velocity"))
+    velocity: np.ndarray | None = attrs.field(
+        default=None, converter=functools.partial(_vector, field="ComConstraint.velocity")
+    )
 
     def __attrs_post_init__(self):
         _same_dims(self, "position", "velocity")
@@ -352,18 +400,28 @@ class ShapeConstraint:
     initial trajectories place in the shape.
     """
 
-    agents: tuple[int, ...] | None = attrs.field(default=None, converter=functools.partial(_agents, field="ShapeConstraint.agents"))
+    agents: tuple[int, ...] | None = attrs.field(
+        default=None, converter=functools.partial(_agents, field="ShapeConstraint.agents")
+    )
     time: float = attrs.field(converter=functools.partial(_time, field="ShapeConstraint.time"))
     shape: Region = attrs.field()
-    velocity: np.ndarray = attrs.field(default=None, converter=functools.partial(_vector, field="ShapeConstraint.velocity"))
+    velocity: np.ndarray = attrs.field(
+        default=None, converter=functools.partial(_vector, field="ShapeConstraint.velocity")
+    )
 
     def __attrs_post_init__(self):
         if not isinstance(self.shape, Region):
-            raise ValidationError(f"ShapeConstraint.shape must be a flockkit.Polygon, Box or Ball; got {type(self.shape).__name__}")
+            raise ValidationError(
+                f"ShapeConstraint.shape must be a flockkit.Polygon, Box or Ball; got {type(self.shape).__name__}"
+            )
         if self.velocity is None:
-            raise ValidationError("ShapeConstraint.velocity is required (shape (D,)): the flock's velocity inside the shape")
+            raise ValidationError(
+                "ShapeConstraint.velocity is required (shape (D,)): the flock's velocity inside the shape"
+            )
         if self.velocity.shape[0] != self.shape.dims:
-            raise ValidationError(f"ShapeConstraint.velocity has {self.velocity.shape[0]} components but the shape is {self.shape.dims}D")
+            raise ValidationError(
+                f"ShapeConstraint.velocity has {self.velocity.shape[0]} components but the shape is {self.shape.dims}D"
+            )
 
 
 Constraint = PointConstraint | ComConstraint | ShapeConstraint
@@ -380,11 +438,14 @@ def _constraints(value) -> tuple:
     try:
         items = tuple(value)
     except TypeError:
-        raise ValidationError(f"Problem.constraints must be a sequence of constraints; got {type(value).__name__}") from None
+        raise ValidationError(
+            f"Problem.constraints must be a sequence of constraints; got {type(value).__name__}"
+        ) from None
     for index, item in enumerate(items):
         if not isinstance(item, (PointConstraint, ComConstraint, ShapeConstraint)):
             raise ValidationError(
-                f"Problem.constraints[{index}] must be a PointConstraint, ComConstraint or ShapeConstraint; got {type(item).__name__}"
+                f"Problem.constraints[{index}] must be a PointConstraint, ComConstraint or ShapeConstraint; got "
+                f"{type(item).__name__}"
             )
     return items
 
@@ -396,7 +457,9 @@ def _regions(value) -> tuple:
         raise ValidationError(f"Problem.obstacles must be a sequence of regions; got {type(value).__name__}") from None
     for index, item in enumerate(items):
         if not isinstance(item, Region):
-            raise ValidationError(f"Problem.obstacles[{index}] must be a flockkit.Ball, Box or Polygon; got {type(item).__name__}")
+            raise ValidationError(
+                f"Problem.obstacles[{index}] must be a flockkit.Ball, Box or Polygon; got {type(item).__name__}"
+            )
     return items
 
 
@@ -440,15 +503,25 @@ class Problem:
 
     n_agents: int = attrs.field(converter=lambda v: integer(v, "Problem.n_agents", minimum=1))
     dims: int = attrs.field(default=2)
-    dt: float = attrs.field(default=0.1, converter=functools.partial(number, field="Problem.dt", minimum=0, strict=True))
+    dt: float = attrs.field(
+        default=0.1, converter=functools.partial(number, field="Problem.dt", minimum=0, strict=True)
+    )
     duration: float = attrs.field(converter=functools.partial(number, field="Problem.duration", minimum=0, strict=True))
     constraints: tuple = attrs.field(default=(), converter=_constraints)
     obstacles: tuple = attrs.field(default=(), converter=_regions)
     flocks: int = attrs.field(default=1, converter=lambda v: integer(v, "Problem.flocks", minimum=1))
-    sigma_com: float = attrs.field(default=0.1, converter=functools.partial(number, field="Problem.sigma_com", minimum=0, strict=True))
-    shape_weight: float = attrs.field(default=10.0, converter=functools.partial(number, field="Problem.shape_weight", minimum=0, strict=True))
-    flock_weight: float = attrs.field(default=1000.0, converter=functools.partial(number, field="Problem.flock_weight", minimum=0, strict=True))
-    visibility: float = attrs.field(default=3.0, converter=functools.partial(number, field="Problem.visibility", minimum=0, strict=True))
+    sigma_com: float = attrs.field(
+        default=0.1, converter=functools.partial(number, field="Problem.sigma_com", minimum=0, strict=True)
+    )
+    shape_weight: float = attrs.field(
+        default=10.0, converter=functools.partial(number, field="Problem.shape_weight", minimum=0, strict=True)
+    )
+    flock_weight: float = attrs.field(
+        default=1000.0, converter=functools.partial(number, field="Problem.flock_weight", minimum=0, strict=True)
+    )
+    visibility: float = attrs.field(
+        default=3.0, converter=functools.partial(number, field="Problem.visibility", minimum=0, strict=True)
+    )
     follow: str = attrs.field(default="nearest")
 
     def __attrs_post_init__(self):
@@ -496,7 +569,9 @@ class Problem:
             raise ValidationError(f"{where} is {dims}D in a {self.dims}D problem")
         bad = [a for a in self.agents_of(constraint) if a >= self.n_agents]
         if bad:
-            raise ValidationError(f"{where}: agent {bad[0]} does not exist; the problem has agents 0 to {self.n_agents - 1}")
+            raise ValidationError(
+                f"{where}: agent {bad[0]} does not exist; the problem has agents 0 to {self.n_agents - 1}"
+            )
 
     def _with_velocities(self) -> tuple:
         from scipy.interpolate import make_interp_spline
@@ -506,16 +581,27 @@ class Problem:
             frames = [self.frame(c.time) for c in track]
             if len(set(frames)) != len(frames):
                 repeated = next(f for f in frames if frames.count(f) > 1)
-                raise ValidationError(f"two {type(track[0]).__name__}s on the same agents at frame {repeated} (t={repeated * self.dt:g} s)")
+                raise ValidationError(
+                    f"two {type(track[0]).__name__}s on the same agents at frame {repeated} (t={repeated * self.dt:g} "
+                    "s)"
+                )
             missing = [c for c in track if c.velocity is None]
             if not missing:
                 continue
             if len(track) == 1:
                 c = track[0]
-                what = f"point constraint on agent {c.agent}" if isinstance(c, PointConstraint) else f"COM constraint on agents {c.agents or 'all'}"
-                raise ValidationError(f"the only {what} (t={c.time:g}) has no path to infer its velocity from; give it a velocity")
+                what = (
+                    f"point constraint on agent {c.agent}"
+                    if isinstance(c, PointConstraint)
+                    else f"COM constraint on agents {c.agents or 'all'}"
+                )
+                raise ValidationError(
+                    f"the only {what} (t={c.time:g}) has no path to infer its velocity from; give it a velocity"
+                )
             times = np.array([c.time for c in track])
-            spline = make_interp_spline(times, np.array([c.position for c in track]), k=min(3, len(track) - 1)).derivative()
+            spline = make_interp_spline(
+                times, np.array([c.position for c in track]), k=min(3, len(track) - 1)
+            ).derivative()
             for c in missing:
                 filled[id(c)] = attrs.evolve(c, velocity=spline(c.time))
         return tuple(filled.get(id(c), c) for c in self.constraints)

@@ -5,21 +5,22 @@ from __future__ import annotations
 import math
 
 import attrs
-
 import numpy as np
 
-from .validate import integer, number
+from ._progress import progress_bar
 from .errors import ValidationError
 from .graph import MotionGraph, Walk
-from .motion import Motion, State
-from ._progress import progress_bar
 from .interfaces import capabilities
+from .motion import Motion, State
 from .registry import get, label, require_dims, resolve
+from .validate import integer, number
 
 __all__ = ["simulate", "random_flock", "build_graph", "walk"]
 
 
-def random_flock(*, n_agents: int, dims: int = 2, rng: np.random.Generator, spacing: float = 1.0, speed: float = 1.0) -> State:
+def random_flock(
+    *, n_agents: int, dims: int = 2, rng: np.random.Generator, spacing: float = 1.0, speed: float = 1.0
+) -> State:
     """A random flock, the documented start of :func:`simulate`.
 
     Positions are uniform in a disc (2D) or ball (3D) around the origin whose area (volume) is
@@ -160,8 +161,9 @@ def _plain(params: dict) -> dict:
     return {k: v for k, v in params.items() if isinstance(v, (int, float, str, bool, type(None))) and k != "n_jobs"}
 
 
-def walk(graph: MotionGraph, *, strategy="random", duration: float | None = None, seed: int | None = None,
-         **params) -> Walk:
+def walk(
+    graph: MotionGraph, *, strategy="random", duration: float | None = None, seed: int | None = None, **params
+) -> Walk:
     """A walk through `graph` with a walk strategy (an installed name with `params`: ``random``,
     ``region`` with ``region=``; or an instance) covering `duration` seconds (default: the length
     of the graph's source motion)."""

@@ -68,7 +68,12 @@ class Transition:
 
 def _edge(value) -> tuple[str, int]:
     kind, index = value
-    if kind not in ("clip", "transition") or isinstance(index, bool) or not isinstance(index, (int, np.integer)) or index < 0:
+    if (
+        kind not in ("clip", "transition")
+        or isinstance(index, bool)
+        or not isinstance(index, (int, np.integer))
+        or index < 0
+    ):
         raise ValidationError(f"Walk.edges entries must be ('clip' or 'transition', index >= 0); got {value!r}")
     return kind, int(index)
 
@@ -97,7 +102,9 @@ class Walk:
     def __attrs_post_init__(self):
         if self.start < 0:
             raise ValidationError(f"Walk.start must be a node index >= 0; got {self.start}")
-        object.__setattr__(self, "_is_transition", np.array([kind == "transition" for kind, _ in self.edges], dtype=bool))
+        object.__setattr__(
+            self, "_is_transition", np.array([kind == "transition" for kind, _ in self.edges], dtype=bool)
+        )
         object.__setattr__(self, "_index", np.array([index for _, index in self.edges], dtype=np.int64))
 
     @property
@@ -208,11 +215,21 @@ class MotionGraph:
 
     def _validate(self):
         k, frames = len(self.nodes), self.motion.n_frames
-        if k < 1 or self.nodes.ndim != 1 or np.any(np.diff(self.nodes) <= 0) or self.nodes[0] < 0 or self.nodes[-1] >= frames:
-            raise ValidationError(f"MotionGraph.nodes must be increasing source frames in 0..{frames - 1}; got {self.nodes}")
+        if (
+            k < 1
+            or self.nodes.ndim != 1
+            or np.any(np.diff(self.nodes) <= 0)
+            or self.nodes[0] < 0
+            or self.nodes[-1] >= frames
+        ):
+            raise ValidationError(
+                f"MotionGraph.nodes must be increasing source frames in 0..{frames - 1}; got {self.nodes}"
+            )
         for index, clip in enumerate(self.clips):
             if (clip.source, clip.target, clip.start, clip.stop) != (index, index + 1, *self.nodes[index : index + 2]):
-                raise ValidationError(f"MotionGraph.clips[{index}] must join node {index} to node {index + 1} by their frames")
+                raise ValidationError(
+                    f"MotionGraph.clips[{index}] must join node {index} to node {index + 1} by their frames"
+                )
         if len(self.clips) != k - 1:
             raise ValidationError(f"MotionGraph needs {k - 1} clips for {k} nodes; got {len(self.clips)}")
         if not self.transitions:
@@ -271,8 +288,14 @@ class MotionGraph:
             Transition(source=renumber[s], target=renumber[e], start=int(s), end=int(e), alignment=a, blend=int(b))
             for s, e, a, b in transitions
         ]
-        return cls(motion=motion, nodes=nodes, clips=_clips(nodes), transitions=kept_transitions, params=params,
-                   provenance=provenance)
+        return cls(
+            motion=motion,
+            nodes=nodes,
+            clips=_clips(nodes),
+            transitions=kept_transitions,
+            params=params,
+            provenance=provenance,
+        )
 
     # -- queries ----------------------------------------------------------------------------
 
@@ -289,7 +312,8 @@ class MotionGraph:
         """Edges a walk may take at `node`: a transition only once its blend has played out
         (`frames_since_transition` frames of clips since the last one), so blends never overlap."""
         return [
-            edge for edge in self.out_edges(node)
+            edge
+            for edge in self.out_edges(node)
             if edge[0] == "clip" or frames_since_transition >= self.transitions[edge[1]].blend
         ]
 
@@ -333,7 +357,9 @@ class MotionGraph:
         for index, clip in enumerate(self.clips):
             graph.add_edge(clip.source, clip.target, kind="clip", index=index, frames=clip.n_frames)
         for index, t in enumerate(self.transitions):
-            graph.add_edge(t.source, t.target, kind="transition", index=index, distance=t.alignment.distance, blend=t.blend)
+            graph.add_edge(
+                t.source, t.target, kind="transition", index=index, distance=t.alignment.distance, blend=t.blend
+            )
         return graph
 
     def __eq__(self, other):
@@ -377,16 +403,30 @@ class MotionGraph:
             nodes = arrays["nodes"]
             transitions = [
                 Transition(
-                    source=int(s), target=int(e), start=int(nodes[s]), end=int(nodes[e]), blend=int(blend),
+                    source=int(s),
+                    target=int(e),
+                    start=int(nodes[s]),
+                    end=int(nodes[e]),
+                    blend=int(blend),
                     alignment=Alignment(distance=dist, assignment=assign, rotation=rot, translation=shift),
                 )
                 for (s, e), blend, dist, assign, rot, shift in zip(
-                    arrays["transition_nodes"], arrays["transition_blend"], arrays["transition_distance"],
-                    arrays["transition_assignment"], arrays["transition_rotation"], arrays["transition_translation"],
+                    arrays["transition_nodes"],
+                    arrays["transition_blend"],
+                    arrays["transition_distance"],
+                    arrays["transition_assignment"],
+                    arrays["transition_rotation"],
+                    arrays["transition_translation"],
                 )
             ]
-            return cls(motion=motion, nodes=nodes, clips=_clips(nodes), transitions=transitions,
-                       params=header.get("params"), provenance=header.get("provenance"))
+            return cls(
+                motion=motion,
+                nodes=nodes,
+                clips=_clips(nodes),
+                transitions=transitions,
+                params=header.get("params"),
+                provenance=header.get("provenance"),
+            )
         except (KeyError, IndexError, TypeError, ValidationError) as exc:
             raise FileFormatError(f"{path}: invalid motion graph: {type(exc).__name__}: {exc}") from None
 

@@ -36,7 +36,9 @@ def _dims(value) -> tuple[int, ...]:
     except TypeError:
         dims = ()
     if not dims or any(isinstance(d, bool) or d not in (2, 3) for d in dims) or len(set(dims)) != len(dims):
-        raise ValidationError(f"Capabilities.dims must be a non-empty tuple of distinct dimensions from (2, 3); got {value!r}")
+        raise ValidationError(
+            f"Capabilities.dims must be a non-empty tuple of distinct dimensions from (2, 3); got {value!r}"
+        )
     return tuple(sorted(int(d) for d in dims))
 
 
@@ -104,7 +106,11 @@ class Capabilities:
     def declared(self) -> dict:
         """The fields that differ from the defaults."""
         default = Capabilities()
-        return {f.name: getattr(self, f.name) for f in attrs.fields(Capabilities) if getattr(self, f.name) != getattr(default, f.name)}
+        return {
+            f.name: getattr(self, f.name)
+            for f in attrs.fields(Capabilities)
+            if getattr(self, f.name) != getattr(default, f.name)
+        }
 
 
 # kind -> the Capabilities fields (besides dims) that something reads for that kind
@@ -127,11 +133,8 @@ def capabilities(component) -> Capabilities:
         return Capabilities()
     if not isinstance(declared, Capabilities):
         name = getattr(component, "__name__", None) or type(component).__name__
-        raise ValidationError(
-            f"{name}.capabilities must be a flockkit.Capabilities; got {type(declared).__name__}"
-        )
+        raise ValidationError(f"{name}.capabilities must be a flockkit.Capabilities; got {type(declared).__name__}")
     return declared
-
 
 
 @runtime_checkable

@@ -19,19 +19,31 @@ from pathlib import Path
 
 import numpy as np
 
-from .validate import integer
 from ._atomic import atomic_path
 from .errors import FileFormatError, ValidationError
 from .motion import Motion
+from .validate import integer
 
-__all__ = ["read_wide", "read_long", "read_npy", "fill_gaps", "export", "write_csv", "write_json", "write_usd", "EXPORT_SUFFIXES"]
+__all__ = [
+    "read_wide",
+    "read_long",
+    "read_npy",
+    "fill_gaps",
+    "export",
+    "write_csv",
+    "write_json",
+    "write_usd",
+    "EXPORT_SUFFIXES",
+]
 
 DEFAULT_MAX_GAP = 10
 
 
 def _dt(dt, fps) -> float:
     if (dt is None) == (fps is None):
-        raise ValidationError("give the frame rate as exactly one of dt= (seconds per frame) or fps= (frames per second)")
+        raise ValidationError(
+            "give the frame rate as exactly one of dt= (seconds per frame) or fps= (frames per second)"
+        )
     value, name = (dt, "dt") if dt is not None else (fps, "fps")
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value <= 0:
         raise ValidationError(f"{name} must be a number > 0; got {value!r}")
@@ -44,8 +56,9 @@ def _runs(missing: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)))
 
 
-def fill_gaps(positions, *, max_gap: int = DEFAULT_MAX_GAP, source: str = "positions", agent_names=None,
-              frame_numbers=None) -> np.ndarray:
+def fill_gaps(
+    positions, *, max_gap: int = DEFAULT_MAX_GAP, source: str = "positions", agent_names=None, frame_numbers=None
+) -> np.ndarray:
     """Fill missing (NaN) positions of a (T, N, D) array by the module's policy; returns a copy.
 
     An agent is missing at a frame if any of its coordinates is NaN. Raises ValidationError,
@@ -88,7 +101,9 @@ def _plain(value):
     return int(value) if float(value).is_integer() else float(value)
 
 
-def _motion(positions, dt, max_gap, source, *, frames=None, agents=None, agent_names=None, frame_numbers=None) -> Motion:
+def _motion(
+    positions, dt, max_gap, source, *, frames=None, agents=None, agent_names=None, frame_numbers=None
+) -> Motion:
     positions = np.asarray(positions, dtype=np.float64)
     agent_names = np.arange(positions.shape[1]) if agent_names is None else np.asarray(agent_names)
     frame_numbers = np.arange(positions.shape[0]) if frame_numbers is None else np.asarray(frame_numbers)
@@ -96,7 +111,9 @@ def _motion(positions, dt, max_gap, source, *, frames=None, agents=None, agent_n
         positions, agent_names = positions[:, list(agents)], agent_names[list(agents)]
     if frames is not None:
         positions, frame_numbers = positions[frames], frame_numbers[frames]
-    positions = fill_gaps(positions, max_gap=max_gap, source=source, agent_names=agent_names, frame_numbers=frame_numbers)
+    positions = fill_gaps(
+        positions, max_gap=max_gap, source=source, agent_names=agent_names, frame_numbers=frame_numbers
+    )
     try:
         return Motion(positions=positions, dt=dt)
     except ValidationError as exc:
@@ -108,7 +125,9 @@ def _table(path: Path, delimiter) -> tuple[np.ndarray, int]:
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
     text = path.read_text(errors="replace").splitlines()
-    lines = [(number, line) for number, line in enumerate(text, 1) if line.strip() and not line.lstrip().startswith("#")]
+    lines = [
+        (number, line) for number, line in enumerate(text, 1) if line.strip() and not line.lstrip().startswith("#")
+    ]
     if not lines:
         raise FileFormatError(f"{path}: no data rows")
     if delimiter is None:
@@ -125,7 +144,9 @@ def _table(path: Path, delimiter) -> tuple[np.ndarray, int]:
             raise FileFormatError(f"{path}, line {number}: not all fields are numbers: {line[:80]!r}") from None
         first = first or number
         if len(rows[-1]) != len(rows[0]):
-            raise FileFormatError(f"{path}, line {number}: {len(rows[-1])} fields where line {first} has {len(rows[0])}")
+            raise FileFormatError(
+                f"{path}, line {number}: {len(rows[-1])} fields where line {first} has {len(rows[0])}"
+            )
     if not rows:
         raise FileFormatError(f"{path}: no numeric rows")
     return np.array(rows), first
@@ -141,8 +162,9 @@ def _frame_index(path, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return (frames.astype(np.int64) - unique[0]) // step, np.arange(unique[0], unique[-1] + 1, step)
 
 
-def read_wide(path, *, dt=None, fps=None, dims: int = 2, delimiter=None, max_gap: int = DEFAULT_MAX_GAP,
-              agents=None) -> Motion:
+def read_wide(
+    path, *, dt=None, fps=None, dims: int = 2, delimiter=None, max_gap: int = DEFAULT_MAX_GAP, agents=None
+) -> Motion:
     """Read a wide table: one row per frame, ``frame, x1, y1, [z1,] x2, y2, ...``.
 
     A header line is skipped. `agents` selects agents (0-based) before the missing-value policy.
@@ -155,15 +177,18 @@ def read_wide(path, *, dt=None, fps=None, dims: int = 2, delimiter=None, max_gap
     table, _ = _table(path, delimiter)
     columns = table.shape[1] - 1
     if columns < dims or columns % dims:
-        raise FileFormatError(f"{path}: {columns} coordinate columns after the frame column is not a multiple of dims={dims}")
+        raise FileFormatError(
+            f"{path}: {columns} coordinate columns after the frame column is not a multiple of dims={dims}"
+        )
     slots, numbers = _frame_index(path, table[:, 0])
     positions = np.full((len(numbers), columns // dims, dims), np.nan)
     positions[slots] = table[:, 1:].reshape(len(table), -1, dims)
     return _motion(positions, dt, max_gap, str(path), agents=agents, frame_numbers=numbers)
 
 
-def read_long(path, *, dt=None, fps=None, dims: int = 2, delimiter=None, max_gap: int = DEFAULT_MAX_GAP,
-              agents=None, frames=None) -> Motion:
+def read_long(
+    path, *, dt=None, fps=None, dims: int = 2, delimiter=None, max_gap: int = DEFAULT_MAX_GAP, agents=None, frames=None
+) -> Motion:
     """Read a long table: one row per agent and frame, ``frame, agent, x, y[, z]``.
 
     Agents are ordered by id; `agents` selects ids (as in the file), `frames` a slice of frame
@@ -176,7 +201,10 @@ def read_long(path, *, dt=None, fps=None, dims: int = 2, delimiter=None, max_gap
         raise ValidationError(f"dims must be 2 or 3; got {dims!r}")
     table, _ = _table(path, delimiter)
     if table.shape[1] != 2 + dims:
-        raise FileFormatError(f"{path}: a long table in {dims}D has {2 + dims} columns (frame, agent, coordinates); found {table.shape[1]}")
+        raise FileFormatError(
+            f"{path}: a long table in {dims}D has {2 + dims} columns (frame, agent, coordinates); found "
+            f"{table.shape[1]}"
+        )
     slots, numbers = _frame_index(path, table[:, 0])
     ids = np.unique(table[:, 1])
     if agents is not None:
@@ -202,8 +230,15 @@ def read_npy(path, *, dt=None, fps=None, max_gap: int = DEFAULT_MAX_GAP, agents=
         array = np.load(path, allow_pickle=False)
     except (ValueError, OSError, EOFError) as exc:
         raise FileFormatError(f"{path}: not a readable .npy array: {exc}") from None
-    if not isinstance(array, np.ndarray) or array.ndim != 3 or array.shape[2] not in (2, 3) or array.dtype.kind not in "fiu":
-        raise FileFormatError(f"{path}: expected a numeric (T, N, D) array with D in {{2, 3}}; got {getattr(array, 'shape', '?')}")
+    if (
+        not isinstance(array, np.ndarray)
+        or array.ndim != 3
+        or array.shape[2] not in (2, 3)
+        or array.dtype.kind not in "fiu"
+    ):
+        raise FileFormatError(
+            f"{path}: expected a numeric (T, N, D) array with D in {{2, 3}}; got {getattr(array, 'shape', '?')}"
+        )
     return _motion(array, dt, max_gap, str(path), agents=agents)
 
 
@@ -221,7 +256,9 @@ def export(motion: Motion, path) -> Path:
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in EXPORT_SUFFIXES:
-        raise ValidationError(f"{path}: unknown export extension {path.suffix!r}; expected {', '.join(EXPORT_SUFFIXES)}")
+        raise ValidationError(
+            f"{path}: unknown export extension {path.suffix!r}; expected {', '.join(EXPORT_SUFFIXES)}"
+        )
     writer = {".csv": write_csv, ".json": write_json}.get(suffix, write_usd)
     writer(motion, path)
     return path
@@ -242,8 +279,15 @@ def write_json(motion: Motion, path) -> None:
     with positions nested frame, agent, coordinate."""
     import json
 
-    document = {"format": "flockkit-motion", "version": 1, "dt": motion.dt, "frames": motion.n_frames,
-                "agents": motion.n_agents, "dims": motion.dims, "positions": motion.positions.tolist()}
+    document = {
+        "format": "flockkit-motion",
+        "version": 1,
+        "dt": motion.dt,
+        "frames": motion.n_frames,
+        "agents": motion.n_agents,
+        "dims": motion.dims,
+        "positions": motion.positions.tolist(),
+    }
     with atomic_path(path) as tmp, open(tmp, "w") as handle:
         json.dump(document, handle)
 
@@ -286,7 +330,12 @@ def write_usd(motion: Motion, path) -> None:
             time = Usd.TimeCode(frame)
             points.Set(Vt.Vec3fArray.FromNumpy(positions[frame].astype(np.float32)), time)
             quaternions = _facing(velocities[frame])
-            turns.Set(Vt.QuathArray([Gf.Quath(float(w), Gf.Vec3h(float(x), float(y), float(z))) for w, x, y, z in quaternions]), time)
+            turns.Set(
+                Vt.QuathArray(
+                    [Gf.Quath(float(w), Gf.Vec3h(float(x), float(y), float(z))) for w, x, y, z in quaternions]
+                ),
+                time,
+            )
         stage.GetRootLayer().Save()
 
 

@@ -59,7 +59,9 @@ class ConfigurationFrame:
     def __attrs_post_init__(self):
         _check_rotation(self.axes, "ConfigurationFrame.axes")
         if self.origin.shape != (self.axes.shape[0],):
-            raise ValidationError(f"ConfigurationFrame.origin must have shape ({self.axes.shape[0]},); got {self.origin.shape}")
+            raise ValidationError(
+                f"ConfigurationFrame.origin must have shape ({self.axes.shape[0]},); got {self.origin.shape}"
+            )
         check_finite(self.origin, field="ConfigurationFrame.origin")
 
     def to_local(self, points) -> np.ndarray:
@@ -422,7 +424,9 @@ class Motion:
 
     def save(self, path) -> None:
         """Write the motion to `path` (.npz of plain arrays with JSON metadata; atomic)."""
-        _npzfile.write(path, kind="motion", version=MOTION_FORMAT_VERSION, arrays=self._to_arrays(), metadata={"dt": self.dt})
+        _npzfile.write(
+            path, kind="motion", version=MOTION_FORMAT_VERSION, arrays=self._to_arrays(), metadata={"dt": self.dt}
+        )
 
     @classmethod
     def load(cls, path) -> Motion:

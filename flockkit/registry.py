@@ -111,11 +111,15 @@ def _parameter_problems(expected: inspect.Signature, actual: inspect.Signature) 
         if got is None and inspect.Parameter.VAR_KEYWORD not in kinds:
             problems.append(f"missing keyword parameter {wanted.name!r}")
         elif got is not None and got.default is inspect.Parameter.empty:
-            problems.append(f"keyword parameter {wanted.name!r} needs a default (the interface's is {wanted.default!r})")
+            problems.append(
+                f"keyword parameter {wanted.name!r} needs a default (the interface's is {wanted.default!r})"
+            )
     optional = {p.name for p in expected.parameters.values() if p.kind == p.KEYWORD_ONLY}
     for extra in positional[len(wanted_positional) :] + [p for p in params if p.kind == p.KEYWORD_ONLY]:
         if extra.default is inspect.Parameter.empty and extra.name not in optional:
-            problems.append(f"extra parameter {extra.name!r} has no default, so callers of the interface cannot call it")
+            problems.append(
+                f"extra parameter {extra.name!r} has no default, so callers of the interface cannot call it"
+            )
     return problems
 
 
@@ -486,9 +490,7 @@ def resolve(kind: str, spec, **params):
     problems = interface_problems(spec, kind)
     if problems:
         lines = "\n".join(f"  - {p}" for p in problems)
-        raise ValidationError(
-            f"{kind} {shown} does not honour the {PROTOCOLS[kind].__name__} interface:\n{lines}"
-        )
+        raise ValidationError(f"{kind} {shown} does not honour the {PROTOCOLS[kind].__name__} interface:\n{lines}")
     return spec
 
 

@@ -30,10 +30,40 @@ def _smoothstep(u: np.ndarray) -> np.ndarray:
 
 
 def _plan(graph: MotionGraph, walk: Walk):
-    """Check `walk` against `graph` and lay it out: per segment (a stretch between transitions) its
-    output start, source start and length, and its rotation, translation and correspondence; per
-    transition taken, where its blend starts in the output, its source frame, the segment it leaves
-    and its blend length."""
+    """Lay `walk` out over `graph`: per segment (a stretch between transitions) its output start,
+    source start and length, and its rotation, translation and correspondence; per transition
+    taken, where its blend starts in the output, its source frame, the segment it leaves and its
+    blend length."""
+    tables = graph.tables
+    is_transition, clip_index, transition_index = _edges(graph, walk)
+    # A graph of one node (a transition looping on it) has no clips at all.
+    clip_start = tables.clip_start[clip_index] if len(graph.clips) else np.zeros(len(clip_index), dtype=np.int64)
+    played = np.where(is_transition, 0, tables.clip_stop[clip_index] - clip_start if len(graph.clips) else 0)
+    before = np.cumsum(played) - played  # output frames played before each edge
+    segment = np.cumsum(is_transition) - is_transition  # segment each edge starts in
+    at = np.flatnonzero(is_transition)
+    taken = transition_index[at]
+    blend = tables.transition_blend[taken]
+    since = np.diff(np.concatenate([[-np.inf], before[at]]))  # clip frames since the previous transition
+    if np.any(since < blend):
+        first = int(np.argmax(since < blend))
+        raise ValidationError(
+            f"Walk.edges[{int(at[first])}] takes a transition {int(since[first])} frames after the previous one; "
+            f"its blend needs {int(blend[first])}"
+        )
+    rotations, translations, mappings = _compose(walk, tables, taken, graph.motion.n_agents, graph.motion.dims)
+    # A segment (the stretch between two transitions) starts at a node and plays consecutive
+    # clips, so it is one slice of the source from that node's frame.
+    output_start = np.append(0, before[at])
+    length = np.diff(np.append(output_start, played.sum() + 1))  # the last one also plays the final frame
+    source_start = graph.nodes[np.append(walk.start, tables.transition_target[taken])]
+    blends = (before[at], tables.transition_start[taken], segment[at], blend)
+    return (output_start, source_start, length), rotations, translations, mappings, blends
+
+
+def _edges(graph: MotionGraph, walk: Walk):
+    """Check that `walk` is a chain of edges of `graph` from its start node: (is_transition, clip
+    index, transition index) per edge, the index of the other kind 0."""
     if not isinstance(walk, Walk):
         raise ValidationError(f"synthesize needs a flockkit.Walk; got {type(walk).__name__}")
     if not 0 <= walk.start < len(graph.nodes):
@@ -52,29 +82,7 @@ def _plan(graph: MotionGraph, walk: Walk):
     if np.any(sources != reached):
         bad = int(np.argmax(sources != reached))
         raise ValidationError(f"Walk.edges[{bad}] = {walk.edges[bad]!r} does not leave node {int(reached[bad])}")
-    # A graph of one node (a transition looping on it) has no clips at all.
-    clip_start = tables.clip_start[clip_index] if len(graph.clips) else np.zeros(len(index), dtype=np.int64)
-    played = np.where(is_transition, 0, tables.clip_stop[clip_index] - clip_start if len(graph.clips) else 0)
-    before = np.cumsum(played) - played  # output frames played before each edge
-    segment = np.cumsum(is_transition) - is_transition  # segment each edge starts in
-    at = np.flatnonzero(is_transition)
-    taken = transition_index[at]
-    blend = tables.transition_blend[taken]
-    since = np.diff(np.concatenate([[-np.inf], before[at]]))  # clip frames since the previous transition
-    if np.any(since < blend):
-        bad = int(at[np.argmax(since < blend)])
-        raise ValidationError(
-            f"Walk.edges[{bad}] takes a transition {int(since[np.argmax(since < blend)])} frames after the previous one; "
-            f"its blend needs {int(blend[np.argmax(since < blend)])}"
-        )
-    rotations, translations, mappings = _compose(walk, tables, taken, graph.motion.n_agents, graph.motion.dims)
-    # A segment (the stretch between two transitions) starts at a node and plays consecutive
-    # clips, so it is one slice of the source from that node's frame.
-    output_start = np.append(0, before[at])
-    length = np.diff(np.append(output_start, played.sum() + 1))  # the last one also plays the final frame
-    source_start = graph.nodes[np.append(walk.start, tables.transition_target[taken])]
-    blends = (before[at], tables.transition_start[taken], segment[at], blend)
-    return (output_start, source_start, length), rotations, translations, mappings, blends
+    return is_transition, clip_index, transition_index
 
 
 def _compose(walk, tables, taken, n_agents, dims):

@@ -35,7 +35,9 @@ def _bound(minimum, strict, maximum=None) -> str:
     return low + ("" if maximum is None else f"{' and' if low else ''} <= {maximum:g}")
 
 
-def number(value, field: str, *, minimum=None, strict: bool = False, maximum=None, optional: bool = False) -> float | None:
+def number(
+    value, field: str, *, minimum=None, strict: bool = False, maximum=None, optional: bool = False
+) -> float | None:
     """`value` as a float: a finite real number (not a bool, not a string) at least `minimum`
     (above it with `strict`) and at most `maximum`; None passes through with `optional`."""
     if value is None and optional:
@@ -56,7 +58,11 @@ def integer(value, field: str, *, minimum=None, optional: bool = False) -> int |
     through with `optional`."""
     if value is None and optional:
         return None
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or (minimum is not None and value < minimum):
+    if (
+        isinstance(value, (bool, np.bool_))
+        or not isinstance(value, (int, np.integer))
+        or (minimum is not None and value < minimum)
+    ):
         expected = f"an integer{_bound(minimum, False)}"
         raise ValidationError(f"{field} must be {'None or ' if optional else ''}{expected}; got {value!r}")
     return int(value)
@@ -87,8 +93,16 @@ def window(motion, start, stop, *, owner: str) -> tuple[int, int]:
     return start, stop
 
 
-def parameter(owner: str, *, default=_NO_DEFAULT, kind: str = "number", minimum=None, strict: bool = False,
-              maximum=None, optional: bool = False):
+def parameter(
+    owner: str,
+    *,
+    default=_NO_DEFAULT,
+    kind: str = "number",
+    minimum=None,
+    strict: bool = False,
+    maximum=None,
+    optional: bool = False,
+):
     """An ``attrs.field`` for a component parameter, checked on construction with the messages of
     :func:`number`, :func:`integer` or :func:`flag` (`kind`), named "<owner> parameter <name>"."""
     if kind not in ("number", "integer", "flag"):

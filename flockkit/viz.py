@@ -7,11 +7,20 @@ from pathlib import Path
 import numpy as np
 
 from ._atomic import atomic_path
-from .constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, ShapeConstraint
+from ._progress import progress_bar
+from .constraints import ComConstraint, PointConstraint, ShapeConstraint
 from .errors import MissingDependencyError, ValidationError
 from .motion import Motion
 
-__all__ = ["plot_motion", "animate", "plot_difference_matrix", "plot_graph", "plot_trace", "PICTURE_SUFFIXES", "ANIMATION_SUFFIXES"]
+__all__ = [
+    "plot_motion",
+    "animate",
+    "plot_difference_matrix",
+    "plot_graph",
+    "plot_trace",
+    "PICTURE_SUFFIXES",
+    "ANIMATION_SUFFIXES",
+]
 
 PICTURE_SUFFIXES = (".png", ".pdf", ".svg")
 ANIMATION_SUFFIXES = (".gif", ".mp4")
@@ -31,20 +40,16 @@ def _pyplot():
 def _check_picture_path(path, suffixes=PICTURE_SUFFIXES, what="picture") -> Path:
     path = Path(path)
     if path.suffix.lower() not in suffixes:
-        raise ValidationError(f"{what} path {path}: unknown extension {path.suffix!r}; expected one of {', '.join(suffixes)}")
+        raise ValidationError(
+            f"{what} path {path}: unknown extension {path.suffix!r}; expected one of {', '.join(suffixes)}"
+        )
     return path
 
 
 def _draw_region(ax, region, **style):
     import matplotlib.patches as patches
 
-    if isinstance(region, Ball):
-        ax.add_patch(patches.Circle(region.center[:2], region.radius, **style))
-    elif isinstance(region, Box):
-        size = region.upper[:2] - region.lower[:2]
-        ax.add_patch(patches.Rectangle(region.lower[:2], size[0], size[1], **style))
-    elif isinstance(region, Polygon):
-        ax.add_patch(patches.Polygon(region.vertices, closed=True, **style))
+    ax.add_patch(patches.Polygon(region.outline(), closed=True, **style))
 
 
 def plot_motion(motion: Motion, path=None, *, problem=None, obstacles=(), regions=(), ax=None, title=None):
@@ -65,8 +70,19 @@ def plot_motion(motion: Motion, path=None, *, problem=None, obstacles=(), region
         ax.plot(xy[:, agent, 0], xy[:, agent, 1], color=colors[agent], linewidth=0.8, alpha=0.8)
     ax.scatter(xy[0, :, 0], xy[0, :, 1], s=8, color="0.4", label="start", zorder=3)
     travel = 0.5 * motion.velocities()[-1, :, :2]  # arrows show half a second of travel
-    ax.quiver(xy[-1, :, 0], xy[-1, :, 1], travel[:, 0], travel[:, 1], color="black", angles="xy",
-              scale_units="xy", scale=1.0, width=0.004, zorder=4, label="end")
+    ax.quiver(
+        xy[-1, :, 0],
+        xy[-1, :, 1],
+        travel[:, 0],
+        travel[:, 1],
+        color="black",
+        angles="xy",
+        scale_units="xy",
+        scale=1.0,
+        width=0.004,
+        zorder=4,
+        label="end",
+    )
     _draw_scene(ax, problem, obstacles, regions)
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("x")
@@ -129,14 +145,12 @@ def animate(motion: Motion, path, *, problem=None, obstacles=(), regions=(), fps
     figure = plt.figure(figsize=(6, 6))
     ax = figure.add_subplot()
     _draw_scene(ax, problem, obstacles, regions)
-    low, high = xy.reshape(-1, 2).min(axis=0), xy.reshape(-1, 2).max(axis=0)
-    margin = 0.05 * max(float(np.max(high - low)), 1.0) + 0.5
-    ax.set_xlim(low[0] - margin, high[0] + margin)
-    ax.set_ylim(low[1] - margin, high[1] + margin)
-    ax.set_aspect("equal")
+    _fit_view(ax, xy)
     trails = [ax.plot([], [], color="0.6", linewidth=0.6)[0] for _ in range(motion.n_agents)]
-    arrows = ax.quiver(xy[0, :, 0], xy[0, :, 1], heading[0, :, 0], heading[0, :, 1], angles="xy", scale_units="xy",
-                       scale=2.0, width=0.006, headwidth=4, color="black", zorder=4)
+    arrows = ax.quiver(
+        xy[0, :, 0], xy[0, :, 1], heading[0, :, 0], heading[0, :, 1], angles="xy", scale_units="xy", scale=2.0,
+        width=0.006, headwidth=4, color="black", zorder=4,
+    )  # fmt: skip
     label = ax.set_title("")
 
     def draw(frame):
@@ -150,21 +164,27 @@ def animate(motion: Motion, path, *, problem=None, obstacles=(), regions=(), fps
 
     rate = fps or max(1.0, 1.0 / (motion.dt * step))
     writer = animation.PillowWriter(fps=rate) if suffix == ".gif" else animation.FFMpegWriter(fps=rate)
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=len(frames), desc=f"drawing {path.name}", unit="frame")
     try:
-        with atomic_path(path) as tmp:
-            animation.FuncAnimation(figure, draw, frames=frames, blit=False).save(
-                tmp, writer=writer, progress_callback=None if bar is None else (lambda done, total: bar.update(1))
-            )
+        _save_animation(animation.FuncAnimation(figure, draw, frames=frames, blit=False), path, writer, progress)
     finally:
         plt.close(figure)
-        if bar is not None:
-            bar.close()
     return path
+
+
+def _fit_view(ax, xy) -> None:
+    """Axis limits holding every position of (T, N, 2) `xy` with a margin, equal scales."""
+    low, high = xy.reshape(-1, 2).min(axis=0), xy.reshape(-1, 2).max(axis=0)
+    margin = 0.05 * max(float(np.max(high - low)), 1.0) + 0.5
+    ax.set_xlim(low[0] - margin, high[0] + margin)
+    ax.set_ylim(low[1] - margin, high[1] + margin)
+    ax.set_aspect("equal")
+
+
+def _save_animation(movie, path, writer, progress: bool) -> None:
+    """Write `movie` (a matplotlib animation) atomically, with a progress bar over its frames."""
+    with progress_bar(progress, unit="frame") as report, atomic_path(path) as tmp:
+        callback = None if report is None else (lambda done, total: report(done + 1, total, f"drawing {path.name}"))
+        movie.save(tmp, writer=writer, progress_callback=callback)
 
 
 def plot_difference_matrix(values, path=None, *, marked=(), title="difference matrix"):
@@ -182,7 +202,9 @@ def plot_difference_matrix(values, path=None, *, marked=(), title="difference ma
     figure.colorbar(image, ax=ax, label="E")
     marked = np.asarray(list(marked), dtype=float).reshape(-1, 2)
     if len(marked):
-        ax.scatter(marked[:, 1], marked[:, 0], s=30, facecolors="none", edgecolors="cyan", linewidths=1.0, label="transitions")
+        ax.scatter(
+            marked[:, 1], marked[:, 0], s=30, facecolors="none", edgecolors="cyan", linewidths=1.0, label="transitions"
+        )
         ax.legend(loc="upper left")
     ax.set_xlabel("candidate j")
     ax.set_ylabel("candidate i")
@@ -211,10 +233,22 @@ def plot_graph(graph, path=None):
     scale = costs.max() if len(costs) and costs.max() > 0 else 1.0
     for clip in graph.clips:
         a, b = seconds[clip.source], seconds[clip.target]
-        ax.add_patch(Arc(((a + b) / 2, 0), abs(b - a), abs(b - a) * 0.3, theta1=180, theta2=360, color="0.5", linewidth=0.8))
+        ax.add_patch(
+            Arc(((a + b) / 2, 0), abs(b - a), abs(b - a) * 0.3, theta1=180, theta2=360, color="0.5", linewidth=0.8)
+        )
     for transition, cost in zip(graph.transitions, costs):
         a, b = seconds[transition.source], seconds[transition.target]
-        ax.add_patch(Arc(((a + b) / 2, 0), abs(b - a), abs(b - a) * 0.6, theta1=0, theta2=180, color=cmap(cost / scale), linewidth=0.8))
+        ax.add_patch(
+            Arc(
+                ((a + b) / 2, 0),
+                abs(b - a),
+                abs(b - a) * 0.6,
+                theta1=0,
+                theta2=180,
+                color=cmap(cost / scale),
+                linewidth=0.8,
+            )
+        )
     ax.scatter(seconds, np.zeros_like(seconds), s=10, color="black", zorder=3)
     span = graph.motion.duration
     ax.set_xlim(-0.02 * span, 1.02 * span)
@@ -222,7 +256,10 @@ def plot_graph(graph, path=None):
     ax.set_yticks([])
     ax.set_xlabel("source time (s)")
     stats = graph.stats()
-    ax.set_title(f"motion graph: {stats['nodes']} nodes, {stats['clips']} clips (below), {stats['transitions']} transitions (above)")
+    ax.set_title(
+        f"motion graph: {stats['nodes']} nodes, {stats['clips']} clips (below), {stats['transitions']} transitions "
+        "(above)"
+    )
     if path is not None:
         _save(figure, path)
     return figure

@@ -51,7 +51,59 @@ def test_mkdocs_builds_the_site_strictly(tmp_path):
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[1]
-    done = subprocess.run([sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(tmp_path / "site")],
-                          cwd=root, capture_output=True, text=True)
+    done = subprocess.run(
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(tmp_path / "site")],
+        cwd=root,
+        capture_output=True,
+        text=True,
+    )
     assert done.returncode == 0, done.stderr
     assert (tmp_path / "site" / "gallery" / "index.html").exists()
+
+
+def _all_text():
+    return "\n".join(page.read_text() for page in PAGES)
+
+
+def test_every_public_name_is_documented():
+    """Like datasette's "every hook is documented": each name a user can import is in the docs."""
+    import flockkit
+    import flockkit.rigid
+    import flockkit.testing
+    import flockkit.validate
+
+    text = _all_text()
+    missing = [n for n in flockkit.__all__ if n != "__version__" and not re.search(rf"(`|flockkit\.){n}\b", text)]
+    for module, prefix in ((flockkit.rigid, "rigid"), (flockkit.validate, "validate"), (flockkit.testing, "")):
+        missing += [f"{prefix}.{n}" for n in module.__all__ if not re.search(rf"(`|{prefix}\.){n}\b", text)]
+    assert missing == []
+
+
+def test_every_builtin_parameter_and_capability_is_documented_on_its_kind_page():
+    import inspect
+
+    import attrs
+
+    import flockkit
+    from flockkit.interfaces import KIND_FIELDS
+
+    missing = []
+    for component in registry.describe():
+        if component.distribution != "flockkit":
+            continue
+        page = (ROOT / "docs" / "kinds" / f"{component.kind}.md").read_text()
+        missing += [
+            f"{component.kind} {component.name}: {p}"
+            for p in inspect.signature(component.factory).parameters
+            if f"`{p}`" not in page
+        ]
+    for kind, fields in KIND_FIELDS.items():
+        page = (ROOT / "docs" / "kinds" / f"{kind}.md").read_text()
+        missing += [
+            f"docs/kinds/{kind}.md: Capabilities.{f}" for f in sorted(fields | {"dims"}) if f"`{f}`" not in page
+        ]
+    documented = flockkit.Capabilities.__doc__
+    missing += [
+        f"Capabilities docstring: {f.name}" for f in attrs.fields(flockkit.Capabilities) if f.name not in documented
+    ]
+    assert missing == []

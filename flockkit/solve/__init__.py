@@ -5,4 +5,15 @@ from .sampler import Proposal, ProposalContext, Solution, Trace, residuals, solv
 from .scenario import load_scenario
 from .windows import windows
 
-__all__ = ["windows", "initial_trajectories", "regenerate", "Proposal", "ProposalContext", "Solution", "Trace", "residuals", "solve", "load_scenario"]
+__all__ = [
+    "windows",
+    "initial_trajectories",
+    "regenerate",
+    "Proposal",
+    "ProposalContext",
+    "Solution",
+    "Trace",
+    "residuals",
+    "solve",
+    "load_scenario",
+]

@@ -110,7 +110,9 @@ class _Initial:
             state = State(positions=snapshot.positions, velocities=snapshot.velocities, extra=snapshot.extra)
             pieces = [self.behavior.forward(state, self.problem.n_frames - 1, self.rng)]
             return _join(pieces, self.dt)
-        positions, velocities = self._configure(snapshot.positions, snapshot.velocities, self.by_frame[first_constrained], fixed={})
+        positions, velocities = self._configure(
+            snapshot.positions, snapshot.velocities, self.by_frame[first_constrained], fixed={}
+        )
         state = State(positions=positions, velocities=velocities)
         pieces = []
         if first_constrained > 0:
@@ -119,7 +121,12 @@ class _Initial:
             if self.guided and all(isinstance(c, PointConstraint) for c in pinned):
                 # simulate the lead-in forward (backward simulation is not forward-plausible),
                 # keeping the constrained agents on the backward path to their constraints
-                lead = self.behavior.forward(lead.state(0), first_constrained, self.rng, guide={c.agent: lead.positions[:, c.agent] for c in pinned})
+                lead = self.behavior.forward(
+                    lead.state(0),
+                    first_constrained,
+                    self.rng,
+                    guide={c.agent: lead.positions[:, c.agent] for c in pinned},
+                )
                 pieces.append(lead)
                 state = _state_at_end(lead, None)
             else:
@@ -136,7 +143,9 @@ class _Initial:
 
     # -- one window --------------------------------------------------------------------------
 
-    def _window(self, state: State, start: int, stop: int, end: State | None = None, prior: State | None = None) -> Motion:
+    def _window(
+        self, state: State, start: int, stop: int, end: State | None = None, prior: State | None = None
+    ) -> Motion:
         """Trajectories for frames start..stop from `state`; with `end`, ending exactly there.
 
         With `prior`, the state one frame before `start` (with the velocity leaving it), the
@@ -157,11 +166,17 @@ class _Initial:
         if end is None:
             fixed = {a: positions[-1, a] for p in spanning if p.is_point for a in p.agents}
             end_positions, end_velocities = self._configure(
-                positions[-1], (positions[-1] - positions[-2]) / self.dt, self.by_frame[stop], fixed=fixed, start_positions=positions[0]
+                positions[-1],
+                (positions[-1] - positions[-2]) / self.dt,
+                self.by_frame[stop],
+                fixed=fixed,
+                start_positions=positions[0],
             )
         else:
             end_positions, end_velocities = np.array(end.positions), np.array(end.velocities)
-        backward = self.behavior.backward(State(positions=end_positions, velocities=end_velocities), steps, self.rng, **guide)
+        backward = self.behavior.backward(
+            State(positions=end_positions, velocities=end_velocities), steps, self.rng, **guide
+        )
         back = self._onto_paths(backward.positions, spanning, start, anchor=forward.positions[0])
         u = _blend_weights(steps)[:, None, None]
         blended = (1 - u) * positions + u * back
@@ -215,7 +230,9 @@ class _Initial:
         """Move the COM along the Hermite curve joining the window's end states."""
         steps = len(positions) - 1
         com = positions.mean(axis=1)
-        curve = CubicHermiteSpline([0.0, steps * self.dt], com[[0, -1]], np.stack([start_velocity.mean(axis=0), end_velocity.mean(axis=0)]))
+        curve = CubicHermiteSpline(
+            [0.0, steps * self.dt], com[[0, -1]], np.stack([start_velocity.mean(axis=0), end_velocity.mean(axis=0)])
+        )
         return positions + (curve(np.arange(steps + 1) * self.dt) - com)[:, None, :]
 
     def _leader(self, pool, positions, agent) -> int:
@@ -233,48 +250,52 @@ class _Initial:
 
     def _configure(self, snapshot, velocities, constraints, *, fixed, start_positions=None):
         """Positions and velocities meeting `constraints`, built from the snapshot; `fixed` agents
-        keep their given positions."""
-        problem, rng = self.problem, self.rng
+        keep their given positions. Each constrained agent is placed by a rigid motion of the
+        snapshot, which the unconstrained agents then copy from a leader (section 3.3.1)."""
         positions, out_velocities = snapshot.copy(), velocities.copy()
-        transforms: dict[int, tuple] = {}  # agent -> the rigid transform that placed it
+        transforms: dict[int, tuple] = {}  # agent -> the rigid motion that placed it
         for agent, where in fixed.items():
             positions[agent] = where
-        for c in (c for c in constraints if isinstance(c, PointConstraint)):
-            if c.agent in fixed:
+        points = [c for c in constraints if isinstance(c, PointConstraint)]
+        for c in points:
+            if c.agent not in fixed:
+                rotation = rigid.turn(velocities[c.agent], c.velocity)
+                transforms[c.agent] = (rotation, c.position - rotation @ snapshot[c.agent])
+                positions[c.agent], out_velocities[c.agent] = c.position, c.velocity
+        pinned = set(fixed) | {c.agent for c in points}
+        for c in constraints:
+            free = [a for a in self.problem.agents_of(c) if a not in pinned]
+            if isinstance(c, PointConstraint) or not free:
                 continue
-            rotation = rigid.turn(velocities[c.agent], c.velocity)
-            transforms[c.agent] = (rotation, c.position - rotation @ snapshot[c.agent])
-            positions[c.agent], out_velocities[c.agent] = c.position, c.velocity
-        pinned = set(fixed) | {c.agent for c in constraints if isinstance(c, PointConstraint)}
-        for c in (c for c in constraints if not isinstance(c, PointConstraint)):
-            agents = list(problem.agents_of(c))
-            free = [a for a in agents if a not in pinned]
-            if not free:
-                continue
-            rotation = rigid.turn(velocities[free].mean(axis=0), c.velocity)
-            target = c.position if isinstance(c, ComConstraint) else c.shape.centroid()
-            translation = target - rotation @ snapshot[free].mean(axis=0)
-            placed = snapshot[free] @ rotation.T + translation
-            slots, slot_velocities = placed, velocities[free] @ rotation.T
-            if isinstance(c, ShapeConstraint):
-                slots = _fill(c.shape, len(free), rng)
-                slot_velocities = slot_velocities - slot_velocities.mean(axis=0) + c.velocity
-            order = _matching(slots, start_positions[free] if start_positions is not None else placed, rng)
-            positions[free], out_velocities[free] = slots[order], slot_velocities[order]
+            origins = None if start_positions is None else start_positions[free]
+            positions[free], out_velocities[free], motion = self._place(c, free, snapshot, velocities, origins)
             if isinstance(c, ComConstraint):  # exact COM, moving only the free agents
+                agents = list(self.problem.agents_of(c))
                 positions[free] += (len(agents) * c.position - positions[agents].sum(axis=0)) / len(free)
-            for agent in free:
-                transforms[agent] = (rotation, translation)
+            transforms.update(dict.fromkeys(free, motion))
             pinned.update(free)
-        others = [a for a in range(problem.n_agents) if a not in pinned]
         placed = np.array(sorted(transforms), dtype=int)
-        for agent in others:
-            if not len(placed):
-                break
+        for agent in (a for a in range(self.problem.n_agents) if a not in pinned and len(placed)):
             rotation, translation = transforms[self._leader(placed, snapshot, agent)]
-            positions[agent] = rotation @ snapshot[agent] + translation
-            out_velocities[agent] = rotation @ velocities[agent]
+            positions[agent] = rigid.apply(rotation, translation, snapshot[agent])
+            out_velocities[agent] = rigid.rotate(rotation, velocities[agent])
         return positions, out_velocities
+
+    def _place(self, constraint, free, snapshot, velocities, origins):
+        """(positions, velocities, rigid motion) of the `free` agents of a COM or shape constraint:
+        the snapshot's subset turned to the constraint's velocity and moved to its target (a shape:
+        samples inside it), the agents matched to the slots keeping their travel from `origins`
+        (the window start; default where the rigid motion puts them) short."""
+        rotation = rigid.turn(velocities[free].mean(axis=0), constraint.velocity)
+        target = constraint.position if isinstance(constraint, ComConstraint) else constraint.shape.centroid()
+        translation = target - rotation @ snapshot[free].mean(axis=0)
+        placed = rigid.apply(rotation, translation, snapshot[free])
+        slots, slot_velocities = placed, rigid.rotate(rotation, velocities[free])
+        if isinstance(constraint, ShapeConstraint):
+            slots = _fill(constraint.shape, len(free), self.rng)
+            slot_velocities = slot_velocities - slot_velocities.mean(axis=0) + constraint.velocity
+        order = _matching(slots, placed if origins is None else origins, self.rng)
+        return slots[order], slot_velocities[order], (rotation, translation)
 
 
 # -- helpers ----------------------------------------------------------------------------------

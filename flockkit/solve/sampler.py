@@ -17,13 +17,13 @@ from collections.abc import Mapping
 import attrs
 import numpy as np
 
-from ..validate import integer, number
+from .._progress import progress_bar
 from ..constraints import ComConstraint, PointConstraint, Problem
 from ..errors import ValidationError
-from ..motion import Motion
-from .._progress import progress_bar
 from ..interfaces import capabilities
+from ..motion import Motion
 from ..registry import get, label, require_dims, resolve
+from ..validate import integer, number
 from .initial import initial_trajectories
 from .windows import windows
 
@@ -116,7 +116,9 @@ def feasible(problem: Problem, motion: Motion) -> bool:
     """Whether `motion` meets the constraints as a solution must: point constraints to 1e-9, COM
     constraints within 3 sigma_com, every shape-constrained agent inside its shape."""
     for c, residual in zip(problem.constraints, residuals(problem, motion)):
-        limit = 1e-9 if isinstance(c, PointConstraint) else 3 * problem.sigma_com if isinstance(c, ComConstraint) else 0.0
+        limit = (
+            1e-9 if isinstance(c, PointConstraint) else 3 * problem.sigma_com if isinstance(c, ComConstraint) else 0.0
+        )
         if residual > limit:
             return False
     return True
@@ -160,11 +162,23 @@ class Scorer:
 STABLE_WINDOW = 100  # iterations per running mean for the `stable` stopping rule
 
 
-def run_chain(problem, behavior, objectives, moves, initial: Motion, iterations: int, rng, *, callback=None, progress=None, stable=None):
+def run_chain(
+    problem,
+    behavior,
+    objectives,
+    moves,
+    initial: Motion,
+    iterations: int,
+    rng,
+    *,
+    callback=None,
+    progress=None,
+    stable=None,
+):
     """One chain from `initial`: (best motion, its log g, Trace). The best motion is the most
-    plausible sample that is `feasible`. `moves` is a list of (name, move, probability). With `stable`, stop early once the mean log g over the last
-    STABLE_WINDOW iterations differs from the mean over the window before by at most `stable`
-    times its size."""
+    plausible sample that is `feasible`. `moves` is a list of (name, move, probability). With
+    `stable`, stop early once the mean log g over the last STABLE_WINDOW iterations differs from
+    the mean over the window before by at most `stable` times its size."""
     scorer = Scorer(problem, behavior, objectives)
     names = [name for name, _, _ in moves]
     weights = np.array([p for _, _, p in moves], dtype=float)
@@ -176,7 +190,9 @@ def run_chain(problem, behavior, objectives, moves, initial: Motion, iterations:
     log_g, tried, accepted = np.empty(iterations), [], np.zeros(iterations, dtype=bool)
     for iteration in range(iterations):
         pick = int(rng.choice(len(moves), p=weights))
-        context = ProposalContext(problem=problem, behavior=behavior, windows=spans, scores=_readonly(scores), pinned=pinned)
+        context = ProposalContext(
+            problem=problem, behavior=behavior, windows=spans, scores=_readonly(scores), pinned=pinned
+        )
         proposal = moves[pick][1].propose(current, context, rng)
         if proposal is not None:
             start, stop = scorer.affected(proposal, current.n_frames)
@@ -286,8 +302,10 @@ def _chains_here(arguments, seeds, iterations, callback, progress) -> list:
     results = []
     with progress_bar(progress and len(seeds) * iterations > 0) as report:
         for index, chain_seed in enumerate(seeds):
-            tick = None if report is None else (
-                lambda done, base=index * iterations: report(base + done, len(seeds) * iterations, "sampling")
+            tick = (
+                None
+                if report is None
+                else (lambda done, base=index * iterations: report(base + done, len(seeds) * iterations, "sampling"))
             )
             chain_callback = None if callback is None else (lambda i, g, a, chain=index: callback(chain, i, g, a))
             results.append(_chain(*arguments, chain_seed, chain_callback, tick))
@@ -347,7 +365,9 @@ def _chain(problem, behavior, moves, terms, iterations, stable, seed, callback, 
     if not iterations:
         scores = Scorer(problem, behavior, terms).frames(initial)
         return initial, float(scores.sum()), Trace(log_g=np.empty(0), proposals=(), accepted=np.zeros(0, dtype=bool))
-    return run_chain(problem, behavior, terms, moves, initial, iterations, rng, callback=callback, progress=progress, stable=stable)
+    return run_chain(
+        problem, behavior, terms, moves, initial, iterations, rng, callback=callback, progress=progress, stable=stable
+    )
 
 
 def _acceptance(traces) -> dict:

@@ -30,11 +30,24 @@ from pathlib import Path
 from ..constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
 from ..errors import FileFormatError, FlockkitError, ValidationError
 
-_PROBLEM_KEYS = {"agents": "n_agents", "dims": "dims", "dt": "dt", "duration": "duration", "flocks": "flocks",
-                 "sigma_com": "sigma_com", "shape_weight": "shape_weight", "flock_weight": "flock_weight", "visibility": "visibility", "follow": "follow"}
+_PROBLEM_KEYS = {
+    "agents": "n_agents",
+    "dims": "dims",
+    "dt": "dt",
+    "duration": "duration",
+    "flocks": "flocks",
+    "sigma_com": "sigma_com",
+    "shape_weight": "shape_weight",
+    "flock_weight": "flock_weight",
+    "visibility": "visibility",
+    "follow": "follow",
+}
 _SOLVE_KEYS = {"behavior", "behavior_params", "iterations", "chains", "seed", "proposals", "objectives", "stable"}
-_CONSTRAINT_KEYS = {"point": {"agent", "time", "position", "velocity"}, "com": {"agents", "time", "position", "velocity"},
-                    "shape": {"agents", "time", "velocity", "polygon", "box", "ball"}}
+_CONSTRAINT_KEYS = {
+    "point": {"agent", "time", "position", "velocity"},
+    "com": {"agents", "time", "position", "velocity"},
+    "shape": {"agents", "time", "velocity", "polygon", "box", "ball"},
+}
 
 
 def load_scenario(path) -> tuple[Problem, dict]:
@@ -49,7 +62,9 @@ def load_scenario(path) -> tuple[Problem, dict]:
         raise FileFormatError(f"{path}: not a TOML scenario: {exc}") from None
     unknown = set(data) - {"problem", "solve", "point", "com", "shape", "obstacle"}
     if unknown:
-        raise ValidationError(f"{path}: unknown table {sorted(unknown)[0]!r}; expected problem, solve, point, com, shape, obstacle")
+        raise ValidationError(
+            f"{path}: unknown table {sorted(unknown)[0]!r}; expected problem, solve, point, com, shape, obstacle"
+        )
     try:
         problem_table = _table(data, "problem", path)
         _only(problem_table, set(_PROBLEM_KEYS), f"{path}: [problem]")
@@ -61,10 +76,16 @@ def load_scenario(path) -> tuple[Problem, dict]:
                 where = f"{path}: [[{kind}]] number {index + 1}"
                 _only(entry, _CONSTRAINT_KEYS[kind], where)
                 constraints.append(_named(where, build, entry))
-        obstacles = [_named(f"{path}: [[obstacle]] number {i + 1}", _region, entry) for i, entry in enumerate(_array(data, "obstacle", path))]
-        problem = _named(f"{path}: [problem]", lambda: Problem(
-            **{_PROBLEM_KEYS[k]: v for k, v in problem_table.items()}, constraints=constraints, obstacles=obstacles
-        ))
+        obstacles = [
+            _named(f"{path}: [[obstacle]] number {i + 1}", _region, entry)
+            for i, entry in enumerate(_array(data, "obstacle", path))
+        ]
+        problem = _named(
+            f"{path}: [problem]",
+            lambda: Problem(
+                **{_PROBLEM_KEYS[k]: v for k, v in problem_table.items()}, constraints=constraints, obstacles=obstacles
+            ),
+        )
     except TypeError as exc:
         raise ValidationError(f"{path}: {exc}") from None
     return problem, dict(settings)
@@ -82,7 +103,9 @@ def _named(where, build, *args):
 def _table(data, name, path, required=True) -> dict:
     value = data.get(name, None if required else {})
     if not isinstance(value, dict):
-        raise ValidationError(f"{path}: expected a [{name}] table" + ("" if value is None else f"; got {type(value).__name__}"))
+        raise ValidationError(
+            f"{path}: expected a [{name}] table" + ("" if value is None else f"; got {type(value).__name__}")
+        )
     return value
 
 
@@ -96,7 +119,9 @@ def _array(data, name, path) -> list:
 def _only(entry, allowed, where):
     unknown = set(entry) - allowed
     if unknown:
-        raise ValidationError(f"{where}: unknown key {sorted(unknown)[0]!r}; expected some of {', '.join(sorted(allowed))}")
+        raise ValidationError(
+            f"{where}: unknown key {sorted(unknown)[0]!r}; expected some of {', '.join(sorted(allowed))}"
+        )
 
 
 def _point(entry):

@@ -190,7 +190,9 @@ def check_plugin(
                 f"({expected[check.__name__]}); remove it from the list"
             )
         passed.append(check.__name__)
-    return CheckReport(passed=tuple(passed), skipped=skipped_checks(kind, component), expected_failures=failed_as_expected)
+    return CheckReport(
+        passed=tuple(passed), skipped=skipped_checks(kind, component), expected_failures=failed_as_expected
+    )
 
 
 def parametrize_with_checks(components, *, partners: Mapping | None = None, expected_failed_checks=None):
@@ -220,5 +222,7 @@ def parametrize_with_checks(components, *, partners: Mapping | None = None, expe
                 run = applicable[check_name]
             if check_name in expected:
                 marks.append(pytest.mark.xfail(reason=expected[check_name], strict=True))
-            params.append(pytest.param(component, functools.partial(run, name), marks=marks, id=f"{kind}:{name}-{check_name}"))
+            params.append(
+                pytest.param(component, functools.partial(run, name), marks=marks, id=f"{kind}:{name}-{check_name}")
+            )
     return pytest.mark.parametrize("component, check", params)

@@ -87,7 +87,9 @@ def on_input(name: str, component, dims: int, what: str):
     except AssertionError as exc:
         raise AssertionError(f"{exc} (on {what} in {dims}D)") from exc
     except Exception as exc:  # noqa: BLE001 - reported as this check failing, with the input
-        raise AssertionError(f"{type(exc).__name__}: {exc} (on {what} in {dims}D){_hint(name, component, dims)}") from exc
+        raise AssertionError(
+            f"{type(exc).__name__}: {exc} (on {what} in {dims}D){_hint(name, component, dims)}"
+        ) from exc
 
 
 def _hint(name, component, dims) -> str:

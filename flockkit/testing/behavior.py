@@ -123,7 +123,9 @@ def _snapshot(value):
 
 def _unchanged(before, after) -> bool:
     return all(
-        np.array_equal(a, b) if isinstance(a, np.ndarray) else a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+        np.array_equal(a, b)
+        if isinstance(a, np.ndarray)
+        else a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
         for a, b in zip(before, after)
     )
 
@@ -146,7 +148,9 @@ def check_rejects_negative_steps(name, model):
     """A negative step count raises flockkit.errors.ValidationError."""
     state = _flock(model)
     for label, call in (("forward", model.forward), ("backward", model.backward)):
-        expect_validation_error(lambda: call(state, -1, np.random.default_rng(0)), f"{name}.{label}(steps=-1)")
+        expect_validation_error(
+            lambda call=call: call(state, -1, np.random.default_rng(0)), f"{name}.{label}(steps=-1)"
+        )
 
 
 def check_log_plausibility_finite(name, model):
@@ -202,7 +206,8 @@ def check_rejects_bad_window(name, model):
     motion = _forward(model, _flock(model))
     for start, stop in ((3, 2), (0, motion.n_frames + 1), (-1, 2)):
         expect_validation_error(
-            lambda: model.log_plausibility(motion, start, stop), f"{name}.log_plausibility(start={start}, stop={stop})"
+            lambda start=start, stop=stop: model.log_plausibility(motion, start, stop),
+            f"{name}.log_plausibility(start={start}, stop={stop})",
         )
 
 
@@ -230,7 +235,9 @@ def check_progress(name, model):
     state = _flock(model)
     for label, operation in (("forward", model.forward), ("backward", model.backward)):
         calls = []
-        reported = operation(state, STEPS, np.random.default_rng(3), progress=lambda *args: calls.append(args))
+        reported = operation(
+            state, STEPS, np.random.default_rng(3), progress=lambda *args, calls=calls: calls.append(args)
+        )
         assert calls, f"{name}.{label}(progress=...) never called progress"
         done = [c[0] for c in calls]
         assert all(len(c) == 3 and isinstance(c[2], str) for c in calls), (

@@ -55,7 +55,9 @@ def check_strongly_connected(name, builder, *, metric=None):
     """Every node reaches every other: no dead ends for a walk."""
     _, graph = _build(builder, metric)
     every = set(range(len(graph.nodes)))
-    assert _reached(graph, True) == every and _reached(graph, False) == every, f"{name}.build left dead ends in the graph"
+    assert _reached(graph, True) == every and _reached(graph, False) == every, (
+        f"{name}.build left dead ends in the graph"
+    )
 
 
 @needs("metric")
@@ -106,8 +108,12 @@ def check_progress(name, builder, *, metric=None):
     _, reported = _build(builder, metric, progress=lambda *args: calls.append(args))
     assert calls, f"{name}.build(progress=...) never called progress"
     for done, total, stage in calls:
-        assert isinstance(stage, str) and 0 <= done <= total, f"{name}: progress({done}, {total}, {stage!r}) is not a count of a total"
-    assert _structure(reported) == _structure(_build(builder, metric)[1]), f"{name} builds another graph when it reports progress"
+        assert isinstance(stage, str) and 0 <= done <= total, (
+            f"{name}: progress({done}, {total}, {stage!r}) is not a count of a total"
+        )
+    assert _structure(reported) == _structure(_build(builder, metric)[1]), (
+        f"{name} builds another graph when it reports progress"
+    )
 
 
 CHECKS = (

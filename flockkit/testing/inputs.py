@@ -85,4 +85,6 @@ def _alignment(motion: Motion, a: int, b: int) -> Alignment:
     rotation = rigid.kabsch(x - x.mean(axis=0), y - y.mean(axis=0))
     translation = x.mean(axis=0) - rigid.rotate(rotation, y.mean(axis=0))
     residual = float(np.mean(np.sum((x - rigid.apply(rotation, translation, y)) ** 2, axis=1)))
-    return Alignment(distance=residual, assignment=np.arange(motion.n_agents), rotation=rotation, translation=translation)
+    return Alignment(
+        distance=residual, assignment=np.arange(motion.n_agents), rotation=rotation, translation=translation
+    )

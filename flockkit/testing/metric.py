@@ -66,7 +66,9 @@ def check_compare_returns_alignment(name, metric):
     for (a, b), context in _each(name, metric, _pairs(metric)):
         with context:
             found = metric.compare(a, b)
-            assert isinstance(found, Alignment), f"{name}.compare returned {type(found).__name__}, not a flockkit.Alignment"
+            assert isinstance(found, Alignment), (
+                f"{name}.compare returned {type(found).__name__}, not a flockkit.Alignment"
+            )
             assert found.assignment.shape == (a.n_agents,) and found.rotation.shape == (a.dims, a.dims), (
                 f"{name}.compare returned an alignment for {found.assignment.shape[0]} agents in "
                 f"{found.rotation.shape[0]}D; expected {a.n_agents} in {a.dims}D"
@@ -89,9 +91,13 @@ def check_rigid_and_permutation_invariant(name, metric):
             copy = _rigid_copy(config, rng)
             found = metric.compare(config, copy)
             tolerance = 1e-8 * _scale(config)
-            assert found.distance <= tolerance, f"{name}: a rigid, reordered copy is at distance {found.distance}; expected 0"
+            assert found.distance <= tolerance, (
+                f"{name}: a rigid, reordered copy is at distance {found.distance}; expected 0"
+            )
             residual = found.residual(config, copy)
-            assert residual <= tolerance, f"{name}: the alignment leaves the copy {residual} away (mean squared); expected 0"
+            assert residual <= tolerance, (
+                f"{name}: the alignment leaves the copy {residual} away (mean squared); expected 0"
+            )
 
 
 def check_distance_covers_alignment(name, metric):
@@ -100,7 +106,8 @@ def check_distance_covers_alignment(name, metric):
         found = metric.compare(a, b)
         residual = found.residual(a, b)
         assert found.distance >= residual - 1e-9 * _scale(a), (
-            f"{name}.compare reports distance {found.distance} but its alignment leaves a mean squared residual of {residual}"
+            f"{name}.compare reports distance {found.distance} but its alignment leaves a mean squared residual of "
+            f"{residual}"
         )
 
 
@@ -132,16 +139,25 @@ def check_pairs_within(name, metric):
     distances = np.array([metric.compare(configs[i], configs[j]).distance for i, j in pairs])
     for threshold in np.quantile(distances, [0.1, 0.5]):
         listed = np.asarray(metric.pairs_within(configs, float(threshold)))
-        assert listed.ndim == 2 and listed.shape[1] == 2, f"{name}.pairs_within returned shape {listed.shape}; expected (P, 2)"
+        assert listed.ndim == 2 and listed.shape[1] == 2, (
+            f"{name}.pairs_within returned shape {listed.shape}; expected (P, 2)"
+        )
         listed_set = {(int(i), int(j)) for i, j in listed}
         assert len(listed_set) == len(listed) and all(i < j for i, j in listed_set), (
             f"{name}.pairs_within must list pairs (i, j) with i < j, each once"
         )
-        missing = [(int(i), int(j)) for (i, j), d in zip(pairs, distances) if d <= threshold and (i, j) not in listed_set]
-        assert not missing, f"{name}.pairs_within(threshold={threshold:.4g}) leaves out {missing[:3]} although compare finds them within it"
+        missing = [
+            (int(i), int(j)) for (i, j), d in zip(pairs, distances) if d <= threshold and (i, j) not in listed_set
+        ]
+        assert not missing, (
+            f"{name}.pairs_within(threshold={threshold:.4g}) leaves out {missing[:3]} although compare finds them "
+            "within it"
+        )
         split = len(configs) // 3
         ranges = ((0, split), (split, len(configs)))
-        parts = [np.asarray(metric.pairs_within(configs, float(threshold), rows=rows)).reshape(-1, 2) for rows in ranges]
+        parts = [
+            np.asarray(metric.pairs_within(configs, float(threshold), rows=rows)).reshape(-1, 2) for rows in ranges
+        ]
         assert {(int(i), int(j)) for part in parts for i, j in part} == listed_set and all(
             start <= i < stop for part, (start, stop) in zip(parts, ranges) for i, _ in part
         ), f"{name}.pairs_within(rows=...) over two row ranges does not give the same pairs as without rows"
@@ -156,16 +172,22 @@ def check_pairwise(name, metric):
     pairs = np.array([[2, 0], [1, 3], [0, 1]])
     for given, expected_pairs in ((pairs, pairs), (None, np.column_stack(np.triu_indices(4, 1)))):
         found = np.asarray(metric.pairwise(configs) if given is None else metric.pairwise(configs, given))
-        assert found.shape == (len(expected_pairs),), f"{name}.pairwise returned shape {found.shape}; expected ({len(expected_pairs)},)"
+        assert found.shape == (len(expected_pairs),), (
+            f"{name}.pairwise returned shape {found.shape}; expected ({len(expected_pairs)},)"
+        )
         for (i, j), value in zip(expected_pairs, found):
             expected = metric.compare(configs[i], configs[j]).distance
-            assert np.isclose(value, expected, rtol=1e-9, atol=1e-12), f"{name}.pairwise gives {value} for pair ({i}, {j}) but compare gives {expected}"
+            assert np.isclose(value, expected, rtol=1e-9, atol=1e-12), (
+                f"{name}.pairwise gives {value} for pair ({i}, {j}) but compare gives {expected}"
+            )
 
 
 def check_deterministic(name, metric):
     """The same pair gives the same alignment twice."""
     for a, b in _pairs(metric):
-        assert metric.compare(a, b) == metric.compare(a, b), f"{name}.compare gives different alignments for the same pair"
+        assert metric.compare(a, b) == metric.compare(a, b), (
+            f"{name}.compare gives different alignments for the same pair"
+        )
 
 
 def check_inputs_unchanged(name, metric):
@@ -185,7 +207,7 @@ def check_rejects_mismatched_sizes(name, metric):
     others = (random_flock(n_agents=6, dims=d, rng=rng), random_flock(n_agents=5, dims=5 - d, rng=rng))
     for other in (o.configuration() for o in others):
         expect_validation_error(
-            lambda: metric.compare(base, other),
+            lambda other=other: metric.compare(base, other),
             f"{name}.compare of {base.n_agents} agents in {d}D with {other.n_agents} in {other.dims}D",
         )
 

@@ -23,13 +23,18 @@ def _case(dims: int) -> tuple[Motion, Problem]:
     else:
         far = Box(lower=[40.0, 40.0, 40.0], upper=[44.0, 44.0, 44.0])
     problem = Problem(
-        n_agents=8, dims=dims, duration=3.0, visibility=1.0,  # a small visibility splits the group
+        n_agents=8,
+        dims=dims,
+        duration=3.0,
+        visibility=1.0,  # a small visibility splits the group
         constraints=[
             PointConstraint(agent=0, time=0.5, position=motion.positions[5, 0], velocity=heading),
             ComConstraint(time=1.0, position=motion.positions[10].mean(axis=0) + 0.3, velocity=heading),
             ComConstraint(agents=[1, 2], time=2.0, position=np.zeros(dims), velocity=heading),
             ShapeConstraint(time=1.5, shape=far, velocity=heading),
-            ShapeConstraint(agents=[3], time=2.5, shape=Ball(center=motion.positions[25, 3], radius=1.0), velocity=heading),
+            ShapeConstraint(
+                agents=[3], time=2.5, shape=Ball(center=motion.positions[25, 3], radius=1.0), velocity=heading
+            ),
         ],
     )
     return motion, problem
@@ -78,7 +83,9 @@ def check_rejects_bad_window(name, objective):
     expect_validation_error(lambda: objective.log_terms(motion, problem, 5, 40), f"{name}.log_terms(start=5, stop=40)")
     expect_validation_error(lambda: objective.log_terms(motion, problem, 7, 3), f"{name}.log_terms(start=7, stop=3)")
     small = Motion(positions=motion.positions[:, :5], dt=motion.dt)
-    expect_validation_error(lambda: objective.log_terms(small, problem), f"{name}.log_terms on 5 agents for an 8-agent problem")
+    expect_validation_error(
+        lambda: objective.log_terms(small, problem), f"{name}.log_terms on 5 agents for an 8-agent problem"
+    )
 
 
 CHECKS = (check_log_terms_per_frame, check_window_is_a_slice, check_inputs_unchanged, check_rejects_bad_window)

@@ -22,16 +22,27 @@ TRIES = 40
 
 def _problems() -> dict[int, Problem]:
     square = Polygon(vertices=[[6.0, -2.0], [10.0, -2.0], [10.0, 2.0], [6.0, 2.0]])
-    planar = Problem(n_agents=8, duration=3.0, constraints=[
-        *(PointConstraint(agent=2, time=t, position=[t * 2.0, 0.5 * t]) for t in (0.5, 1.5, 2.5)),
-        ComConstraint(agents=[0, 1, 3], time=1.0, position=[2.0, 1.0], velocity=[1.0, 0.0]),
-        ShapeConstraint(time=3.0, shape=square, velocity=[1.0, 0.0]),
-    ])
-    spatial = Problem(n_agents=6, dims=3, duration=2.0, constraints=[
-        PointConstraint(agent=0, time=0.0, position=[0.0, 0.0, 0.0], velocity=[1.0, 0.0, 0.0]),
-        PointConstraint(agent=4, time=1.2, position=[2.0, 1.0, 0.5], velocity=[1.0, 0.0, 0.0]),
-        ShapeConstraint(agents=[1, 2], time=2.0, shape=Ball(center=[3.0, 0.0, 0.0], radius=1.5), velocity=[1.0, 0.0, 0.0]),
-    ])
+    planar = Problem(
+        n_agents=8,
+        duration=3.0,
+        constraints=[
+            *(PointConstraint(agent=2, time=t, position=[t * 2.0, 0.5 * t]) for t in (0.5, 1.5, 2.5)),
+            ComConstraint(agents=[0, 1, 3], time=1.0, position=[2.0, 1.0], velocity=[1.0, 0.0]),
+            ShapeConstraint(time=3.0, shape=square, velocity=[1.0, 0.0]),
+        ],
+    )
+    spatial = Problem(
+        n_agents=6,
+        dims=3,
+        duration=2.0,
+        constraints=[
+            PointConstraint(agent=0, time=0.0, position=[0.0, 0.0, 0.0], velocity=[1.0, 0.0, 0.0]),
+            PointConstraint(agent=4, time=1.2, position=[2.0, 1.0, 0.5], velocity=[1.0, 0.0, 0.0]),
+            ShapeConstraint(
+                agents=[1, 2], time=2.0, shape=Ball(center=[3.0, 0.0, 0.0], radius=1.5), velocity=[1.0, 0.0, 0.0]
+            ),
+        ],
+    )
     return {2: planar, 3: spatial}
 
 
@@ -44,7 +55,10 @@ def _cases(move, behavior):
         motion = initial_trajectories(problem, behavior, np.random.default_rng(SEED))
         scores = np.asarray(behavior.log_plausibility(motion), dtype=np.float64)
         context = ProposalContext(
-            problem=problem, behavior=behavior, windows=tuple(windows(problem)), scores=scores,
+            problem=problem,
+            behavior=behavior,
+            windows=tuple(windows(problem)),
+            scores=scores,
             pinned=pinned_frames(problem),
         )
         found.append((problem, motion, context))
@@ -67,9 +81,13 @@ def check_returns_proposals(name, move, *, behavior=None):
     proposes something at least sometimes. (A Motion's positions are finite by construction.)"""
     made = 0
     for _, current, proposal in _proposals(move, behavior):
-        assert isinstance(proposal, Proposal), f"{name}.propose returned {type(proposal).__name__}, not a flockkit.Proposal or None"
+        assert isinstance(proposal, Proposal), (
+            f"{name}.propose returned {type(proposal).__name__}, not a flockkit.Proposal or None"
+        )
         shape = proposal.motion.positions.shape
-        assert shape == current.positions.shape, f"{name} proposed a motion of shape {shape}; the current one is {current.positions.shape}"
+        assert shape == current.positions.shape, (
+            f"{name} proposed a motion of shape {shape}; the current one is {current.positions.shape}"
+        )
         assert proposal.motion.dt == current.dt, f"{name} changed dt"
         made += 1
     assert made, f"{name}.propose returned None every time"
@@ -82,7 +100,9 @@ def check_keeps_point_constraints(name, move, *, behavior=None):
         for c in problem.constraints:
             if isinstance(c, PointConstraint):
                 error = np.abs(proposal.motion.positions[problem.frame(c.time), c.agent] - c.position).max()
-                assert error <= 1e-9, f"{name} moved agent {c.agent} {error:.3g} off its point constraint at t={c.time:g}"
+                assert error <= 1e-9, (
+                    f"{name} moved agent {c.agent} {error:.3g} off its point constraint at t={c.time:g}"
+                )
 
 
 @needs("behavior")

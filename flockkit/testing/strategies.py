@@ -75,7 +75,9 @@ def configurations(*, min_agents=1, max_agents=10, dims=None, max_coordinate=100
     @st.composite
     def draw_configuration(draw):
         shape = (draw(st.integers(min_agents, max_agents)), draw(dims_strategy))
-        return Configuration(positions=draw(_vectors(shape, max_coordinate)), velocities=draw(_vectors(shape, max_speed)))
+        return Configuration(
+            positions=draw(_vectors(shape, max_coordinate)), velocities=draw(_vectors(shape, max_speed))
+        )
 
     return draw_configuration()
 
@@ -123,7 +125,11 @@ def motions(
 
     @st.composite
     def draw_motion(draw):
-        shape = (draw(st.integers(min_frames, max_frames)), draw(st.integers(min_agents, max_agents)), draw(dims_strategy))
+        shape = (
+            draw(st.integers(min_frames, max_frames)),
+            draw(st.integers(min_agents, max_agents)),
+            draw(dims_strategy),
+        )
         return Motion(
             positions=draw(_vectors(shape, max_coordinate)),
             dt=draw(dt_strategy),

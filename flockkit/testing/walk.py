@@ -40,7 +40,9 @@ def check_deterministic(name, strategy, *, graph=None):
     graph = _graph(strategy, graph)
     for seed in (7, 8, 9):
         first = strategy.walk(graph, np.random.default_rng(seed), 60.0)
-        assert first == strategy.walk(graph, np.random.default_rng(seed), 60.0), f"{name}.walk differs for the same seed"
+        assert first == strategy.walk(graph, np.random.default_rng(seed), 60.0), (
+            f"{name}.walk differs for the same seed"
+        )
 
 
 @needs("graph")
@@ -48,7 +50,10 @@ def check_rejects_bad_duration(name, strategy, *, graph=None):
     """A duration <= 0 raises flockkit.errors.ValidationError."""
     graph = _graph(strategy, graph)
     for duration in (0.0, -5.0):
-        expect_validation_error(lambda: strategy.walk(graph, np.random.default_rng(0), duration), f"{name}.walk(duration={duration})")
+        expect_validation_error(
+            lambda duration=duration: strategy.walk(graph, np.random.default_rng(0), duration),
+            f"{name}.walk(duration={duration})",
+        )
 
 
 CHECKS = (check_walk_covers_duration, check_deterministic, check_rejects_bad_duration)

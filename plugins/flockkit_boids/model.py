@@ -117,11 +117,15 @@ class Boids:
 
     def __attrs_post_init__(self):
         if self.field_of_view > 360:
-            raise ValidationError(f"boids parameter field_of_view must be in (0, 360] degrees; got {self.field_of_view}")
+            raise ValidationError(
+                f"boids parameter field_of_view must be in (0, 360] degrees; got {self.field_of_view}"
+            )
 
     # -- the three operations -------------------------------------------------------------
 
-    def forward(self, initial: flockkit.State, steps: int, rng: np.random.Generator, *, progress=None, guide=None) -> flockkit.Motion:
+    def forward(
+        self, initial: flockkit.State, steps: int, rng: np.random.Generator, *, progress=None, guide=None
+    ) -> flockkit.Motion:
         """Simulate `steps` steps from `initial`; ``steps + 1`` frames, the first equal to `initial`.
 
         `guide` maps agent indices to (steps + 1, D) positions those agents take from frame 1 on
@@ -130,11 +134,20 @@ class Boids:
         steps = _steps(steps)
         guide = self._guide(guide, steps, initial)
         positions, wander = self._simulate(
-            initial.positions, initial.velocities, self._wander_of(initial, rng), steps, rng, perception=1.0, progress=progress, guide=guide
+            initial.positions,
+            initial.velocities,
+            self._wander_of(initial, rng),
+            steps,
+            rng,
+            perception=1.0,
+            progress=progress,
+            guide=guide,
         )
         return flockkit.Motion(positions=positions, dt=self.dt, channels={_WANDER: wander})
 
-    def backward(self, final: flockkit.State, steps: int, rng: np.random.Generator, *, progress=None, guide=None) -> flockkit.Motion:
+    def backward(
+        self, final: flockkit.State, steps: int, rng: np.random.Generator, *, progress=None, guide=None
+    ) -> flockkit.Motion:
         """``steps + 1`` frames ending at `final`: simulate from `final` with velocities reversed and
         perception reversed (agents react to those behind them), then reverse time (004, 3.1).
         `guide` as for forward, its arrays in forward time (the last row at `final`)."""
@@ -142,7 +155,14 @@ class Boids:
         steps = _steps(steps)
         guide = {agent: path[::-1] for agent, path in self._guide(guide, steps, final).items()}
         positions, wander = self._simulate(
-            final.positions, -final.velocities, -self._wander_of(final, rng), steps, rng, perception=-1.0, progress=progress, guide=guide
+            final.positions,
+            -final.velocities,
+            -self._wander_of(final, rng),
+            steps,
+            rng,
+            perception=-1.0,
+            progress=progress,
+            guide=guide,
         )
         return flockkit.Motion(positions=positions[::-1], dt=self.dt, channels={_WANDER: -wander[::-1]})
 
@@ -229,7 +249,10 @@ class Boids:
             if isinstance(agent, bool) or not isinstance(agent, (int, np.integer)) or not 0 <= agent < state.n_agents:
                 raise ValidationError(f"boids: guide keys must be agent indices below {state.n_agents}; got {agent!r}")
             if path.shape != (steps + 1, state.dims) or not np.all(np.isfinite(path)):
-                raise ValidationError(f"boids: guide[{agent}] must be finite positions of shape {(steps + 1, state.dims)}; got {path.shape}")
+                raise ValidationError(
+                    f"boids: guide[{agent}] must be finite positions of shape {(steps + 1, state.dims)}; got "
+                    f"{path.shape}"
+                )
             checked[int(agent)] = path
         return checked
 

@@ -75,7 +75,9 @@ class IcpHungarian:
         distance, assignment, rotation = self._search(prepared, np.array([0]), np.array([1]))
         rotation = rotation[0]
         return flockkit.Alignment(
-            distance=max(float(distance[0]), 0.0), assignment=assignment[0], rotation=rotation,
+            distance=max(float(distance[0]), 0.0),
+            assignment=assignment[0],
+            rotation=rotation,
             translation=prepared.com[0] - rotation @ prepared.com[1],
         )
 
@@ -121,7 +123,9 @@ class IcpHungarian:
         k = len(configurations)
         first, stop = (0, k) if rows is None else (int(rows[0]), int(rows[1]))
         if not 0 <= first <= stop <= k:
-            raise ValidationError(f"icp-hungarian.pairs_within: rows must be (start, stop) with 0 <= start <= stop <= {k}; got {rows!r}")
+            raise ValidationError(
+                f"icp-hungarian.pairs_within: rows must be (start, stop) with 0 <= start <= stop <= {k}; got {rows!r}"
+            )
         prepared = _Prepared(configurations, self.up)
         limit = float(threshold)
         if prepared.dims == 3:
@@ -156,7 +160,11 @@ class IcpHungarian:
         """Rows of (ia, ib) (or of `blocks`) whose pair may be within `limit` (one per pair)."""
         ia, ib = np.asarray(ia), np.asarray(ib)
         # rounding must never drop a pair at the limit: allow for it relative to the pair's size
-        limit = limit * (1 + 1e-9) + 1e-9 * (prepared.scale[ia] + prepared.scale[ib] + self.velocity_weight * (prepared.speed_scale[ia] + prepared.speed_scale[ib]))
+        limit = limit * (1 + 1e-9) + 1e-9 * (
+            prepared.scale[ia]
+            + prepared.scale[ib]
+            + self.velocity_weight * (prepared.speed_scale[ia] + prepared.speed_scale[ib])
+        )
         keep = np.zeros(len(ia), dtype=bool)
         for s in range(0, len(ia), _BOUND_CHUNK):
             part = slice(s, s + _BOUND_CHUNK)
@@ -164,7 +172,11 @@ class IcpHungarian:
             mean_part = self.velocity_weight * (prepared.mean_speed[ia[part]] - prepared.mean_speed[ib[part]]) ** 2
             kept = np.flatnonzero(floor + mean_part <= limit[part])
             if prepared.dims == 2 and len(kept):
-                kept = kept[_branch_and_bound(prepared, ia[part][kept], ib[part][kept], self.velocity_weight, limit[part][kept], floor[kept])]
+                kept = kept[
+                    _branch_and_bound(
+                        prepared, ia[part][kept], ib[part][kept], self.velocity_weight, limit[part][kept], floor[kept]
+                    )
+                ]
             keep[s + kept] = True
         labels = (ia, ib) if blocks is None else blocks
         return np.column_stack([labels[0][keep], labels[1][keep]]).astype(int)
@@ -190,7 +202,9 @@ class IcpHungarian:
     def _check_pair(self, a, b):
         for name, value in (("a", a), ("b", b)):
             if not isinstance(value, flockkit.Configuration):
-                raise ValidationError(f"icp-hungarian: {name} must be a flockkit.Configuration; got {type(value).__name__}")
+                raise ValidationError(
+                    f"icp-hungarian: {name} must be a flockkit.Configuration; got {type(value).__name__}"
+                )
         if a.positions.shape != b.positions.shape:
             raise ValidationError(
                 f"icp-hungarian compares configurations of the same size; got {a.n_agents} agents in {a.dims}D "
@@ -201,7 +215,10 @@ class IcpHungarian:
         configurations = list(configurations)
         for index, config in enumerate(configurations):
             if not isinstance(config, flockkit.Configuration):
-                raise ValidationError(f"icp-hungarian: configurations[{index}] must be a flockkit.Configuration; got {type(config).__name__}")
+                raise ValidationError(
+                    f"icp-hungarian: configurations[{index}] must be a flockkit.Configuration; got "
+                    f"{type(config).__name__}"
+                )
             self._check_pair(configurations[0], config)
         return configurations
 
@@ -210,7 +227,9 @@ class IcpHungarian:
         n, w = prepared.n_agents, self.velocity_weight
         bound = ((prepared.sorted_radii[ia] - prepared.sorted_radii[ib]) ** 2).sum(axis=1) / n
         if w:
-            bound += w * ((prepared.sorted_deviation_speeds[ia] - prepared.sorted_deviation_speeds[ib]) ** 2).sum(axis=1) / n
+            bound += (
+                w * ((prepared.sorted_deviation_speeds[ia] - prepared.sorted_deviation_speeds[ib]) ** 2).sum(axis=1) / n
+            )
             if mean_velocity:
                 bound += w * (prepared.mean_speed[ia] - prepared.mean_speed[ib]) ** 2
         return bound
@@ -221,8 +240,11 @@ class IcpHungarian:
         p, s, d = starts.shape[0], starts.shape[1], prepared.dims
         pick = lambda array, index: np.repeat(array[index], s, axis=0)  # noqa: E731
         distance, assignment, rotation = self._descend(
-            pick(prepared.centered, ia), pick(prepared.centered, ib),
-            pick(prepared.velocities, ia), pick(prepared.velocities, ib), starts.reshape(p * s, d, d),
+            pick(prepared.centered, ia),
+            pick(prepared.centered, ib),
+            pick(prepared.velocities, ia),
+            pick(prepared.velocities, ib),
+            starts.reshape(p * s, d, d),
         )
         best = np.argmin(distance.reshape(p, s), axis=1)  # the first start wins ties
         flat = np.arange(p) * s + best
@@ -252,7 +274,11 @@ class IcpHungarian:
             better = active[improved]
             # an unchanged assignment gives back the same rotation: nothing more to gain
             moved = np.any(assignment != best_assignment[active], axis=1) | ~np.isfinite(previous)
-            best[better], best_assignment[better], best_rotation[better] = distance[improved], assignment[improved], rotation[better]
+            best[better], best_assignment[better], best_rotation[better] = (
+                distance[improved],
+                assignment[improved],
+                rotation[better],
+            )
             going = improved & moved & (distance < previous * (1 - self.tolerance))
             active, assignment = active[going], assignment[going]
             if not len(active):
@@ -378,7 +404,12 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=12) -> np.ndarra
     passed[pair[value <= limit[pair]]] = True
     piece = np.flatnonzero(np.r_[pair[1:] == pair[:-1], False])  # samples that start a piece
     pair, lo, hi = pair[piece], theta[piece], theta[piece + 1]
-    lo_value, hi_value, lo_assignment, hi_assignment = value[piece], value[piece + 1], assignment[piece], assignment[piece + 1]
+    lo_value, hi_value, lo_assignment, hi_assignment = (
+        value[piece],
+        value[piece + 1],
+        assignment[piece],
+        assignment[piece + 1],
+    )
     for level in range(levels + 1):
         alive = (_wedge_bound(total[pair], lo, hi, lo_value, hi_value) <= limit[pair]) & ~passed[pair]
         exact = np.all(lo_assignment == hi_assignment, axis=1)
@@ -389,7 +420,12 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=12) -> np.ndarra
         if level == levels or not alive.any():
             break
         pair, lo, hi = pair[alive], lo[alive], hi[alive]
-        lo_value, hi_value, lo_assignment, hi_assignment = lo_value[alive], hi_value[alive], lo_assignment[alive], hi_assignment[alive]
+        lo_value, hi_value, lo_assignment, hi_assignment = (
+            lo_value[alive],
+            hi_value[alive],
+            lo_assignment[alive],
+            hi_assignment[alive],
+        )
         middle = (lo + hi) / 2
         value, assignment = sample(pair, middle)
         passed[pair[value <= limit[pair]]] = True
@@ -414,6 +450,13 @@ def _wedge_bound(total, lo, hi, lo_value, hi_value):
 
 def _checked_pairs(pairs, k) -> np.ndarray:
     pairs = np.asarray(pairs)
-    if pairs.ndim != 2 or pairs.shape[1] != 2 or (pairs.size and (not np.issubdtype(pairs.dtype, np.integer) or pairs.min() < 0 or pairs.max() >= k)):
-        raise ValidationError(f"icp-hungarian.pairwise: pairs must be integer indices into the {k} configurations, shape (P, 2); got shape {pairs.shape}")
+    if (
+        pairs.ndim != 2
+        or pairs.shape[1] != 2
+        or (pairs.size and (not np.issubdtype(pairs.dtype, np.integer) or pairs.min() < 0 or pairs.max() >= k))
+    ):
+        raise ValidationError(
+            f"icp-hungarian.pairwise: pairs must be integer indices into the {k} configurations, shape (P, 2); got "
+            f"shape {pairs.shape}"
+        )
     return pairs.astype(int)

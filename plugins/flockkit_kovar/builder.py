@@ -42,7 +42,6 @@ import flockkit
 from flockkit import validate
 from flockkit.errors import ValidationError
 
-
 _FIRST_PROBE = 0.02  # where probing starts, as a fraction of the mean squared radius
 
 
@@ -86,7 +85,9 @@ class Kovar:
         if validate.integer(self.n_jobs, "kovar parameter n_jobs") == 0:
             raise ValidationError("kovar parameter n_jobs must be a non-zero integer; got 0")
 
-    def build(self, motion: flockkit.Motion, metric, rng: np.random.Generator, *, progress=None) -> flockkit.MotionGraph:
+    def build(
+        self, motion: flockkit.Motion, metric, rng: np.random.Generator, *, progress=None
+    ) -> flockkit.MotionGraph:
         """The motion graph of `motion` under `metric` (deterministic; `rng` is not needed).
         `progress(done, total, stage)` is called as pairs are bounded and distances computed."""
         if not isinstance(motion, flockkit.Motion):
@@ -104,37 +105,48 @@ class Kovar:
         apart = np.abs(np.subtract.outer(np.arange(len(frames)), np.arange(len(frames))))  # in candidates
         far = apart * stride >= max(gap, 1)
         # nearer the diagonal than the neighbors of far cells, cells never matter: pruning skips them
-        matrix = _Matrix(configs, metric, n_jobs=self.n_jobs, progress=progress, needed=apart >= math.ceil(max(gap, 1) / stride) - 2)
+        matrix = _Matrix(
+            configs, metric, n_jobs=self.n_jobs, progress=progress, needed=apart >= math.ceil(max(gap, 1) / stride) - 2
+        )
+        threshold, chosen = self._choose(motion, frames, far, matrix, blend, configs, flockkit.capabilities(metric))
+        transitions = _transitions(frames, chosen, matrix, blend)
+        if _kept(motion, frames, chosen, matrix, blend) == 0:
+            raise ValidationError(self._no_transition_message(motion, frames, far, matrix, blend, threshold))
+        params = {
+            "candidate_interval": self.candidate_interval,
+            "stride": stride,
+            "min_gap": self.min_gap,
+            "threshold": threshold,
+            "threshold_rule": "per_second" if self.per_second else ("absolute" if self.threshold else "adaptive"),
+            "per_second": self.per_second,
+            "blend_frames": blend,
+            "candidates": len(frames),
+            "evaluated": matrix.evaluated,
+            "prune": self.prune,
+        }
+        return flockkit.MotionGraph.assemble(motion, transitions, params=params, provenance={"builder": "kovar"})
+
+    def _choose(self, motion, frames, far, matrix, blend, configs, offers):
+        """(threshold, chosen minima) by the rule the parameters ask for: the paper's `per_second`,
+        an absolute `threshold`, or the adaptive rule (module docstring)."""
         if self.per_second is not None:
             matrix.fill(matrix.all_pairs())
             count = math.ceil(self.per_second * motion.duration)
             minima = _local_minima(matrix.values, far)
             chosen = sorted(minima, key=lambda ij: (matrix.values[ij], ij))[:count]
-            threshold = float(max((matrix.values[ij] for ij in chosen), default=0.0))
-        else:
-            spread = float(np.mean([np.mean(np.sum((c.positions - c.center_of_mass()) ** 2, axis=1)) for c in configs]))
-            offers = flockkit.capabilities(metric)
-            prune = self.prune and (offers.pairs_within or offers.lower_bound)
-            if self.threshold is not None:
-                threshold = self.threshold
-                if prune:
-                    matrix.fill_within(threshold)
-                else:
-                    matrix.fill(matrix.all_pairs())
-                chosen = [ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= threshold]
+            return float(max((matrix.values[ij] for ij in chosen), default=0.0)), chosen
+        prune = self.prune and (offers.pairs_within or offers.lower_bound)
+        if self.threshold is not None:
+            if prune:
+                matrix.fill_within(self.threshold)
             else:
-                wanted = max(self.min_transitions, math.ceil(self.transitions_per_minute * motion.duration / 60))
-                threshold, chosen = self._adaptive(motion, frames, far, matrix, blend, spread, wanted, prune)
-        transitions = _transitions(frames, chosen, matrix, blend)
-        if _kept(motion, frames, chosen, matrix, blend) == 0:
-            raise ValidationError(self._no_transition_message(motion, frames, far, matrix, blend, threshold))
-        params = {
-            "candidate_interval": self.candidate_interval, "stride": stride, "min_gap": self.min_gap,
-            "threshold": threshold, "threshold_rule": "per_second" if self.per_second else ("absolute" if self.threshold else "adaptive"),
-            "per_second": self.per_second, "blend_frames": blend, "candidates": len(frames),
-            "evaluated": matrix.evaluated, "prune": self.prune,
-        }
-        return flockkit.MotionGraph.assemble(motion, transitions, params=params, provenance={"builder": "kovar"})
+                matrix.fill(matrix.all_pairs())
+            return self.threshold, [
+                ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= self.threshold
+            ]
+        spread = float(np.mean([np.mean(np.sum((c.positions - c.center_of_mass()) ** 2, axis=1)) for c in configs]))
+        wanted = max(self.min_transitions, math.ceil(self.transitions_per_minute * motion.duration / 60))
+        return self._adaptive(motion, frames, far, matrix, blend, spread, wanted, prune)
 
     def _adaptive(self, motion, frames, far, matrix, blend, spread, wanted, prune):
         """(threshold, chosen minima) by the adaptive rule (module docstring). Without pruning every
@@ -147,7 +159,10 @@ class Kovar:
                 matrix.fill_within(probe)
             else:
                 matrix.fill(matrix.all_pairs())
-            minima = sorted((ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= probe), key=lambda ij: (matrix.values[ij], ij))
+            minima = sorted(
+                (ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= probe),
+                key=lambda ij: (matrix.values[ij], ij),
+            )
             # the lowest minima, adding the shortfall until enough survive the trimming of dead ends
             while count <= len(minima):
                 kept = _kept(motion, frames, minima[:count], matrix, blend)
@@ -177,7 +192,11 @@ class Kovar:
         probe = _FIRST_PROBE * spread
         while True:
             matrix.fill_within(probe, ranges=strips)
-            values = sorted(matrix.values[i, j] for i, j in _local_minima(matrix.values, far) if i < j and interior[i] and matrix.values[i, j] <= probe)
+            values = sorted(
+                matrix.values[i, j]
+                for i, j in _local_minima(matrix.values, far)
+                if i < j and interior[i] and matrix.values[i, j] <= probe
+            )
             if len(values) >= needed:
                 return float(values[needed - 1]), 1.1
             if probe >= spread:
@@ -315,7 +334,7 @@ def _row_ranges(k: int, count: int) -> list[tuple[int, int]]:
     """(start, stop) row ranges holding about equal numbers of pairs i < j (row i has k - 1 - i)."""
     done = np.cumsum(np.arange(k - 1, -1, -1))
     cuts = np.searchsorted(done, np.linspace(0, done[-1], count + 1)[1:-1])
-    edges = [0, *sorted(set(int(c) + 1 for c in cuts)), k]
+    edges = [0, *sorted({int(c) + 1 for c in cuts}), k]
     return [(a, b) for a, b in zip(edges[:-1], edges[1:]) if a < b]
 
 

@@ -25,7 +25,8 @@ def _window(motion, problem, start, stop) -> tuple[int, int]:
         raise ValidationError(f"objective: problem must be a flockkit.Problem; got {type(problem).__name__}")
     if motion.n_agents != problem.n_agents or motion.dims != problem.dims:
         raise ValidationError(
-            f"objective: the motion has {motion.n_agents} agents in {motion.dims}D, the problem {problem.n_agents} in {problem.dims}D"
+            f"objective: the motion has {motion.n_agents} agents in {motion.dims}D, the problem {problem.n_agents} in "
+            f"{problem.dims}D"
         )
     return validate.window(motion, start, stop, owner="objective")
 
@@ -60,7 +61,9 @@ class ShapeTerm:
         start, stop = _window(motion, problem, start, stop)
         terms = np.zeros(stop - start)
         for frame, constraint in _active(problem, flockkit.ShapeConstraint, start, stop):
-            outside = np.maximum(constraint.shape.signed_distance(motion.positions[frame, list(problem.agents_of(constraint))]), 0.0)
+            outside = np.maximum(
+                constraint.shape.signed_distance(motion.positions[frame, list(problem.agents_of(constraint))]), 0.0
+            )
             terms[frame - start] -= problem.shape_weight * float(outside @ outside)
         return terms
 
@@ -71,7 +74,9 @@ class FlockTerm:
 
     def log_terms(self, motion, problem, start=0, stop=None) -> np.ndarray:
         start, stop = _window(motion, problem, start, stop)
-        counts = np.array([count_flocks(motion.positions[t], problem.visibility) for t in range(start, stop)], dtype=float)
+        counts = np.array(
+            [count_flocks(motion.positions[t], problem.visibility) for t in range(start, stop)], dtype=float
+        )
         return -problem.flock_weight * np.abs(counts - problem.flocks)
 
 

@@ -126,7 +126,9 @@ class Regenerate:
             return None
         motion = regenerate(problem, behavior, current, start, stop, rng)
         held = stop < current.n_frames - 1  # the last frame is free unless constrained
-        return Proposal(motion=motion, start=start + 1, stop=stop if held else stop + 1, agents=tuple(range(current.n_agents)))
+        return Proposal(
+            motion=motion, start=start + 1, stop=stop if held else stop + 1, agents=tuple(range(current.n_agents))
+        )
 
 
 # -- multi-resolution bumps ---------------------------------------------------------------------

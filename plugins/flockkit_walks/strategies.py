@@ -60,7 +60,9 @@ class RandomWalk:
 
 def _region(value):
     if not isinstance(value, flockkit.Region):
-        raise ValidationError(f"walk parameter region must be a flockkit region (Ball, Box or Polygon); got {type(value).__name__}")
+        raise ValidationError(
+            f"walk parameter region must be a flockkit region (Ball, Box or Polygon); got {type(value).__name__}"
+        )
     return value
 
 
@@ -128,8 +130,12 @@ class RegionWalk:
             frames = _frames_of(graph, edge)
             since = since + frames if edge[0] == "clip" else 0
             target = graph.edge_target(edge)
-            stack.append((target, since, rotation, translation, played + frames, self._order(graph, target, since, rng)))
-        return flockkit.Walk(start=stack[0][0], edges=edges, rotation=np.eye(graph.motion.dims), translation=stack[0][3])
+            stack.append(
+                (target, since, rotation, translation, played + frames, self._order(graph, target, since, rng))
+            )
+        return flockkit.Walk(
+            start=stack[0][0], edges=edges, rotation=np.eye(graph.motion.dims), translation=stack[0][3]
+        )
 
     @staticmethod
     def _order(graph, node, since, rng) -> list:
@@ -182,4 +188,6 @@ class _Search:
         if ahead >= self.horizon:
             return True
         options = graph.allowed_edges(graph.edge_target(edge), since)
-        return any(self._path(options[i], since, rotation, translation, ahead, rng) for i in rng.permutation(len(options)))
+        return any(
+            self._path(options[i], since, rotation, translation, ahead, rng) for i in rng.permutation(len(options))
+        )

@@ -26,8 +26,20 @@ def test_plugins_lists_kind_name_plugin_distribution_version(capsys):
 def test_simulate_writes_motion_and_picture(capsys, tmp_path):
     out_file, picture = tmp_path / "flock.npz", tmp_path / "flock.png"
     code, out, err = run(
-        capsys, "simulate", "--agents", "12", "--steps", "30", "--seed", "4", "-o", str(out_file),
-        "--picture", str(picture), "--param", "cohesion_weight=2.5",
+        capsys,
+        "simulate",
+        "--agents",
+        "12",
+        "--steps",
+        "30",
+        "--seed",
+        "4",
+        "-o",
+        str(out_file),
+        "--picture",
+        str(picture),
+        "--param",
+        "cohesion_weight=2.5",
     )
     assert code == 0, err
     motion = flockkit.Motion.load(out_file)
@@ -55,8 +67,14 @@ def test_check_runs_the_kit_and_reports_what_it_skipped(capsys, tmp_path):
         (["simulate", "--agents", "3", "--steps", "5", "-o", "{tmp}/a.csv"], "unknown extension '.csv'"),
         (["simulate", "--agents", "3", "--steps", "5", "-o", "{tmp}/missing/a.npz"], "does not exist"),
         (["simulate", "--agents", "3", "--steps", "5", "-o", "{tmp}/a.npz", "--picture", "{tmp}/a.gif"], "'.gif'"),
-        (["simulate", "--agents", "3", "--steps", "5", "--behavior", "boidz", "-o", "{tmp}/a.npz"], "Did you mean 'boids'"),
-        (["simulate", "--agents", "3", "--steps", "5", "--param", "speed=2", "-o", "{tmp}/a.npz"], "its parameters are"),
+        (
+            ["simulate", "--agents", "3", "--steps", "5", "--behavior", "boidz", "-o", "{tmp}/a.npz"],
+            "Did you mean 'boids'",
+        ),
+        (
+            ["simulate", "--agents", "3", "--steps", "5", "--param", "speed=2", "-o", "{tmp}/a.npz"],
+            "its parameters are",
+        ),
         (["check", "behavior", "nothing"], "no behavior named 'nothing'"),
     ],
 )
@@ -112,7 +130,19 @@ def test_build_walk_and_info(capsys, tmp_path, recording):
     assert code == 0, err
     expected = flockkit.synthesize(graph, flockkit.walk(graph, duration=20, seed=3))
     assert flockkit.Motion.load(walked) == expected
-    code, _, err = run(capsys, "walk", str(graph_file), "--duration", "20", "--strategy", "region", "--region", "box:-100,-100,100,100", "-o", str(boxed))
+    code, _, err = run(
+        capsys,
+        "walk",
+        str(graph_file),
+        "--duration",
+        "20",
+        "--strategy",
+        "region",
+        "--region",
+        "box:-100,-100,100,100",
+        "-o",
+        str(boxed),
+    )
     assert code == 0, err
     code, out, _ = run(capsys, "info", str(graph_file))
     assert code == 0 and f'"transitions": {len(graph.transitions)}' in out
@@ -129,7 +159,10 @@ def test_build_with_a_threshold_that_leaves_nothing_says_what_would_work(capsys,
 @pytest.mark.parametrize(
     "argv, message",
     [
-        (["walk", "GRAPH", "--duration", "5", "--strategy", "region", "--region", "box:1,2", "-o", "OUT.npz"], "--region"),
+        (
+            ["walk", "GRAPH", "--duration", "5", "--strategy", "region", "--region", "box:1,2", "-o", "OUT.npz"],
+            "--region",
+        ),
         (["build", "GRAPH", "-o", "OUT.npz"], "expected a 'motion' file"),
         (["walk", "GRAPH", "--duration", "5", "-o", "OUT.gif"], "unknown extension"),
         (["info", "MISSING.npz"], "no such file"),
@@ -138,7 +171,10 @@ def test_build_with_a_threshold_that_leaves_nothing_says_what_would_work(capsys,
 def test_graph_commands_reject_bad_input_in_one_line(capsys, tmp_path, recording, argv, message):
     graph_file = tmp_path / "graph.npz"
     flockkit.build_graph(flockkit.Motion.load(recording)).save(graph_file)
-    argv = [str(graph_file) if a == "GRAPH" else str(tmp_path / a) if a in ("OUT.npz", "OUT.gif", "MISSING.npz") else a for a in argv]
+    argv = [
+        str(graph_file) if a == "GRAPH" else str(tmp_path / a) if a in ("OUT.npz", "OUT.gif", "MISSING.npz") else a
+        for a in argv
+    ]
     code, _, err = run(capsys, *argv)
     assert code == 1 and message in err and len(err.strip().splitlines()) == 1
 
@@ -161,8 +197,15 @@ def test_solve_writes_the_solution(capsys, tmp_path):
     "text, message",
     [
         ("[problem]\nagents = 3\n", "duration"),
-        ("[problem]\nagents = 3\nduration = 1.0\n[[point]]\nagent = 9\ntime = 0.5\nposition = [0, 0]\nvelocity = [1, 0]\n", "agent 9 does not exist"),
-        ("[problem]\nagents = 3\nduration = 1.0\n[[shape]]\ntime = 0.5\nvelocity = [1, 0]\n", "exactly one of polygon, box or ball"),
+        (
+            "[problem]\nagents = 3\nduration = 1.0\n[[point]]\nagent = 9\ntime = 0.5\nposition = [0, 0]\nvelocity = "
+            "[1, 0]\n",
+            "agent 9 does not exist",
+        ),
+        (
+            "[problem]\nagents = 3\nduration = 1.0\n[[shape]]\ntime = 0.5\nvelocity = [1, 0]\n",
+            "exactly one of polygon, box or ball",
+        ),
         ("[problem]\nagents = 3\nduration = 1.0\ncolour = 'red'\n", "unknown key 'colour'"),
         ("[problem\n", "not a TOML scenario"),
     ],
@@ -181,7 +224,9 @@ def test_export_and_import_round_trip(capsys, tmp_path, recording):
     assert code == 0, err
     code, _, err = run(capsys, "import", str(table), "--fps", "10", "-o", str(tmp_path / "back.npz"))
     assert code == 0, err
-    np.testing.assert_array_equal(flockkit.Motion.load(tmp_path / "back.npz").positions, flockkit.Motion.load(recording).positions)
+    np.testing.assert_array_equal(
+        flockkit.Motion.load(tmp_path / "back.npz").positions, flockkit.Motion.load(recording).positions
+    )
     code, _, err = run(capsys, "export", str(recording), "-o", str(tmp_path / "flock.usda"))
     assert code == 0 and (tmp_path / "flock.usda").read_text().startswith("#usda")
 
@@ -220,8 +265,19 @@ def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data
     code, out, err = run(capsys, "demo", "-o", str(tmp_path / "demo"), "--data", str(shared_data), "--quiet")
     assert code == 0, err
     names = {p.name for p in (tmp_path / "demo").iterdir()}
-    assert names == {"recording.png", "difference-matrix.png", "graph.png", "synthesized.png", "synthesized.gif",
-                     "come-from-behind.png", "come-from-behind.gif", "trace.png", "sticklebacks.png", "sticklebacks.gif", "summary.json"}
+    assert names == {
+        "recording.png",
+        "difference-matrix.png",
+        "graph.png",
+        "synthesized.png",
+        "synthesized.gif",
+        "come-from-behind.png",
+        "come-from-behind.gif",
+        "trace.png",
+        "sticklebacks.png",
+        "sticklebacks.gif",
+        "summary.json",
+    }
     summary = json.loads((tmp_path / "demo" / "summary.json").read_text())
     assert summary["synthesized"]["seconds"] >= 120 and summary["synthesized"]["center of mass in the box"]
     assert max(summary["come-from-behind"]["residuals"]) <= 0.3 and summary["sticklebacks"]["transitions"] >= 3

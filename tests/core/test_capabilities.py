@@ -14,7 +14,16 @@ from flockkit.errors import FlockkitWarning, PluginError, ValidationError
 from flockkit.solve.sampler import Scorer
 from flockkit.testing import check_plugin, checks_for, skipped_checks
 
-from ..testing.fakes import ComTerm, Declaring, GlobalRandomness, IcpHungarian, Kovar, RandomVelocity, RandomWalk, Retime
+from ..testing.fakes import (
+    ComTerm,
+    Declaring,
+    GlobalRandomness,
+    IcpHungarian,
+    Kovar,
+    RandomVelocity,
+    RandomWalk,
+    Retime,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 BUILTIN_PLUGINS = "boids,icp,kovar,walks,objectives,proposals"
@@ -70,7 +79,12 @@ def test_capabilities_reads_the_declaration_or_gives_the_defaults():
     assert flockkit.capabilities(Declaring).guide and flockkit.capabilities(Declaring()).plausibility_reach == 1
     assert flockkit.Capabilities(dims=[3, 2]).dims == (2, 3)
     boids = flockkit.get("behavior", "boids")
-    assert flockkit.capabilities(boids).declared() == {"guide": True, "obstacles": True, "plausibility_reach": 2, "progress": True}
+    assert flockkit.capabilities(boids).declared() == {
+        "guide": True,
+        "obstacles": True,
+        "plausibility_reach": 2,
+        "progress": True,
+    }
 
     class Odd(RandomVelocity):
         capabilities = {"dims": (2,)}
@@ -110,11 +124,23 @@ class ObstaclesNotTaken(RandomVelocity):
 @pytest.mark.parametrize(
     "kind, factory, problem",
     [
-        ("behavior", GuideWithoutKeyword, "forward(initial, steps, rng, guide=): missing keyword parameter 'guide' (capabilities.guide is declared)"),
-        ("metric", PairsWithoutMethod, "pairs_within(configurations, threshold, rows=): missing (capabilities.pairs_within is declared)"),
+        (
+            "behavior",
+            GuideWithoutKeyword,
+            "forward(initial, steps, rng, guide=): missing keyword parameter 'guide' (capabilities.guide is declared)",
+        ),
+        (
+            "metric",
+            PairsWithoutMethod,
+            "pairs_within(configurations, threshold, rows=): missing (capabilities.pairs_within is declared)",
+        ),
         ("metric", PairsWithoutRows, "missing keyword parameter 'rows'"),
         ("behavior", MetricFieldOnABehavior, "capabilities.pairwise is declared, but only metric components use it"),
-        ("behavior", ObstaclesNotTaken, "the factory has no parameter 'obstacles' (capabilities.obstacles is declared)"),
+        (
+            "behavior",
+            ObstaclesNotTaken,
+            "the factory has no parameter 'obstacles' (capabilities.obstacles is declared)",
+        ),
     ],
 )
 def test_declared_operations_are_checked_at_registration(kind, factory, problem):
@@ -129,7 +155,11 @@ def test_the_kit_reports_undeclared_operations_as_skipped_with_the_reason():
     assert set(report.skipped) == {"check_guide", "check_progress", "check_plausibility_reach"}
     assert all("does not declare Capabilities." in reason for reason in report.skipped.values())
     assert not set(report.passed) & set(report.skipped)
-    assert {c.__name__ for c in checks_for("behavior", Declaring())} >= {"check_guide", "check_progress", "check_plausibility_reach"}
+    assert {c.__name__ for c in checks_for("behavior", Declaring())} >= {
+        "check_guide",
+        "check_progress",
+        "check_plausibility_reach",
+    }
     assert skipped_checks("metric", IcpHungarian()) == {}
 
 
@@ -237,10 +267,15 @@ def test_resolve_takes_names_and_instances_and_refuses_the_rest():
 
 
 def small_problem(**extra):
-    return flockkit.Problem(n_agents=6, duration=2.0, constraints=[
-        flockkit.PointConstraint(agent=0, time=0.5, position=[0.0, 0.0], velocity=[1.0, 0.0]),
-        flockkit.ComConstraint(time=2.0, position=[2.0, 0.5], velocity=[1.0, 0.0]),
-    ], **extra)
+    return flockkit.Problem(
+        n_agents=6,
+        duration=2.0,
+        constraints=[
+            flockkit.PointConstraint(agent=0, time=0.5, position=[0.0, 0.0], velocity=[1.0, 0.0]),
+            flockkit.ComConstraint(time=2.0, position=[2.0, 0.5], velocity=[1.0, 0.0]),
+        ],
+        **extra,
+    )
 
 
 def test_solve_takes_behavior_parameters_and_instances_of_every_component():
@@ -261,7 +296,10 @@ def test_solve_takes_behavior_parameters_and_instances_of_every_component():
 def test_solve_refuses_obstacles_for_a_model_that_does_not_declare_them():
     registry.register(Plugin(), name="runtime")
     problem = small_problem(obstacles=[flockkit.Ball(center=[1.0, 3.0], radius=0.5)])
-    with pytest.raises(ValidationError, match=r"behavior walker does not avoid obstacles \(it does not declare Capabilities\(obstacles=True\)\)"):
+    with pytest.raises(
+        ValidationError,
+        match=r"behavior walker does not avoid obstacles \(it does not declare Capabilities\(obstacles=True\)\)",
+    ):
         flockkit.solve(problem, behavior="walker", iterations=1)
 
 
@@ -314,9 +352,11 @@ class Spy(RandomVelocity):
 
 def test_undeclared_operations_are_never_used_and_declared_ones_are():
     Spy.handed.clear()
-    problem = flockkit.Problem(n_agents=4, duration=2.0, constraints=[
-        flockkit.PointConstraint(agent=0, time=t, position=[t, 0.0]) for t in (0.5, 1.0, 1.5)
-    ])
+    problem = flockkit.Problem(
+        n_agents=4,
+        duration=2.0,
+        constraints=[flockkit.PointConstraint(agent=0, time=t, position=[t, 0.0]) for t in (0.5, 1.0, 1.5)],
+    )
     flockkit.solve(problem, behavior=Spy(), iterations=0, seed=1)
     flockkit.simulate(Spy(), n_agents=4, steps=5, progress=True)
     assert Spy.handed and not any(guide or progress for guide, progress in Spy.handed)
@@ -325,7 +365,11 @@ def test_undeclared_operations_are_never_used_and_declared_ones_are():
 
 
 def _string_constants(path):
-    return [node.value for node in ast.walk(ast.parse(path.read_text())) if isinstance(node, ast.Constant) and isinstance(node.value, str)]
+    return [
+        node.value
+        for node in ast.walk(ast.parse(path.read_text()))
+        if isinstance(node, ast.Constant) and isinstance(node.value, str)
+    ]
 
 
 def test_the_core_names_no_builtin_outside_convenience_defaults_and_sniffs_no_signature():

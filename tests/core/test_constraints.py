@@ -25,16 +25,23 @@ def test_velocities_come_from_the_spline_through_a_sequence():
 
 
 def test_a_given_velocity_is_kept_and_two_constraints_give_the_chord():
-    problem = Problem(n_agents=2, duration=2.0, constraints=[point(1, 0.0, [0, 0], velocity=[5, 5]), point(1, 2.0, [4, 2])])
+    problem = Problem(
+        n_agents=2, duration=2.0, constraints=[point(1, 0.0, [0, 0], velocity=[5, 5]), point(1, 2.0, [4, 2])]
+    )
     np.testing.assert_allclose(problem.constraints[0].velocity, [5, 5])
     np.testing.assert_allclose(problem.constraints[1].velocity, [2, 1])
 
 
 def test_com_sequences_are_fitted_per_subset():
-    problem = Problem(n_agents=4, duration=2.0, constraints=[
-        ComConstraint(agents=[0, 1], time=0.0, position=[0, 0]), ComConstraint(agents=[0, 1], time=1.0, position=[3, 0]),
-        ComConstraint(time=0.5, position=[0, 0], velocity=[0, 1]),
-    ])
+    problem = Problem(
+        n_agents=4,
+        duration=2.0,
+        constraints=[
+            ComConstraint(agents=[0, 1], time=0.0, position=[0, 0]),
+            ComConstraint(agents=[0, 1], time=1.0, position=[3, 0]),
+            ComConstraint(time=0.5, position=[0, 0], velocity=[0, 1]),
+        ],
+    )
     np.testing.assert_allclose(problem.constraints[0].velocity, [3, 0])
     np.testing.assert_allclose(problem.constraints[2].velocity, [0, 1])
 

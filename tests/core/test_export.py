@@ -29,6 +29,7 @@ def test_json_holds_the_positions(motion, tmp_path):
 def test_usd_has_a_time_sample_per_frame_facing_the_velocity(motion, tmp_path, suffix):
     pytest.importorskip("pxr", reason="usd-core (flockkit[usd]) is not installed")
     from pxr import Gf, Usd, UsdGeom
+
     path = tmp_path / f"flock{suffix}"
     flockkit.io.export(motion, path)
     stage = Usd.Stage.Open(str(path))

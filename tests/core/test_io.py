@@ -92,7 +92,9 @@ def test_fill_gaps_policy():
 def test_fill_gaps_keeps_known_values(data):
     motion = data.draw(fst.motions(min_frames=3, max_frames=15, max_agents=4))
     positions = np.array(motion.positions)
-    holes = data.draw(st.lists(st.tuples(st.integers(0, motion.n_frames - 1), st.integers(0, motion.n_agents - 1)), max_size=6))
+    holes = data.draw(
+        st.lists(st.tuples(st.integers(0, motion.n_frames - 1), st.integers(0, motion.n_agents - 1)), max_size=6)
+    )
     for t, agent in holes:
         positions[t, agent] = np.nan
     if np.isnan(positions).all(axis=(0, 2)).any():
@@ -107,7 +109,12 @@ def test_fill_gaps_keeps_known_values(data):
 
 @pytest.mark.parametrize(
     "content, expected",
-    [("1,2,3\n4,5\n", "line 2"), ("frame,x\n1,abc\n2,3\n", "line 2"), ("0,1,2,3\n", "multiple of dims"), ("", "no data")],
+    [
+        ("1,2,3\n4,5\n", "line 2"),
+        ("frame,x\n1,abc\n2,3\n", "line 2"),
+        ("0,1,2,3\n", "multiple of dims"),
+        ("", "no data"),
+    ],
 )
 def test_bad_tables(tmp_path, content, expected):
     path = tmp_path / "bad.csv"

@@ -84,8 +84,9 @@ def test_velocity_convention_forward_difference_then_arrival():
 
 
 def test_state_and_configuration_access():
-    motion = flockkit.Motion(positions=np.random.default_rng(0).random((6, 4, 2)), dt=0.1,
-                             channels={"wander": np.ones((6, 4, 2))})
+    motion = flockkit.Motion(
+        positions=np.random.default_rng(0).random((6, 4, 2)), dt=0.1, channels={"wander": np.ones((6, 4, 2))}
+    )
     assert motion.state(-2) == motion.state(4)
     np.testing.assert_array_equal(motion.configuration(2).velocities, motion.velocities()[2])
     np.testing.assert_array_equal(motion.state(3).extra["wander"], np.ones((4, 2)))

@@ -32,8 +32,9 @@ def test_configuration_frames_follow_the_school(sticklebacks):
 
 def test_boids_scores_real_fish(sticklebacks):
     """Plausibility inference runs on motion no model made: finite, one value per frame."""
-    model = flockkit.get("behavior", "boids", dt=1 / 15, perception_radius=300.0, separation_radius=40.0,
-                         target_speed=150.0)
+    model = flockkit.get(
+        "behavior", "boids", dt=1 / 15, perception_radius=300.0, separation_radius=40.0, target_speed=150.0
+    )
     values = model.log_plausibility(sticklebacks)
     assert values.shape == (301,) and np.all(np.isfinite(values))
     shaken = flockkit.Motion(

@@ -8,11 +8,17 @@ from flockkit.solve.sampler import Scorer
 
 
 def small_problem():
-    return Problem(n_agents=10, duration=3.0, constraints=[
-        *(PointConstraint(agent=4, time=t, position=[1.2 * t, 0.3 * np.sin(t)]) for t in (0.5, 1.5, 2.5)),
-        ComConstraint(time=2.0, position=[2.4, 0.5], velocity=[1.0, 0.0]),
-        ShapeConstraint(agents=[0, 1, 2], time=3.0, shape=Polygon(vertices=[[2, -1], [5, -1], [3.5, 2]]), velocity=[1.0, 0.0]),
-    ])
+    return Problem(
+        n_agents=10,
+        duration=3.0,
+        constraints=[
+            *(PointConstraint(agent=4, time=t, position=[1.2 * t, 0.3 * np.sin(t)]) for t in (0.5, 1.5, 2.5)),
+            ComConstraint(time=2.0, position=[2.4, 0.5], velocity=[1.0, 0.0]),
+            ShapeConstraint(
+                agents=[0, 1, 2], time=3.0, shape=Polygon(vertices=[[2, -1], [5, -1], [3.5, 2]]), velocity=[1.0, 0.0]
+            ),
+        ],
+    )
 
 
 def full_score(problem, motion):
@@ -60,7 +66,9 @@ def test_same_seed_same_solution_and_chains_are_ranked():
 
 def test_callback_sees_every_iteration():
     seen = []
-    flockkit.solve(small_problem(), iterations=12, seed=1, callback=lambda chain, i, log_g, accepted: seen.append((chain, i)))
+    flockkit.solve(
+        small_problem(), iterations=12, seed=1, callback=lambda chain, i, log_g, accepted: seen.append((chain, i))
+    )
     assert seen == [(0, i) for i in range(12)]
 
 

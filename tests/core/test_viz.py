@@ -10,10 +10,15 @@ pytest.importorskip("matplotlib", reason="pictures need flockkit[viz]")
 
 @pytest.fixture(scope="module")
 def solved():
-    problem = flockkit.Problem(n_agents=6, duration=2.0, constraints=[
-        flockkit.PointConstraint(agent=0, time=1.0, position=[0.0, 0.0], velocity=[1.0, 0.0]),
-        flockkit.ShapeConstraint(time=2.0, shape=flockkit.Box(lower=[0, -2], upper=[3, 2]), velocity=[1.0, 0.0]),
-    ], obstacles=[flockkit.Ball(center=[5.0, 5.0], radius=1.0)])
+    problem = flockkit.Problem(
+        n_agents=6,
+        duration=2.0,
+        constraints=[
+            flockkit.PointConstraint(agent=0, time=1.0, position=[0.0, 0.0], velocity=[1.0, 0.0]),
+            flockkit.ShapeConstraint(time=2.0, shape=flockkit.Box(lower=[0, -2], upper=[3, 2]), velocity=[1.0, 0.0]),
+        ],
+        obstacles=[flockkit.Ball(center=[5.0, 5.0], radius=1.0)],
+    )
     return problem, flockkit.solve(problem, iterations=15, seed=1)
 
 
@@ -34,10 +39,14 @@ def test_pictures_are_pngs(tmp_path, solved):
     from scipy.spatial.distance import squareform
 
     drawings = {
-        "still.png": lambda p: viz.plot_motion(solution.motion, p, problem=problem, regions=[flockkit.Box(lower=[-5, -5], upper=[5, 5])]),
+        "still.png": lambda p: viz.plot_motion(
+            solution.motion, p, problem=problem, regions=[flockkit.Box(lower=[-5, -5], upper=[5, 5])]
+        ),
         "trace.png": lambda p: viz.plot_trace(solution, p),
         "graph.png": lambda p: viz.plot_graph(graph, p),
-        "matrix.png": lambda p: viz.plot_difference_matrix(squareform(metric.pairwise(configs)), p, marked=[(2, 9), (9, 2)]),
+        "matrix.png": lambda p: viz.plot_difference_matrix(
+            squareform(metric.pairwise(configs)), p, marked=[(2, 9), (9, 2)]
+        ),
     }
     for name, draw in drawings.items():
         draw(tmp_path / name)

@@ -80,7 +80,9 @@ class Declaring(RandomVelocity):
 
     def forward(self, initial, steps, rng, *, guide=None, progress=None):
         self._steps(steps)
-        return flockkit.Motion(positions=self._run(initial.positions, initial.velocities, steps, rng, guide, progress), dt=self.dt)
+        return flockkit.Motion(
+            positions=self._run(initial.positions, initial.velocities, steps, rng, guide, progress), dt=self.dt
+        )
 
     def backward(self, final, steps, rng, *, guide=None, progress=None):
         self._steps(steps)
@@ -239,7 +241,12 @@ class _Wrapped:
 
     @staticmethod
     def _with(found, **changes):
-        fields = dict(distance=found.distance, assignment=found.assignment, rotation=found.rotation, translation=found.translation)
+        fields = {
+            "distance": found.distance,
+            "assignment": found.assignment,
+            "rotation": found.rotation,
+            "translation": found.translation,
+        }
         fields.update(changes)
         return flockkit.Alignment(**fields)
 
@@ -272,8 +279,10 @@ class IgnoresRotation(_Wrapped):
         cost = cdist(pa, pb, "sqeuclidean")
         _, assignment = linear_sum_assignment(cost)
         return flockkit.Alignment(
-            distance=cost[np.arange(len(pa)), assignment].mean(), assignment=assignment,
-            rotation=np.eye(a.dims), translation=a.center_of_mass() - b.center_of_mass(),
+            distance=cost[np.arange(len(pa)), assignment].mean(),
+            assignment=assignment,
+            rotation=np.eye(a.dims),
+            translation=a.center_of_mass() - b.center_of_mass(),
         )
 
 
@@ -341,7 +350,6 @@ BROKEN_BY_KIND = {"behavior": BROKEN, "metric": BROKEN_METRICS}
 # -- builders: the built-in kovar is the correct base ---------------------------------------
 
 import attrs  # noqa: E402
-
 from flockkit_kovar import Kovar  # noqa: E402
 from flockkit_walks import RandomWalk  # noqa: E402
 
@@ -383,7 +391,12 @@ class DeadEnds(_KovarBased):
 class OverclaimsAlignment(_KovarBased):
     def build(self, motion, metric, rng):
         graph = super().build(motion, metric, rng)
-        return attrs.evolve(graph, transitions=[attrs.evolve(t, alignment=_Wrapped._with(t.alignment, distance=0.0)) for t in graph.transitions])
+        return attrs.evolve(
+            graph,
+            transitions=[
+                attrs.evolve(t, alignment=_Wrapped._with(t.alignment, distance=0.0)) for t in graph.transitions
+            ],
+        )
 
 
 class RandomSubset(_KovarBased):
@@ -426,6 +439,7 @@ BROKEN_BUILDERS = {
 
 # -- walks: the built-in random walk is the correct base ------------------------------------
 
+
 class NoWalk:
     def stroll(self, graph, rng, duration):
         return None
@@ -433,7 +447,11 @@ class NoWalk:
 
 class HalfWalk:
     def walk(self, graph, rng, duration):
-        return RandomWalk(start=0).walk(graph, rng, max(duration / 2, 0.1)) if duration > 0 else RandomWalk().walk(graph, rng, duration)
+        return (
+            RandomWalk(start=0).walk(graph, rng, max(duration / 2, 0.1))
+            if duration > 0
+            else RandomWalk().walk(graph, rng, duration)
+        )
 
 
 class UnseededWalk:
@@ -476,7 +494,11 @@ class WindowFromZero(ComTerm):
 
     def log_terms(self, motion, problem, start=0, stop=None):
         stop = motion.n_frames if stop is None else stop
-        return super().log_terms(motion, problem, 0, max(stop - start, 0)) if 0 <= start <= stop <= motion.n_frames else super().log_terms(motion, problem, start, stop)
+        return (
+            super().log_terms(motion, problem, 0, max(stop - start, 0))
+            if 0 <= start <= stop <= motion.n_frames
+            else super().log_terms(motion, problem, start, stop)
+        )
 
 
 class MutatesMotionTerms(ComTerm):
@@ -522,14 +544,24 @@ class DropsFrames(Retime):
         proposal = super().propose(current, context, rng)
         if proposal is None:
             return None
-        return flockkit.Proposal(motion=flockkit.Motion(positions=proposal.motion.positions[:-1], dt=current.dt), start=proposal.start, stop=proposal.stop, agents=proposal.agents)
+        return flockkit.Proposal(
+            motion=flockkit.Motion(positions=proposal.motion.positions[:-1], dt=current.dt),
+            start=proposal.start,
+            stop=proposal.stop,
+            agents=proposal.agents,
+        )
 
 
 class MovesPinned(Retime):
     """Shifts every agent at every frame a little (and says so): breaks point constraints."""
 
     def propose(self, current, context, rng):
-        return flockkit.Proposal(motion=flockkit.Motion(positions=current.positions + 1e-3, dt=current.dt), start=0, stop=current.n_frames, agents=tuple(range(current.n_agents)))
+        return flockkit.Proposal(
+            motion=flockkit.Motion(positions=current.positions + 1e-3, dt=current.dt),
+            start=0,
+            stop=current.n_frames,
+            agents=tuple(range(current.n_agents)),
+        )
 
 
 class UnderReports(Retime):
@@ -537,7 +569,9 @@ class UnderReports(Retime):
         proposal = super().propose(current, context, rng)
         if proposal is None:
             return None
-        return flockkit.Proposal(motion=proposal.motion, start=proposal.start, stop=proposal.start + 1, agents=proposal.agents)
+        return flockkit.Proposal(
+            motion=proposal.motion, start=proposal.start, stop=proposal.start + 1, agents=proposal.agents
+        )
 
 
 class MutatesCurrent(Retime):

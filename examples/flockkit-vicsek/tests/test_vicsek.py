@@ -2,12 +2,11 @@
 
 import numpy as np
 import pytest
+from flockkit_vicsek import Vicsek
 
 import flockkit
 from flockkit.errors import ValidationError
 from flockkit.testing import check_plugin, parametrize_with_checks
-
-from flockkit_vicsek import Vicsek
 
 
 @parametrize_with_checks([("behavior", Vicsek()), ("behavior", Vicsek(noise=0.5, radius=5.0))])

@@ -1,12 +1,11 @@
 import numpy as np
 import pytest
+from flockkit_boids import Boids
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import flockkit
 from flockkit.errors import ValidationError
-
-from flockkit_boids import Boids
 
 
 def unit(vectors):
@@ -32,7 +31,9 @@ def sampled_impulses(motion):
 )
 def test_plausibility_inverts_forward_exactly(seed, n_agents, dims, cohesion, fov):
     model = Boids(cohesion_weight=cohesion, field_of_view=fov)
-    motion = flockkit.simulate(n_agents=n_agents, steps=40, dims=dims, seed=seed, cohesion_weight=cohesion, field_of_view=fov)
+    motion = flockkit.simulate(
+        n_agents=n_agents, steps=40, dims=dims, seed=seed, cohesion_weight=cohesion, field_of_view=fov
+    )
     np.testing.assert_allclose(model.wander_impulses(motion), sampled_impulses(motion), rtol=0, atol=1e-9)
 
 

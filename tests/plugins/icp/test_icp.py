@@ -1,13 +1,12 @@
 import numpy as np
 import pytest
+from flockkit_icp import IcpHungarian
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import flockkit
 from flockkit.errors import ValidationError
 from flockkit.testing import strategies as fst
-
-from flockkit_icp import IcpHungarian
 
 
 def random_rotation(dims, seed):
@@ -35,8 +34,9 @@ def test_rigid_reordered_copies_are_found(config, seed, data):
     rotation = random_rotation(config.dims, seed)
     order = np.array(data.draw(st.permutations(range(config.n_agents))))
     shift = np.random.default_rng(seed).normal(0, 20, config.dims)
-    copy = flockkit.Configuration(positions=(config.positions @ rotation.T + shift)[order],
-                                  velocities=(config.velocities @ rotation.T)[order])
+    copy = flockkit.Configuration(
+        positions=(config.positions @ rotation.T + shift)[order], velocities=(config.velocities @ rotation.T)[order]
+    )
     found = IcpHungarian().compare(config, copy)
     assert found.distance < 1e-9
     np.testing.assert_allclose(found.transform(copy.positions[found.assignment]), config.positions, atol=1e-6)
@@ -107,7 +107,11 @@ def test_real_fish_frames_match_better_when_close_in_time(shared_data):
 
 @pytest.mark.parametrize(
     "params, name",
-    [({"velocity_weight": -1}, "velocity_weight"), ({"max_iterations": 0}, "max_iterations"), ({"tolerance": 0}, "tolerance")],
+    [
+        ({"velocity_weight": -1}, "velocity_weight"),
+        ({"max_iterations": 0}, "max_iterations"),
+        ({"tolerance": 0}, "tolerance"),
+    ],
 )
 def test_bad_parameters(params, name):
     with pytest.raises(ValidationError, match=name):
@@ -115,7 +119,9 @@ def test_bad_parameters(params, name):
 
 
 @settings(max_examples=40, deadline=None)
-@given(st.lists(fst.configurations(min_agents=4, max_agents=4, dims=2), min_size=2, max_size=6), st.floats(0, 2), st.data())
+@given(
+    st.lists(fst.configurations(min_agents=4, max_agents=4, dims=2), min_size=2, max_size=6), st.floats(0, 2), st.data()
+)
 def test_pairs_within_lists_every_close_pair(configs, weight, data):
     metric = IcpHungarian(velocity_weight=weight)
     distances = metric.pairwise(configs)
@@ -158,14 +164,19 @@ def test_pairwise_rejects_bad_pairs():
     with pytest.raises(ValidationError, match="pairs"):
         IcpHungarian().pairwise(configs, [[0, 2]])
 
+
 @settings(max_examples=30, deadline=None)
-@given(fst.configurations(min_agents=5, max_agents=5, dims=2), fst.configurations(min_agents=5, max_agents=5, dims=2), st.floats(-4, 4), st.floats(0.01, 3.0))
+@given(
+    fst.configurations(min_agents=5, max_agents=5, dims=2),
+    fst.configurations(min_agents=5, max_agents=5, dims=2),
+    st.floats(-4, 4),
+    st.floats(0.01, 3.0),
+)
 def test_wedge_bound_holds_over_the_interval_and_is_reached_when_its_ends_agree(a, b, lo, width):
     """The branch and bound's bound on E over an interval of rotations, from E at its two ends,
     against E sampled densely inside (each sample: the optimal assignment at that rotation)."""
-    from scipy.optimize import linear_sum_assignment
-
     from flockkit_icp.metric import _wedge_bound
+    from scipy.optimize import linear_sum_assignment
 
     left, right = a.positions - a.center_of_mass(), b.positions - b.center_of_mass()
 

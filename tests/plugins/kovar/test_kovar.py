@@ -37,7 +37,9 @@ def test_pruning_gives_the_identical_graph(recording, graph):
 def test_pruning_identical_with_an_absolute_threshold(recording, graph):
     threshold = min(t.alignment.distance for t in graph.transitions)
     pruned, full = (
-        flockkit.get("builder", "kovar", threshold=threshold, prune=prune).build(recording, METRIC, np.random.default_rng(0))
+        flockkit.get("builder", "kovar", threshold=threshold, prune=prune).build(
+            recording, METRIC, np.random.default_rng(0)
+        )
         for prune in (True, False)
     )
     assert structure(pruned) == structure(full)
@@ -48,7 +50,9 @@ def test_pruned_probing_upwards_gives_the_identical_graph(recording, graph, monk
     import flockkit_kovar.builder as kovar
 
     monkeypatch.setattr(kovar.Kovar, "_first_probe", lambda self, *args: (1e-6, 2))
-    assert structure(flockkit.get("builder", "kovar").build(recording, METRIC, np.random.default_rng(0))) == structure(graph)
+    assert structure(flockkit.get("builder", "kovar").build(recording, METRIC, np.random.default_rng(0))) == structure(
+        graph
+    )
 
 
 def test_pruned_build_probing_from_strips_is_identical(monkeypatch):
@@ -154,7 +158,11 @@ def test_paper_rule_and_absolute_threshold(recording):
         flockkit.get("builder", "kovar", threshold=1e-12).build(recording, METRIC, np.random.default_rng(0))
     working = float(str(info.value).split("threshold=")[1].split()[0])
     assert "smallest transition cost seen is" in str(info.value)
-    assert flockkit.get("builder", "kovar", threshold=working).build(recording, METRIC, np.random.default_rng(0)).transitions
+    assert (
+        flockkit.get("builder", "kovar", threshold=working)
+        .build(recording, METRIC, np.random.default_rng(0))
+        .transitions
+    )
 
 
 def test_parallel_build_is_identical(recording, graph):
@@ -173,8 +181,13 @@ def test_sticklebacks_default_graph_and_pruning(shared_data):
 
 @pytest.mark.parametrize(
     "params, name",
-    [({"candidate_interval": 0}, "candidate_interval"), ({"min_transitions": 0}, "min_transitions"),
-     ({"threshold": -1.0}, "threshold"), ({"n_jobs": 0}, "n_jobs"), ({"prune": "yes"}, "prune")],
+    [
+        ({"candidate_interval": 0}, "candidate_interval"),
+        ({"min_transitions": 0}, "min_transitions"),
+        ({"threshold": -1.0}, "threshold"),
+        ({"n_jobs": 0}, "n_jobs"),
+        ({"prune": "yes"}, "prune"),
+    ],
 )
 def test_bad_parameters(params, name):
     with pytest.raises(ValidationError, match=name):
@@ -183,7 +196,9 @@ def test_bad_parameters(params, name):
 
 def test_too_short_a_recording():
     with pytest.raises(ValidationError, match="candidate frames"):
-        flockkit.get("builder", "kovar").build(flockkit.simulate(n_agents=3, steps=4, seed=0), METRIC, np.random.default_rng(0))
+        flockkit.get("builder", "kovar").build(
+            flockkit.simulate(n_agents=3, steps=4, seed=0), METRIC, np.random.default_rng(0)
+        )
 
 
 def test_assemble_trims_dead_ends(recording):

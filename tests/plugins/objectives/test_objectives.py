@@ -13,7 +13,11 @@ def still(positions, frames=5):
 
 def test_com_term_is_the_gaussian_log_density_at_its_frame():
     motion = still([[0, 0], [2, 0], [4, 3]])
-    problem = Problem(n_agents=3, duration=0.4, constraints=[ComConstraint(agents=[0, 1], time=0.2, position=[1, 0.5], velocity=[1, 0])])
+    problem = Problem(
+        n_agents=3,
+        duration=0.4,
+        constraints=[ComConstraint(agents=[0, 1], time=0.2, position=[1, 0.5], velocity=[1, 0])],
+    )
     terms = flockkit.get("objective", "com").log_terms(motion, problem)
     expected = -math.log(0.1 * math.sqrt(2 * math.pi)) - 0.25 / (2 * 0.01)
     assert terms[2] == pytest.approx(expected) and np.count_nonzero(terms) == 1
@@ -22,17 +26,28 @@ def test_com_term_is_the_gaussian_log_density_at_its_frame():
 def test_shape_term_counts_squared_distance_outside_only():
     triangle = Polygon(vertices=[[0, 0], [4, 0], [0, 4]])
     motion = still([[1, 1], [0.5, 0.5], [0, 6]])  # the third agent is 2 above the top corner
-    problem = Problem(n_agents=3, duration=0.4, constraints=[ShapeConstraint(time=0.3, shape=triangle, velocity=[1, 0])])
+    problem = Problem(
+        n_agents=3, duration=0.4, constraints=[ShapeConstraint(time=0.3, shape=triangle, velocity=[1, 0])]
+    )
     terms = flockkit.get("objective", "shape").log_terms(motion, problem)
     assert terms[3] == pytest.approx(-10.0 * 4.0) and np.count_nonzero(terms) == 1
-    inside = Problem(n_agents=3, duration=0.4, constraints=[ShapeConstraint(agents=[0, 1], time=0.3, shape=triangle, velocity=[1, 0])])
+    inside = Problem(
+        n_agents=3,
+        duration=0.4,
+        constraints=[ShapeConstraint(agents=[0, 1], time=0.3, shape=triangle, velocity=[1, 0])],
+    )
     assert not np.any(flockkit.get("objective", "shape").log_terms(motion, inside))
 
 
 def test_shape_term_in_3d_with_a_ball():
     motion = still([[0, 0, 0], [0, 0, 3]])
-    problem = Problem(n_agents=2, dims=3, duration=0.4, shape_weight=2.0,
-                      constraints=[ShapeConstraint(time=0.0, shape=Ball(center=[0, 0, 0], radius=1.0), velocity=[1, 0, 0])])
+    problem = Problem(
+        n_agents=2,
+        dims=3,
+        duration=0.4,
+        shape_weight=2.0,
+        constraints=[ShapeConstraint(time=0.0, shape=Ball(center=[0, 0, 0], radius=1.0), velocity=[1, 0, 0])],
+    )
     assert flockkit.get("objective", "shape").log_terms(motion, problem)[0] == pytest.approx(-2.0 * 4.0)
 
 

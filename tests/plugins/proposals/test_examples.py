@@ -4,12 +4,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from flockkit_objectives.terms import count_flocks
 
 import flockkit
 from flockkit import ComConstraint, PointConstraint
 from flockkit.solve import load_scenario
-
-from flockkit_objectives.terms import count_flocks
 
 SCENARIOS = sorted((Path(__file__).parents[3] / "examples" / "scenarios").glob("*.toml"))
 
@@ -47,8 +46,15 @@ def test_the_single_agent_example_has_model_like_wander_impulses():
     solution = flockkit.solve(problem, **settings)
     boids = flockkit.get("behavior", "boids")
     found = np.linalg.norm(boids.wander_impulses(solution.motion)[1:-1], axis=-1).ravel()
-    simulated = np.concatenate([
-        np.linalg.norm(boids.wander_impulses(flockkit.simulate(n_agents=problem.n_agents, steps=problem.n_frames - 1, seed=k))[1:-1], axis=-1).ravel()
-        for k in range(5)
-    ])
+    simulated = np.concatenate(
+        [
+            np.linalg.norm(
+                boids.wander_impulses(flockkit.simulate(n_agents=problem.n_agents, steps=problem.n_frames - 1, seed=k))[
+                    1:-1
+                ],
+                axis=-1,
+            ).ravel()
+            for k in range(5)
+        ]
+    )
     assert ks_2samp(found, simulated).pvalue > 0.01

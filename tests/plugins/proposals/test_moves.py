@@ -1,5 +1,6 @@
 import numpy as np
 import pytest
+from flockkit_proposals.moves import _add_bump, _decompose, _recompose
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -8,13 +9,16 @@ from flockkit import PointConstraint, Problem
 from flockkit.solve import ProposalContext, initial_trajectories, windows
 from flockkit.solve.sampler import pinned_frames
 
-from flockkit_proposals.moves import _add_bump, _decompose, _recompose
-
 
 def context_for(problem, motion):
     behavior = flockkit.get("behavior", "boids")
-    return ProposalContext(problem=problem, behavior=behavior, windows=tuple(windows(problem)),
-                           scores=np.zeros(motion.n_frames), pinned=pinned_frames(problem))
+    return ProposalContext(
+        problem=problem,
+        behavior=behavior,
+        windows=tuple(windows(problem)),
+        scores=np.zeros(motion.n_frames),
+        pinned=pinned_frames(problem),
+    )
 
 
 @settings(max_examples=30, deadline=None)
@@ -51,12 +55,18 @@ def test_retiming_keeps_the_path_and_the_distance():
         for point in new[first + 1 : last]:
             segments = old[first : last + 1]
             a, b = segments[:-1], segments[1:]
-            t = np.clip(np.einsum("kd,kd->k", point - a, b - a) / np.maximum(np.einsum("kd,kd->k", b - a, b - a), 1e-300), 0, 1)
+            t = np.clip(
+                np.einsum("kd,kd->k", point - a, b - a) / np.maximum(np.einsum("kd,kd->k", b - a, b - a), 1e-300), 0, 1
+            )
             assert np.min(np.linalg.norm(a + t[:, None] * (b - a) - point, axis=1)) < 1e-9
 
 
 def test_bumps_avoid_agents_pinned_inside_their_span():
-    constraints = [PointConstraint(agent=a, time=t, position=[t, a], velocity=[1, 0]) for a in range(4) for t in np.arange(0, 3.05, 0.1)]
+    constraints = [
+        PointConstraint(agent=a, time=t, position=[t, a], velocity=[1, 0])
+        for a in range(4)
+        for t in np.arange(0, 3.05, 0.1)
+    ]
     problem = Problem(n_agents=5, duration=3.0, constraints=constraints)
     motion = initial_trajectories(problem, flockkit.get("behavior", "boids"), np.random.default_rng(0))
     context = context_for(problem, motion)

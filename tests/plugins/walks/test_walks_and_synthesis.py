@@ -7,7 +7,10 @@ from scipy.spatial import cKDTree
 import flockkit
 from flockkit.errors import ValidationError
 
-FENCE = [flockkit.Ball(center=[15 * np.cos(a), 15 * np.sin(a)], radius=2.2) for a in np.linspace(0, 2 * np.pi, 24, endpoint=False)]
+FENCE = [
+    flockkit.Ball(center=[15 * np.cos(a), 15 * np.sin(a)], radius=2.2)
+    for a in np.linspace(0, 2 * np.pi, 24, endpoint=False)
+]
 
 
 @pytest.fixture(scope="module")
@@ -78,9 +81,13 @@ def test_region_walk_checks_each_edge_it_takes_whole(graph, recording):
     box = com_box(recording)
     middle, half = (box.lower + box.upper) / 2, (box.upper - box.lower) / 4
     pen = flockkit.Box(lower=middle - half, upper=middle + half)
-    assert max(clip.stop - clip.start for clip in graph.clips) * graph.motion.dt > 10  # clips far longer than the horizon
+    assert (
+        max(clip.stop - clip.start for clip in graph.clips) * graph.motion.dt > 10
+    )  # clips far longer than the horizon
     for seed in (0, 2):
-        motion = flockkit.synthesize(graph, flockkit.walk(graph, strategy="region", region=pen, duration=120, seed=seed, horizon=0.5))
+        motion = flockkit.synthesize(
+            graph, flockkit.walk(graph, strategy="region", region=pen, duration=120, seed=seed, horizon=0.5)
+        )
         assert pen.contains(motion.center_of_mass()).all()
 
 
@@ -116,7 +123,9 @@ def test_synthesis_has_no_jumps(graph, recording, seed):
 
 def test_transition_keeps_world_positions_and_identities(graph):
     """Across a transition the group stays where it was, each agent near its own last position."""
-    index, transition = next((i, t) for i, t in enumerate(graph.transitions) if 0 < t.source and t.target < len(graph.clips))
+    index, transition = next(
+        (i, t) for i, t in enumerate(graph.transitions) if 0 < t.source and t.target < len(graph.clips)
+    )
     edges = [("clip", k) for k in range(transition.source)] + [("transition", index), ("clip", transition.target)]
     motion = flockkit.synthesize(graph, flockkit.Walk(start=0, edges=edges))
     at = transition.start - graph.nodes[0]  # output frame where the transition happens
@@ -133,15 +142,19 @@ def test_unblended_positional_transitions_would_jump():
 
 
 def test_other_regions(graph):
-    for region in (flockkit.Ball(center=[0.0, 0.0], radius=12.0),
-                   flockkit.Polygon(vertices=[[-13, -13], [13, -13], [13, 13], [0, 4], [-13, 13]])):
+    for region in (
+        flockkit.Ball(center=[0.0, 0.0], radius=12.0),
+        flockkit.Polygon(vertices=[[-13, -13], [13, -13], [13, 13], [0, 4], [-13, 13]]),
+    ):
         motion = flockkit.synthesize(graph, flockkit.walk(graph, strategy="region", region=region, duration=60, seed=2))
         assert motion.duration >= 60 and region.contains(motion.center_of_mass()).all()
 
 
 def test_impossible_region_is_an_error_not_a_loop(graph):
     with pytest.raises(ValidationError, match="region"):
-        flockkit.walk(graph, strategy="region", region=flockkit.Ball(center=[0.0, 0.0], radius=0.3), duration=60, seed=0)
+        flockkit.walk(
+            graph, strategy="region", region=flockkit.Ball(center=[0.0, 0.0], radius=0.3), duration=60, seed=0
+        )
     with pytest.raises(ValidationError, match="3D"):
         flockkit.walk(graph, strategy="region", region=flockkit.Ball(center=[0.0, 0.0, 0.0], radius=5.0), duration=10)
 
@@ -150,7 +163,9 @@ def test_batch_synthesis(graph):
     walks = [flockkit.walk(graph, duration=20, seed=s) for s in range(50)]
     crowd = flockkit.synthesize_many(graph, walks)
     assert crowd.n_agents == 50 * 10 and crowd.n_frames == min(flockkit.synthesize(graph, w).n_frames for w in walks)
-    np.testing.assert_array_equal(crowd.positions[:, 30:40], flockkit.synthesize(graph, walks[3]).positions[: crowd.n_frames])
+    np.testing.assert_array_equal(
+        crowd.positions[:, 30:40], flockkit.synthesize(graph, walks[3]).positions[: crowd.n_frames]
+    )
     with pytest.raises(ValidationError, match="n_frames"):
         flockkit.synthesize_many(graph, walks, n_frames=10**6)
 
@@ -165,7 +180,9 @@ def test_bad_walks_are_refused(graph):
         at_target = next((i for i, t in enumerate(graph.transitions) if t.source == target), None)
         if at_target is not None:
             with pytest.raises(ValidationError, match="blend"):
-                flockkit.synthesize(graph, flockkit.Walk(start=0, edges=[("transition", first), ("transition", at_target)]))
+                flockkit.synthesize(
+                    graph, flockkit.Walk(start=0, edges=[("transition", first), ("transition", at_target)])
+                )
     with pytest.raises(ValidationError, match="not an edge"):
         flockkit.synthesize(graph, flockkit.Walk(start=0, edges=[("clip", 10**6)]))
     with pytest.raises(ValidationError, match="Walk.start"):
