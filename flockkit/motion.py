@@ -29,7 +29,8 @@ DEFAULT_UP = (0.0, 0.0, 1.0)
 MOTION_FORMAT_VERSION = 1
 
 # Below this fraction of the mean agent speed the mean velocity is treated as zero (agents that
-# cancel each other out give no heading), and below this sine the heading is treated as parallel to up.
+# cancel each other out give no heading), and below this sine the heading is treated as parallel
+# to up. Our choice: far above float64 rounding (1e-16), far below any heading a capture resolves.
 _DEGENERATE = 1e-6
 
 

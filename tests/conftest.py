@@ -18,6 +18,16 @@ def require_folder(folder: Path) -> Path:
     return folder
 
 
+@pytest.fixture
+def fresh_registry():
+    """Plugins discovered afresh before and after the test (run-time plugins forgotten)."""
+    from flockkit import registry
+
+    registry.reset()
+    yield
+    registry.reset()
+
+
 @pytest.fixture(scope="session")
 def shared_data():
     """The folder of real captures (see require_folder)."""

@@ -1,4 +1,4 @@
-"""Every installed behavior, metric, builder and walk, built-in or third-party, goes through the conformance kit."""
+"""Every installed component of every kind, built-in or third-party, goes through the conformance kit."""
 
 import flockkit
 from flockkit.testing import parametrize_with_checks
@@ -7,7 +7,7 @@ from flockkit.testing import parametrize_with_checks
 PARAMS = {("walk", "region"): {"region": flockkit.Ball(center=[0.0, 0.0], radius=60.0)}}
 COMPONENTS = [
     (kind, flockkit.get(kind, name, **PARAMS.get((kind, name), {})))
-    for kind in ("behavior", "metric", "builder", "walk")
+    for kind in ("behavior", "metric", "builder", "walk", "proposal", "objective")
     for name in flockkit.available(kind)
 ]
 

@@ -329,7 +329,8 @@ class Boids:
         steer += (self.speed_weight / self.target_speed) * (self.target_speed - speed)[:, None] * heading
         for obstacle in self.obstacles:
             distance = obstacle.signed_distance(x)
-            # Grows like 1 / distance near the surface so that no other rule can push an agent in.
+            # Grows like 1 / distance near the surface so that no other rule can push an agent in;
+            # saturates at 1/20 of avoid_distance (19 = 20 - 1) so the push stays finite there.
             closeness = np.clip(self.avoid_distance / np.maximum(distance, 0.05 * self.avoid_distance) - 1.0, 0.0, 19.0)
             if closeness.any():
                 normal = obstacle.surface_normal(x)

@@ -29,11 +29,7 @@ ROOT = Path(__file__).resolve().parents[2]
 BUILTIN_PLUGINS = "boids,icp,kovar,walks,objectives,proposals"
 
 
-@pytest.fixture(autouse=True)
-def fresh_registry():
-    registry.reset()
-    yield
-    registry.reset()
+pytestmark = pytest.mark.usefixtures("fresh_registry")
 
 
 class Plugin:

@@ -26,7 +26,7 @@ class RandomVelocity:
         if not isinstance(steps, int) or steps < 0:
             raise ValidationError(f"steps must be an integer >= 0; got {steps!r}")
 
-    def _run(self, x0, v0, steps, rng):
+    def _run(self, x0, v0, steps, rng, guide=None, progress=None):
         positions = np.empty((steps + 1, *x0.shape))
         positions[0] = x0
         velocity = np.array(v0)
@@ -34,7 +34,11 @@ class RandomVelocity:
             if t > 0:
                 velocity = velocity + self.sigma * rng.standard_normal(x0.shape)
             positions[t + 1] = positions[t] + velocity * self.dt
+            for agent, path in (guide or {}).items():
+                positions[t + 1, agent] = path[t + 1]
             velocity = (positions[t + 1] - positions[t]) / self.dt
+            if progress is not None:
+                progress(t + 1, steps, "simulating")
         return positions
 
     def forward(self, initial, steps, rng):
@@ -62,21 +66,6 @@ class Declaring(RandomVelocity):
     agents, progress reports, and its plausibility's reach (frame t reads frames t - 1 .. t + 1)."""
 
     capabilities = flockkit.Capabilities(guide=True, progress=True, plausibility_reach=1)
-
-    def _run(self, x0, v0, steps, rng, guide=None, progress=None):
-        positions = np.empty((steps + 1, *x0.shape))
-        positions[0] = x0
-        velocity = np.array(v0)
-        for t in range(steps):
-            if t > 0:
-                velocity = velocity + self.sigma * rng.standard_normal(x0.shape)
-            positions[t + 1] = positions[t] + velocity * self.dt
-            for agent, path in (guide or {}).items():
-                positions[t + 1, agent] = path[t + 1]
-            velocity = (positions[t + 1] - positions[t]) / self.dt
-            if progress is not None:
-                progress(t + 1, steps, "simulating")
-        return positions
 
     def forward(self, initial, steps, rng, *, guide=None, progress=None):
         self._steps(steps)
