@@ -6,7 +6,7 @@ convenience layer (``simulate``, ``build_graph``, ``walk``, ``solve``), rigid mo
 (``flockkit.rigid``) and the checks plugins share (``flockkit.validate``).
 """
 
-from . import errors, io, rigid, validate
+from . import errors, io, parallel, rigid, validate
 from .constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, Problem, Region, ShapeConstraint
 from .convenience import build_graph, random_flock, simulate, walk
 from .graph import Clip, MotionGraph, Transition, Walk
@@ -56,6 +56,7 @@ __all__ = [
     "random_flock",
     "errors",
     "io",
+    "parallel",
     "rigid",
     "validate",
     "__version__",

@@ -8,6 +8,7 @@ leaves a half-written file.
 from __future__ import annotations
 
 import json
+import math
 import zipfile
 from pathlib import Path
 
@@ -37,27 +38,30 @@ def read(path, *, kind: str, versions: tuple[int, ...]) -> tuple[dict[str, np.nd
     """Read a file written by :func:`write`, checking its kind and version.
 
     Raises FileNotFoundError for a missing file and FileFormatError, naming the file, for anything
-    that is not a complete flockkit file of this `kind` and a supported version.
+    that is not a complete flockkit file of this `kind` and a supported version: a folder or device,
+    a corrupt or truncated archive, an array whose header claims more data than the archive holds
+    (refused before anything is allocated), or metadata that is not a JSON object.
     """
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise FileNotFoundError(f"{path}: no such file")
+    if not path.is_file():
+        raise FileFormatError(f"{path}: not a regular file ({'a folder' if path.is_dir() else 'a device or socket'})")
     try:
-        with open(path, "rb") as handle:
-            npz = np.load(handle, allow_pickle=False)
-            if not isinstance(npz, np.lib.npyio.NpzFile):
-                raise ValueError("a single .npy array, not an .npz archive")
-            with npz:
-                arrays = {name: npz[name] for name in npz.files}
-    except (zipfile.BadZipFile, ValueError, OSError, EOFError, KeyError) as exc:
-        raise FileFormatError(f"{path}: not a readable flockkit {kind} file (.npz): {exc}") from None
+        arrays = _arrays(path)
+    except FileFormatError:
+        raise
+    except Exception as exc:  # noqa: BLE001 - zlib, zipfile, numpy header parsing: all mean a bad file
+        raise FileFormatError(
+            f"{path}: not a readable flockkit {kind} file (.npz): {type(exc).__name__}: {exc}"
+        ) from None
     raw = arrays.pop(METADATA_KEY, None)
     if raw is None:
         raise FileFormatError(f"{path}: no flockkit metadata; expected a {kind} file written by flockkit")
     try:
         header = json.loads(raw.tobytes().decode("utf-8"))
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise FileFormatError(f"{path}: corrupt metadata: {exc}") from None
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise FileFormatError(f"{path}: corrupt metadata: {type(exc).__name__}: {exc}") from None
     if not isinstance(header, dict) or header.get("format") != kind:
         found = header.get("format") if isinstance(header, dict) else None
         raise FileFormatError(f"{path}: holds a flockkit {found!r} file; expected a {kind!r} file")
@@ -67,3 +71,33 @@ def read(path, *, kind: str, versions: tuple[int, ...]) -> tuple[dict[str, np.nd
             f"this flockkit reads versions {', '.join(map(str, versions))}"
         )
     return arrays, header
+
+
+def _arrays(path: Path) -> dict[str, np.ndarray]:
+    """The arrays of an .npz, each header checked against the size its archive entry declares
+    before the array is read (a corrupt header cannot make us allocate what is not there)."""
+    from numpy.lib import format as npy
+
+    arrays = {}
+    with zipfile.ZipFile(path) as archive:
+        for info in archive.infolist():
+            if not info.filename.endswith(".npy"):
+                raise FileFormatError(f"{path}: unexpected entry {info.filename!r} in the archive")
+            with archive.open(info) as handle:
+                version = npy.read_magic(handle)
+                read_header = npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0
+                shape, fortran, dtype = read_header(handle)
+                if dtype.hasobject:
+                    raise FileFormatError(
+                        f"{path}: array {info.filename!r} holds Python objects; flockkit never reads those"
+                    )
+                needed = math.prod(shape) * dtype.itemsize
+                if needed != info.file_size - handle.tell():
+                    raise FileFormatError(
+                        f"{path}: array {info.filename!r} claims shape {shape} ({needed} bytes) but its entry holds "
+                        f"{info.file_size - handle.tell()} bytes"
+                    )
+                data = handle.read(needed)
+            array = np.frombuffer(data, dtype=dtype)
+            arrays[info.filename.removesuffix(".npy")] = array.reshape(shape, order="F" if fortran else "C").copy()
+    return arrays

@@ -1,30 +1,54 @@
 """The ``flockkit`` command: a thin layer over the public API.
 
-Every error becomes one line on stderr and a non-zero exit (1 for errors, 2 for usage), never a
-traceback.
+Every error becomes one line on stderr and a non-zero exit, never a traceback: 1 for errors, 2 for
+usage, 3 when ``solve`` wrote a motion that does not meet its constraints, 70 for an error
+flockkit did not foresee (a bug: ``FLOCKKIT_TRACEBACK=1`` shows it), 130 on Ctrl-C and 143 on
+SIGTERM (temporary files removed, worker processes stopped). Output paths are checked before any
+work. Warnings raised along the way are printed after the result, one line each, never before an
+error line.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
+import os
+import signal
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import flockkit
 
-from .errors import FlockkitError, ValidationError
+from ._atomic import TERMINATED, check_writable
+from .errors import FlockkitError, MissingDependencyError, ValidationError
 from .registry import KINDS, describe
 
+# per command, the keyword arguments its options set (and the option that sets each): a --param
+# of one of these names would clash with them
+_RESERVED = {
+    "simulate": {"dt": "--dt", "n_agents": "--agents", "steps": "--steps", "seed": "--seed", "dims": "--dims",
+                 "behavior": "--behavior", "progress": "--quiet", "initial": None},
+    "build": {"metric": "--metric", "builder": "--builder", "threshold": "--threshold", "n_jobs": "--jobs",
+              "seed": None, "progress": "--quiet", "metric_params": None, "motion": None},
+    "walk": {"duration": "--duration", "seed": "--seed", "strategy": "--strategy", "region": "--region",
+             "graph": None},
+}  # fmt: skip
 
-def _parameters(pairs) -> dict:
+
+def _parameters(pairs, command: str | None = None) -> dict:
     """``key=value`` strings to keyword arguments; values are read as JSON when they parse."""
     params = {}
+    reserved = _RESERVED.get(command, {})
     for pair in pairs or ():
         key, sep, raw = pair.partition("=")
         if not sep or not key.isidentifier():
             raise ValidationError(f"--param expects key=value with key a Python identifier; got {pair!r}")
+        if key in reserved:
+            option = reserved[key]
+            raise ValidationError(f"--param {key}: {f'set it with {option}' if option else 'not a parameter here'}")
         try:
             params[key] = json.loads(raw)
         except json.JSONDecodeError:
@@ -33,12 +57,13 @@ def _parameters(pairs) -> dict:
 
 
 def _require_suffix(path: str, suffixes: tuple[str, ...], option: str) -> Path:
+    """The output `path`, checked before any work: a known suffix, and a file can be made there."""
     path = Path(path)
     if path.suffix.lower() not in suffixes:
         raise ValidationError(f"{option} {path}: unknown extension {path.suffix!r}; expected {' or '.join(suffixes)}")
     if not path.parent.is_dir():
         raise ValidationError(f"{option} {path}: folder {path.parent} does not exist")
-    return path
+    return check_writable(path)
 
 
 def _cmd_plugins(args) -> int:
@@ -65,7 +90,7 @@ def _cmd_simulate(args) -> int:
         dt=args.dt,
         seed=args.seed,
         progress=not args.quiet and sys.stderr.isatty(),
-        **_parameters(args.param),
+        **_parameters(args.param, "simulate"),
     )
     motion.save(output)
     print(f"wrote {output}: {motion!r}")
@@ -110,12 +135,15 @@ def _progress(args) -> bool:
 def _cmd_build(args) -> int:
     output = _require_suffix(args.output, (".npz",), "-o")
     motion = flockkit.Motion.load(args.motion)
-    params = _parameters(args.param)
+    params = _parameters(args.param, "build")
     if args.threshold is not None:
         params["threshold"] = args.threshold
-    if args.jobs is not None:
+    if args.jobs is not None and args.backend is None:
         params["n_jobs"] = args.jobs
-    graph = flockkit.build_graph(motion, builder=args.builder, metric=args.metric, progress=_progress(args), **params)
+    with _backend(args):
+        graph = flockkit.build_graph(
+            motion, builder=args.builder, metric=args.metric, progress=_progress(args), **params
+        )
     graph.save(output)
     stats = graph.stats()
     print(
@@ -148,7 +176,7 @@ def _region(text: str):
 def _cmd_walk(args) -> int:
     output = _require_suffix(args.output, (".npz",), "-o")
     graph = flockkit.MotionGraph.load(args.graph)
-    params = _parameters(args.param)
+    params = _parameters(args.param, "walk")
     if args.region is not None:
         params["region"] = _region(args.region)
     path = flockkit.walk(graph, strategy=args.strategy, duration=args.duration, seed=args.seed, **params)
@@ -201,7 +229,10 @@ def _cmd_solve(args) -> int:
     for option in ("iterations", "chains", "seed"):
         if getattr(args, option) is not None:
             settings[option] = getattr(args, option)
-    solution = flockkit.solve(problem, n_jobs=args.jobs, progress=_progress(args), **settings)
+    from .solve.sampler import unmet
+
+    with _backend(args):
+        solution = flockkit.solve(problem, n_jobs=args.jobs, progress=_progress(args), **settings)
     solution.motion.save(output)
     rates = ", ".join(f"{name} {rate:.0%}" for name, rate in sorted(solution.acceptance.items())) or "none"
     print(f"wrote {output}: {solution.motion!r}")
@@ -209,7 +240,58 @@ def _cmd_solve(args) -> int:
         f"log g {solution.log_g[0]:.6g}; largest constraint residual {max(solution.residuals, default=0.0):.3g}; "
         f"accepted: {rates}"
     )
+    missed = unmet(problem, solution.motion)
+    if missed:
+        index, residual, limit = max(missed, key=lambda m: m[1] - m[2])
+        kind = type(problem.constraints[index]).__name__
+        raise _Unmet(
+            f"{len(missed)} constraint(s) not met; the worst is constraints[{index}] ({kind} at "
+            f"t={problem.constraints[index].time:g}), off by {residual:.3g} (tolerance {limit:.3g}); {output} holds "
+            "the closest motion found: the scenario asks for more than the behavior model can do there"
+        )
     return 0
+
+
+class _Unmet(FlockkitError):
+    """solve wrote its best motion, but it misses a constraint: exit status 3."""
+
+
+@contextlib.contextmanager
+def _backend(args):
+    """Run the command's parallel work on the joblib backend `--backend` names (with `--jobs`
+    workers, default all): dask (a LocalCluster, or the scheduler at `--scheduler`), ray (a local
+    Ray, or the cluster at `--scheduler`), loky, threading. Without it, joblib's default."""
+    import joblib
+
+    if args.backend is None:
+        yield
+        return
+    workers = -1 if args.jobs is None else args.jobs
+    if args.backend == "dask":
+        try:
+            from distributed import Client
+        except ImportError:
+            raise MissingDependencyError(
+                "--backend dask needs dask.distributed: pip install 'flockkit[scale]'"
+            ) from None
+        with Client(args.scheduler) if args.scheduler else Client(), joblib.parallel_config("dask", n_jobs=workers):
+            yield
+    elif args.backend == "ray":
+        try:
+            import ray
+            from ray.util.joblib import register_ray
+        except ImportError:
+            raise MissingDependencyError("--backend ray needs ray: pip install 'flockkit[scale]'") from None
+        register_ray()
+        ray.init(address=args.scheduler, include_dashboard=False, log_to_driver=False)
+        try:
+            with joblib.parallel_config("ray", n_jobs=workers):
+                yield
+        finally:
+            ray.shutdown()
+    else:
+        with joblib.parallel_config(args.backend, n_jobs=workers):
+            yield
 
 
 def _cmd_demo(args) -> int:
@@ -278,6 +360,14 @@ def _param(parser, what: str) -> None:
     parser.add_argument("--param", action="append", metavar="KEY=VALUE", help=f"{what} parameter, repeatable")
 
 
+def _scale_out(parser) -> None:
+    parser.add_argument("--jobs", type=int, help="parallel workers (-1: all; default 1, or all with --backend)")
+    parser.add_argument(
+        "--backend", choices=("loky", "threading", "dask", "ray"), help="joblib backend (dask, ray: flockkit[scale])"
+    )
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="with --backend dask or ray: the cluster to use")
+
+
 def _plugins_arguments(parser) -> None:
     parser.add_argument("--kind", choices=KINDS, help="only this kind")
 
@@ -301,7 +391,7 @@ def _build_arguments(parser) -> None:
     parser.add_argument("--metric", default="icp-hungarian", help="configuration metric (default icp-hungarian)")
     parser.add_argument("--builder", default="kovar", help="graph builder (default kovar)")
     parser.add_argument("--threshold", type=float, help="absolute transition threshold (default: adaptive)")
-    parser.add_argument("--jobs", type=int, help="parallel workers (-1: all cores)")
+    _scale_out(parser)
     _param(parser, "builder")
     _quiet(parser)
 
@@ -328,7 +418,7 @@ def _solve_arguments(parser) -> None:
     parser.add_argument("--iterations", type=int, help="sampler iterations (default: the scenario's, else 1000)")
     parser.add_argument("--chains", type=int, help="independent chains")
     parser.add_argument("--seed", type=int, help="random seed")
-    parser.add_argument("--jobs", type=int, default=1, help="parallel workers for chains")
+    _scale_out(parser)
     _quiet(parser)
 
 
@@ -416,17 +506,73 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class _Terminated(BaseException):
+    """SIGTERM, raised where the command is so that every cleanup runs."""
+
+
+_TERMINATION = []  # set when SIGTERM arrives: a library's cleanup may replace our exception with its own
+
+
+def _terminate(signum, frame):
+    _TERMINATION.append(signum)
+    raise _Terminated
+
+
 def main(argv=None) -> int:
     args = build_parser().parse_args(argv)
+    previous = signal.signal(signal.SIGTERM, _terminate)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        try:
+            code = _run(args)
+        finally:
+            _stop_workers()
+            signal.signal(signal.SIGTERM, previous)
+    if code == 0:
+        for message in dict.fromkeys(_line(w.message) for w in caught):
+            print(f"flockkit {args.command}: warning: {message}", file=sys.stderr)
+    return code
+
+
+def _run(args) -> int:
+    """Run the command; every exception becomes one line on stderr and an exit status."""
+    _TERMINATION.clear()
     try:
         return args.run(args)
-    except (FlockkitError, OSError, AssertionError) as exc:
-        message = " ".join(line.strip() for line in str(exc).splitlines() if line.strip())
-        print(f"flockkit {args.command}: error: {message}", file=sys.stderr)
-        return 1
-    except KeyboardInterrupt:
-        print(f"flockkit {args.command}: interrupted", file=sys.stderr)
-        return 130
+    except SystemExit:
+        raise
+    except BaseException as exc:  # noqa: BLE001 - each becomes its line and status below
+        if _TERMINATION or isinstance(exc, _Terminated):
+            print(f"flockkit {args.command}: terminated", file=sys.stderr)
+            return TERMINATED
+        if isinstance(exc, KeyboardInterrupt):
+            print(f"flockkit {args.command}: interrupted", file=sys.stderr)
+            return 130
+        if isinstance(exc, _Unmet):
+            return _fail(args, exc, 3)
+        if isinstance(exc, FlockkitError | OSError | AssertionError | MemoryError):
+            return _fail(args, exc, 1)
+        if os.environ.get("FLOCKKIT_TRACEBACK") == "1" or not isinstance(exc, Exception):
+            raise
+        return _fail(args, exc, 70, prefix="internal error (please report; FLOCKKIT_TRACEBACK=1 shows where): ")
+
+
+def _fail(args, exc: BaseException, code: int, prefix: str = "") -> int:
+    kind = "" if isinstance(exc, FlockkitError | OSError | AssertionError) else f"{type(exc).__name__}: "
+    print(f"flockkit {args.command}: error: {prefix}{kind}{_line(exc)}", file=sys.stderr)
+    return code
+
+
+def _line(message) -> str:
+    return " ".join(line.strip() for line in str(message).splitlines() if line.strip())
+
+
+def _stop_workers() -> None:
+    """Stop the joblib worker processes a command started, rather than leave them idling."""
+    if "joblib.externals.loky" in sys.modules:
+        from joblib.externals.loky import get_reusable_executor
+
+        get_reusable_executor().shutdown(wait=True, kill_workers=True)
 
 
 if __name__ == "__main__":

@@ -36,6 +36,21 @@ def _field(name: str):
     return attrs.field(converter=functools.partial(readonly_float, field=name))
 
 
+# The most frames a Problem may have: a day at the paper's 10 Hz (86 400 s), rounded up. Beyond it
+# the sampler's Python loops over frames take hours before any result.
+MAX_FRAMES = 1_000_000
+
+# Regions keep their coordinates within +-1e150 so that squared distances (areas, volumes) stay
+# finite in float64, whose largest value is 1.8e308.
+EXTENT = 1e150
+
+
+def _check_extent(array: np.ndarray, field: str) -> None:
+    check_finite(array, field=field)
+    if np.any(np.abs(array) > EXTENT):
+        raise ValidationError(f"{field} must lie within +-{EXTENT:g} (squared distances must stay finite); got {array}")
+
+
 def _unit(vectors: np.ndarray) -> np.ndarray:
     """Unit vectors; vectors too short to normalize accurately (subnormal scale) become zero."""
     norms = np.linalg.norm(vectors, axis=-1, keepdims=True)
@@ -48,7 +63,7 @@ class Region:
     Subclasses define `dims`, `bounds()`, `centroid()` and `_distance_and_normal(points)`."""
 
     def _points(self, points) -> np.ndarray:
-        points = np.asarray(points, dtype=np.float64)
+        points = readonly_float(points, field=f"points for a {type(self).__name__}")
         if points.ndim == 0 or points.shape[-1] != self.dims:
             raise ValidationError(
                 f"points for a {self.dims}D {type(self).__name__} must have shape (..., {self.dims}); got "
@@ -58,15 +73,14 @@ class Region:
 
     def signed_distance(self, points) -> np.ndarray:
         """Distance from each point to the boundary, negative inside; shape points.shape[:-1]."""
-        points = np.asarray(points, dtype=np.float64)
-        distance, _ = self._distance_and_normal(self._points(points))
-        return distance.reshape(points.shape[:-1])
+        flat = self._points(points)
+        distance, _ = self._distance_and_normal(flat)
+        return distance.reshape(np.shape(points)[:-1])
 
     def surface_normal(self, points) -> np.ndarray:
         """Outward unit normal of the boundary nearest each point; shape points.shape."""
-        points = np.asarray(points, dtype=np.float64)
         _, normal = self._distance_and_normal(self._points(points))
-        return normal.reshape(points.shape)
+        return normal.reshape(np.shape(points))
 
     def contains(self, points) -> np.ndarray:
         """Whether each point lies inside or on the boundary."""
@@ -118,12 +132,14 @@ class Ball(Region):
     """
 
     center: np.ndarray = _field("Ball.center")
-    radius: float = attrs.field(converter=functools.partial(number, field="Ball.radius", minimum=0, strict=True))
+    radius: float = attrs.field(
+        converter=functools.partial(number, field="Ball.radius", minimum=0, strict=True, maximum=EXTENT)
+    )
 
     def __attrs_post_init__(self):
         if self.center.shape not in ((2,), (3,)):
             raise ValidationError(f"Ball.center must have shape (2,) or (3,); got {self.center.shape}")
-        check_finite(self.center, field="Ball.center")
+        _check_extent(self.center, "Ball.center")
 
     @property
     def dims(self) -> int:
@@ -166,8 +182,8 @@ class Box(Region):
                 f"Box.lower and Box.upper must both have shape (2,) or (3,); got {self.lower.shape} and "
                 f"{self.upper.shape}"
             )
-        check_finite(self.lower, field="Box.lower")
-        check_finite(self.upper, field="Box.upper")
+        _check_extent(self.lower, "Box.lower")
+        _check_extent(self.upper, "Box.upper")
         if not np.all(self.lower < self.upper):
             raise ValidationError(
                 f"Box.lower must be below Box.upper in every coordinate; got {self.lower} and {self.upper}"
@@ -221,7 +237,14 @@ class Polygon(Region):
         v = self.vertices
         if v.ndim != 2 or v.shape[1] != 2 or v.shape[0] < 3:
             raise ValidationError(f"Polygon.vertices must have shape (K, 2) with K >= 3; got {v.shape}")
-        check_finite(v, field="Polygon.vertices")
+        _check_extent(v, "Polygon.vertices")
+        repeated = np.flatnonzero(np.all(v == np.roll(v, -1, axis=0), axis=1))
+        if len(repeated):
+            k = int(repeated[0])
+            raise ValidationError(
+                f"Polygon.vertices {k} and {(k + 1) % len(v)} are the same point; give each vertex once, "
+                "without repeating the first at the end"
+            )
         if abs(self._signed_area()) <= 1e-12 * max(1.0, float(np.ptp(v)) ** 2):
             raise ValidationError("Polygon.vertices enclose no area; expected a simple polygon")
         crossing = self._crossing_edges()
@@ -317,6 +340,12 @@ def _time(value, *, field: str) -> float:
     return number
 
 
+def _required_vector(value, *, field: str):
+    if value is None:
+        raise ValidationError(f"{field} is required: a point of shape (2,) or (3,)")
+    return _vector(value, field=field)
+
+
 def _vector(value, *, field: str):
     if value is None:
         return None
@@ -361,7 +390,7 @@ class PointConstraint:
 
     agent: int = attrs.field(converter=_agent)
     time: float = attrs.field(converter=functools.partial(_time, field="PointConstraint.time"))
-    position: np.ndarray = attrs.field(converter=functools.partial(_vector, field="PointConstraint.position"))
+    position: np.ndarray = attrs.field(converter=functools.partial(_required_vector, field="PointConstraint.position"))
     velocity: np.ndarray | None = attrs.field(
         default=None, converter=functools.partial(_vector, field="PointConstraint.velocity")
     )
@@ -382,7 +411,7 @@ class ComConstraint:
         default=None, converter=functools.partial(_agents, field="ComConstraint.agents")
     )
     time: float = attrs.field(converter=functools.partial(_time, field="ComConstraint.time"))
-    position: np.ndarray = attrs.field(converter=functools.partial(_vector, field="ComConstraint.position"))
+    position: np.ndarray = attrs.field(converter=functools.partial(_required_vector, field="ComConstraint.position"))
     velocity: np.ndarray | None = attrs.field(
         default=None, converter=functools.partial(_vector, field="ComConstraint.velocity")
     )
@@ -502,7 +531,7 @@ class Problem:
     """
 
     n_agents: int = attrs.field(converter=lambda v: integer(v, "Problem.n_agents", minimum=1))
-    dims: int = attrs.field(default=2)
+    dims: int = attrs.field(default=2, converter=lambda v: integer(v, "Problem.dims", minimum=2))
     dt: float = attrs.field(
         default=0.1, converter=functools.partial(number, field="Problem.dt", minimum=0, strict=True)
     )
@@ -525,8 +554,13 @@ class Problem:
     follow: str = attrs.field(default="nearest")
 
     def __attrs_post_init__(self):
-        if self.dims not in (2, 3) or isinstance(self.dims, bool):
+        if self.dims not in (2, 3):
             raise ValidationError(f"Problem.dims must be 2 or 3; got {self.dims!r}")
+        if self.n_frames > MAX_FRAMES:
+            raise ValidationError(
+                f"Problem: duration {self.duration:g} s at dt = {self.dt:g} s is {self.n_frames} frames; at most "
+                f"{MAX_FRAMES} are supported (the sampler holds and simulates every frame)"
+            )
         if self.follow not in ("nearest", "random"):
             raise ValidationError(f"Problem.follow must be 'nearest' or 'random'; got {self.follow!r}")
         for index, constraint in enumerate(self.constraints):

@@ -13,7 +13,8 @@ from .graph import MotionGraph, Walk
 from .interfaces import capabilities
 from .motion import Motion, State
 from .registry import get, label, require_dims, resolve
-from .validate import integer, number
+from .validate import allocation, integer, number
+from .validate import seed as validate_seed
 
 __all__ = ["simulate", "random_flock", "build_graph", "walk"]
 
@@ -91,7 +92,11 @@ def simulate(
     else:
         model = resolve("behavior", behavior, **params)
     require_dims("behavior", model, dims, f"a {dims}D flock", spec=behavior)
-    rng = np.random.default_rng(seed)
+    # positions, and as much again for the model's channels (boids: its wander)
+    allocation(2 * (steps + 1) * n_agents * dims, f"simulate: {steps + 1} frames of {n_agents} agents in {dims}D")
+    rng = np.random.default_rng(validate_seed(seed))
+    if initial is not None and not isinstance(initial, State):
+        raise ValidationError(f"simulate: initial must be a flockkit.State; got {type(initial).__name__}")
     if initial is None:
         initial = random_flock(n_agents=n_agents, dims=dims, rng=rng)
     elif initial.n_agents != n_agents or initial.dims != dims:
@@ -130,7 +135,7 @@ def build_graph(
     measure = resolve("metric", metric, **metric_params)
     for kind, component, spec in (("builder", made, builder), ("metric", measure, metric)):
         require_dims(kind, component, motion.dims, f"a {motion.dims}D motion", spec=spec)
-    rng = np.random.default_rng(seed)
+    rng = np.random.default_rng(validate_seed(seed))
     if progress and capabilities(made).progress:
         with progress_bar(True) as report:
             graph = made.build(motion, measure, rng, progress=report)
@@ -169,7 +174,12 @@ def walk(
     of the graph's source motion)."""
     if not isinstance(graph, MotionGraph):
         raise ValidationError(f"walk needs a flockkit.MotionGraph; got {type(graph).__name__}")
-    duration = graph.motion.duration if duration is None else duration
+    duration = graph.motion.duration if duration is None else number(duration, "walk: duration", minimum=0, strict=True)
     made = resolve("walk", strategy, **params)
     require_dims("walk", made, graph.motion.dims, f"a {graph.motion.dims}D graph", spec=strategy)
-    return made.walk(graph, np.random.default_rng(seed), duration)
+    frames = duration / graph.motion.dt
+    # synthesis holds the positions, their gather indices and placed copies: about 4 times them
+    allocation(
+        4 * frames * graph.motion.n_agents * graph.motion.dims, f"walk: {duration:g} s ({frames:.3g} frames) of motion"
+    )
+    return made.walk(graph, np.random.default_rng(validate_seed(seed)), duration)

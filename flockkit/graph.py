@@ -67,7 +67,7 @@ class Transition:
 
 
 def _edge(value) -> tuple[str, int]:
-    kind, index = value
+    kind, index = value if isinstance(value, (tuple, list)) and len(value) == 2 else (None, None)
     if (
         kind not in ("clip", "transition")
         or isinstance(index, bool)
@@ -243,8 +243,8 @@ class MotionGraph:
                 raise ValidationError(f"{field} frames do not match its nodes")
             if transition.alignment.assignment.shape != (n,) or transition.alignment.rotation.shape != (d, d):
                 raise ValidationError(f"{field}.alignment is not for {n} agents in {d}D")
-            if transition.blend < 0:
-                raise ValidationError(f"{field}.blend must be >= 0; got {transition.blend}")
+            if not 0 <= transition.blend < frames:
+                raise ValidationError(f"{field}.blend must be a frame count in 0..{frames - 1}; got {transition.blend}")
 
     # -- building ---------------------------------------------------------------------------
 
@@ -398,6 +398,11 @@ class MotionGraph:
     def load(cls, path) -> MotionGraph:
         """Read a graph written by :meth:`save`; FileFormatError naming the file if it is not one."""
         arrays, header = _npzfile.read(path, kind="graph", versions=(GRAPH_FORMAT_VERSION,))
+        names = ("transition_nodes", "transition_blend", "transition_distance", "transition_assignment",
+                 "transition_rotation", "transition_translation")  # fmt: skip
+        lengths = {name: len(arrays[name]) if name in arrays and arrays[name].ndim else None for name in names}
+        if len(set(lengths.values())) != 1:
+            raise FileFormatError(f"{path}: invalid motion graph: its transition arrays differ in length: {lengths}")
         try:
             motion = Motion._from_arrays(arrays, header["dt"])
             nodes = arrays["nodes"]
@@ -427,7 +432,7 @@ class MotionGraph:
                 params=header.get("params"),
                 provenance=header.get("provenance"),
             )
-        except (KeyError, IndexError, TypeError, ValidationError) as exc:
+        except (KeyError, IndexError, TypeError, ValueError, OverflowError) as exc:
             raise FileFormatError(f"{path}: invalid motion graph: {type(exc).__name__}: {exc}") from None
 
 

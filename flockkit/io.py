@@ -22,7 +22,7 @@ import numpy as np
 from ._atomic import atomic_path
 from .errors import FileFormatError, ValidationError
 from .motion import Motion
-from .validate import integer
+from .validate import allocation, integer
 
 __all__ = [
     "read_wide",
@@ -127,7 +127,7 @@ def _table(path: Path, delimiter) -> tuple[np.ndarray, int]:
     """The numeric rows of a delimited text file (header lines skipped) and the first data line."""
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such file")
-    text = path.read_text(errors="replace").splitlines()
+    text = path.read_text(encoding="utf-8-sig", errors="replace").splitlines()  # -sig: drop a BOM
     lines = [
         (number, line) for number, line in enumerate(text, 1) if line.strip() and not line.lstrip().startswith("#")
     ]
@@ -155,14 +155,32 @@ def _table(path: Path, delimiter) -> tuple[np.ndarray, int]:
     return np.array(rows), first
 
 
-def _frame_index(path, frames: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _frame_index(path, frames: np.ndarray, agents: int, dims: int, max_gap) -> tuple[np.ndarray, np.ndarray]:
     """Row -> frame slot, and the frame number of every slot, for frame numbers on a regular grid
-    (gaps in it become missing frames)."""
-    if not np.all(np.isfinite(frames)) or not np.all(frames == np.round(frames)):
-        raise FileFormatError(f"{path}: the frame column must hold whole numbers")
+    (gaps in it become missing frames). Gaps longer than `max_gap` frames (None: no limit) and
+    grids larger than memory are refused before the grid is made."""
+    if not np.all(np.isfinite(frames)) or not np.all(frames == np.round(frames)) or np.any(np.abs(frames) > 2**53):
+        raise FileFormatError(f"{path}: the frame column must hold whole numbers (of magnitude at most 2**53)")
     unique = np.unique(frames.astype(np.int64))
     step = int(np.gcd.reduce(np.diff(unique))) if len(unique) > 1 else 1
+    missing = np.diff(unique) // step - 1  # whole frames missing between consecutive frame numbers
+    if max_gap is not None and np.any(missing > max_gap):
+        at = int(np.argmax(missing > max_gap))
+        raise ValidationError(
+            f"{path}: frames {unique[at] + step}..{unique[at + 1] - step} are missing for every agent "
+            f"({int(missing[at])} frames, more than max_gap={max_gap}); raise max_gap or read the parts apart"
+        )
+    slots = (unique[-1] - unique[0]) // step + 1
+    allocation(float(slots) * agents * dims, f"{path}: a grid of {slots} frames x {agents} agents")
     return (frames.astype(np.int64) - unique[0]) // step, np.arange(unique[0], unique[-1] + 1, step)
+
+
+def _unique_rows(path, keys: np.ndarray, what: str) -> None:
+    """Refuse a table that gives the same `keys` (rows of numbers) twice, naming the first."""
+    _, first, counts = np.unique(keys, axis=0, return_index=True, return_counts=True)
+    if np.any(counts > 1):
+        row = keys[first[np.argmax(counts > 1)]]
+        raise FileFormatError(f"{path}: {what} {', '.join(f'{v:g}' for v in row)} is given more than once")
 
 
 def read_wide(
@@ -183,8 +201,16 @@ def read_wide(
         raise FileFormatError(
             f"{path}: {columns} coordinate columns after the frame column is not a multiple of dims={dims}"
         )
-    slots, numbers = _frame_index(path, table[:, 0])
-    positions = np.full((len(numbers), columns // dims, dims), np.nan)
+    _unique_rows(path, table[:, :1], "frame")
+    count = columns // dims
+    if agents is not None:
+        agents = list(agents) if not isinstance(agents, (str, bytes)) else [agents]
+        if any(isinstance(a, bool) or not isinstance(a, (int, np.integer)) or not 0 <= a < count for a in agents):
+            raise ValidationError(f"{path}: agents must be indices in 0..{count - 1}; got {agents!r}")
+        if len(set(agents)) != len(agents):
+            raise ValidationError(f"{path}: agents must be distinct; got {agents!r}")
+    slots, numbers = _frame_index(path, table[:, 0], count, dims, max_gap)
+    positions = np.full((len(numbers), count, dims), np.nan)
     positions[slots] = table[:, 1:].reshape(len(table), -1, dims)
     return _motion(positions, dt, max_gap, str(path), agents=agents, frame_numbers=numbers)
 
@@ -208,8 +234,10 @@ def read_long(
             f"{path}: a long table in {dims}D has {2 + dims} columns (frame, agent, coordinates); found "
             f"{table.shape[1]}"
         )
-    slots, numbers = _frame_index(path, table[:, 0])
+    _unique_rows(path, table[:, :2], "frame and agent")
     ids = np.unique(table[:, 1])
+    # a frame selection may skip a long gap, so the gap rule waits for the selected frames
+    slots, numbers = _frame_index(path, table[:, 0], len(ids), dims, max_gap if frames is None else None)
     if agents is not None:
         wanted = np.asarray(agents, dtype=np.float64)
         unknown = sorted(set(wanted.tolist()) - set(ids.tolist()))
@@ -311,8 +339,7 @@ def write_usd(motion: Motion, path) -> None:
     positions[..., : motion.dims] = motion.positions
     velocities = np.zeros_like(positions)
     velocities[..., : motion.dims] = motion.velocities()
-    with atomic_path(path) as tmp:
-        tmp.unlink()  # USD creates the layer itself
+    with atomic_path(path, create=False) as tmp:  # USD creates the layer itself
         stage = Usd.Stage.CreateNew(str(tmp))
         UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
         stage.SetTimeCodesPerSecond(1.0 / motion.dt)

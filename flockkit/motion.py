@@ -105,7 +105,7 @@ class Alignment:
     translation : ndarray, shape (D,)
     """
 
-    distance: float = attrs.field(converter=float)
+    distance: float = attrs.field(converter=lambda v: number(v, "Alignment.distance", minimum=0))
     assignment: np.ndarray = attrs.field(converter=lambda value: _readonly_int(value, "Alignment.assignment"))
     rotation: np.ndarray = _field("Alignment.rotation")
     translation: np.ndarray = _field("Alignment.translation")
@@ -401,6 +401,8 @@ class Motion:
     def __getitem__(self, frames) -> Motion:
         if not isinstance(frames, slice):
             raise TypeError("index a Motion with a slice of frames; use state(t) or configuration(t) for one frame")
+        if frames.step == 0:
+            raise ValidationError("Motion slices need a positive step; got 0")
         start, stop, step = frames.indices(self.n_frames)
         if step < 1:
             raise ValidationError(f"Motion slices need a positive step; got {step}")

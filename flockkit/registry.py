@@ -311,7 +311,7 @@ def _build_manager() -> pluggy.PluginManager:
             )
         try:
             plugin = entry_point.load()
-        except Exception as exc:
+        except (Exception, SystemExit) as exc:  # a plugin calling sys.exit() at import is a broken plugin
             raise PluginError(
                 f"plugin {entry_point.name!r} ({where}) failed to import {entry_point.value!r}:\n"
                 f"  {type(exc).__name__}: {exc}\nFix it, or skip it with {BLOCK_VARIABLE}={entry_point.name}."
@@ -460,7 +460,15 @@ def get(kind: str, name: str, **params):
         except TypeError as exc:
             accepted = ", ".join(p for p in signature.parameters if p not in ("self", "args", "kwargs")) or "none"
             raise ValidationError(f"{kind} {name!r}: {exc}; its parameters are: {accepted}") from None
-    instance = component.factory(**params)
+    try:
+        instance = component.factory(**params)
+    except ValidationError:
+        raise  # a parameter the component refuses, named by it
+    except Exception as exc:  # noqa: BLE001 - whatever a plugin raises, say which plugin it was
+        raise PluginError(
+            f"{component.origin} failed to make {kind} {name!r} (parameters: {', '.join(params) or 'none'}): "
+            f"{type(exc).__name__}: {exc}"
+        ) from exc
     problems = interface_problems(instance, kind)
     if problems:
         raise _interface_error(component, problems)

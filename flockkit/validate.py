@@ -19,13 +19,14 @@ Each raises ``flockkit.errors.ValidationError`` (a ``ValueError``) saying what w
 from __future__ import annotations
 
 import math
+import os
 
 import attrs
 import numpy as np
 
 from .errors import ValidationError
 
-__all__ = ["number", "integer", "flag", "window", "parameter"]
+__all__ = ["number", "integer", "flag", "seed", "window", "parameter", "allocation"]
 
 _NO_DEFAULT = object()
 
@@ -73,6 +74,44 @@ def flag(value, field: str) -> bool:
     if not isinstance(value, (bool, np.bool_)):
         raise ValidationError(f"{field} must be True or False; got {value!r}")
     return bool(value)
+
+
+def seed(value, field: str = "seed") -> int | None:
+    """`value` as a random seed: None (fresh entropy) or an integer >= 0, what
+    ``numpy.random.default_rng`` takes."""
+    return integer(value, field, minimum=0, optional=True)
+
+
+def allocation(n_values, what: str, *, itemsize: int = 8) -> None:
+    """Refuse, before any work, a result of `n_values` numbers (`itemsize` bytes each) larger
+    than this machine's memory: ValidationError stating the memory `what` would need and what
+    there is (from /proc/meminfo's MemAvailable, else physical memory)."""
+    needed = float(n_values) * itemsize
+    available = _available_memory()
+    if needed > available:
+        raise ValidationError(f"{what} needs {_size(needed)} of memory; this machine has {_size(available)} available")
+
+
+def _available_memory() -> float:
+    try:
+        with open("/proc/meminfo") as handle:
+            for line in handle:
+                if line.startswith("MemAvailable:"):
+                    return float(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return float(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return float("inf")
+
+
+def _size(count: float) -> str:
+    for unit in ("bytes", "KiB", "MiB", "GiB", "TiB", "PiB"):
+        if count < 1024 or unit == "PiB":
+            return f"{count:.3g} {unit}"
+        count /= 1024
+    return f"{count:.3g} PiB"
 
 
 def window(motion, start, stop, *, owner: str) -> tuple[int, int]:

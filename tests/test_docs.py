@@ -68,13 +68,15 @@ def _all_text():
 def test_every_public_name_is_documented():
     """Like datasette's "every hook is documented": each name a user can import is in the docs."""
     import flockkit
+    import flockkit.parallel
     import flockkit.rigid
     import flockkit.testing
     import flockkit.validate
 
     text = _all_text()
     missing = [n for n in flockkit.__all__ if n != "__version__" and not re.search(rf"(`|flockkit\.){n}\b", text)]
-    for module, prefix in ((flockkit.rigid, "rigid"), (flockkit.validate, "validate"), (flockkit.testing, "")):
+    modules = (flockkit.rigid, "rigid"), (flockkit.validate, "validate"), (flockkit.parallel, "parallel")
+    for module, prefix in (*modules, (flockkit.testing, "")):
         missing += [f"{prefix}.{n}" for n in module.__all__ if not re.search(rf"(`|{prefix}\.){n}\b", text)]
     assert missing == []
 

@@ -17,13 +17,15 @@ from collections.abc import Mapping
 import attrs
 import numpy as np
 
+from .. import parallel
 from .._progress import progress_bar
 from ..constraints import ComConstraint, PointConstraint, Problem
 from ..errors import ValidationError
 from ..interfaces import capabilities
 from ..motion import Motion
 from ..registry import get, label, require_dims, resolve
-from ..validate import integer, number
+from ..validate import allocation, integer, number
+from ..validate import seed as validate_seed
 from .initial import initial_trajectories
 from .windows import windows
 
@@ -112,16 +114,24 @@ def pinned_frames(problem: Problem) -> np.ndarray:
     return pinned
 
 
-def feasible(problem: Problem, motion: Motion) -> bool:
-    """Whether `motion` meets the constraints as a solution must: point constraints to 1e-9, COM
-    constraints within 3 sigma_com, every shape-constrained agent inside its shape."""
-    for c, residual in zip(problem.constraints, residuals(problem, motion)):
-        limit = (
-            1e-9 if isinstance(c, PointConstraint) else 3 * problem.sigma_com if isinstance(c, ComConstraint) else 0.0
-        )
+def unmet(problem: Problem, motion: Motion) -> list[tuple[int, float, float]]:
+    """(index, residual, tolerance) of each constraint of `problem` that `motion` does not meet as
+    a solution must: point constraints to 1e-9, COM constraints within 3 sigma_com, every
+    shape-constrained agent inside its shape."""
+    found = []
+    for index, (c, residual) in enumerate(zip(problem.constraints, residuals(problem, motion))):
+        if isinstance(c, PointConstraint):
+            limit = 1e-9
+        else:
+            limit = 3 * problem.sigma_com if isinstance(c, ComConstraint) else 0.0
         if residual > limit:
-            return False
-    return True
+            found.append((index, residual, limit))
+    return found
+
+
+def feasible(problem: Problem, motion: Motion) -> bool:
+    """Whether `motion` meets every constraint as a solution must (see :func:`unmet`)."""
+    return not unmet(problem, motion)
 
 
 def residuals(problem: Problem, motion: Motion) -> tuple[float, ...]:
@@ -230,7 +240,7 @@ def solve(
     proposals=None,
     objectives=DEFAULT_OBJECTIVES,
     stable=None,
-    n_jobs=1,
+    n_jobs=None,
     callback=None,
     progress=False,
 ) -> Solution:
@@ -250,8 +260,9 @@ def solve(
         Stop a chain early once its running mean of log g stabilizes: the mean over the last 100
         iterations within this fraction of the mean over the 100 before.
     chains, n_jobs : int
-        Independent chains (each from its own initial trajectories), run by joblib workers. Every
-        component is resolved here, once; workers receive instances.
+        Independent chains (each from its own initial trajectories), run by joblib workers
+        (``n_jobs=None``: what ``joblib.parallel_config`` says, else 1; see ``flockkit.parallel``).
+        Every component is resolved here, once; workers receive instances.
     seed : int, optional
         Seeds everything: the same seed gives the same Solution, whatever `n_jobs` is.
     proposals : mapping or sequence, optional
@@ -269,11 +280,15 @@ def solve(
         raise ValidationError(f"solve: problem must be a flockkit.Problem; got {type(problem).__name__}")
     iterations = integer(iterations, "iterations", minimum=0)
     chains = integer(chains, "chains", minimum=1)
-    if isinstance(n_jobs, bool) or not isinstance(n_jobs, int) or n_jobs == 0:
-        raise ValidationError(f"n_jobs must be a non-zero integer; got {n_jobs!r}")
+    n_jobs = parallel.jobs(n_jobs)
     if callback is not None and n_jobs != 1:
         raise ValidationError("solve: a callback runs in this process only; use n_jobs=1 with it")
     stable = number(stable, "solve: stable", minimum=0, optional=True)
+    seed = validate_seed(seed)
+    size = f"{problem.n_frames} frames of {problem.n_agents} agents in {problem.dims}D"
+    # per chain: the current, proposed and best motions and a channel; the trace: 3 numbers an iteration
+    allocation(4 * chains * problem.n_frames * problem.n_agents * problem.dims, f"solve: {chains} chains of {size}")
+    allocation(3 * chains * iterations, f"solve: the trace of {chains} chains of {iterations} iterations")
     model = _behavior(problem, behavior, behavior_params)
     moves = _moves(problem, DEFAULT_PROPOSALS if proposals is None else proposals, iterations)
     terms = [_component("objective", spec, problem) for spec in objectives]
@@ -282,9 +297,7 @@ def solve(
     if n_jobs == 1:
         results = _chains_here(arguments, seeds, iterations, callback, progress)
     else:
-        from joblib import Parallel, delayed
-
-        results = Parallel(n_jobs=n_jobs)(delayed(_chain)(*arguments, chain_seed, None, None) for chain_seed in seeds)
+        results = list(parallel.imap(_chain, [(*arguments, s, None, None) for s in seeds], n_jobs=n_jobs))
     order = sorted(range(chains), key=lambda k: -results[k][1])
     best = results[order[0]][0]
     return Solution(

@@ -41,7 +41,10 @@ _WANDER = "wander"
 
 
 def _obstacles(value):
-    obstacles = tuple(value)
+    try:
+        obstacles = tuple(value)
+    except TypeError:
+        raise ValidationError(f"boids parameter obstacles must be a sequence of regions; got {value!r}") from None
     for index, obstacle in enumerate(obstacles):
         if not isinstance(obstacle, flockkit.Region):
             raise ValidationError(
@@ -256,8 +259,22 @@ class Boids:
             checked[int(agent)] = path
         return checked
 
+    def _check_memory(self, x) -> None:
+        """Refuse, before simulating, a flock whose neighbor pairs would not fit in memory: pairs
+        expected at the flock's mean density, about 20 numbers each (offsets, distances, weights)."""
+        n, d = x.shape
+        if n <= self.kdtree_above:
+            return
+        extent = np.maximum(np.ptp(x, axis=0), self.perception_radius)
+        reach = (math.pi if d == 2 else 4 * math.pi / 3) * self.perception_radius**d
+        pairs = n * min(n - 1, n * reach / float(np.prod(extent)))
+        validate.allocation(20 * pairs, f"boids: finding the neighbors of {n} agents in {d}D")
+
+    @np.errstate(over="ignore", invalid="ignore")  # overflow is reported as an error at the end
     def _simulate(self, x0, v0, wander0, steps, rng, *, perception, progress, guide=None):
         n, d = x0.shape
+        if steps > 1:
+            self._check_memory(x0)
         positions = np.empty((steps + 1, n, d))
         wander = np.empty_like(positions)
         positions[0], wander[0] = x0, wander0
@@ -280,6 +297,12 @@ class Boids:
                 progress(t + 1, steps, "simulating")
         if steps:
             wander[steps] = wander[steps - 1]
+        if not np.all(np.isfinite(positions)):
+            first = int(np.argmin(np.all(np.isfinite(positions), axis=(1, 2))))
+            raise ValidationError(
+                f"boids: the simulation overflowed at step {first} (dt = {self.dt:g} s, acceleration "
+                f"{self.acceleration:g}); use a smaller dt"
+            )
         return positions, wander
 
     def _infer_wander(self, x, dt, t) -> np.ndarray:

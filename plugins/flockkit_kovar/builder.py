@@ -67,9 +67,9 @@ class Kovar:
         Seconds over which synthesis blends across a transition.
     prune : bool
         Skip exact evaluations the metric's declared ``pairs_within`` (or ``lower_bound``) rules out.
-    n_jobs : int
-        joblib workers for the difference matrix (-1: all cores); a Dask cluster can run them
-        through joblib's dask backend.
+    n_jobs : int, optional
+        joblib workers for the difference matrix (-1: all cores; None: what
+        ``joblib.parallel_config`` says, else 1); any joblib backend runs them (``flockkit.parallel``).
     """
 
     candidate_interval: float = validate.parameter("kovar", default=0.2, minimum=0, strict=True)
@@ -80,13 +80,13 @@ class Kovar:
     per_second: float | None = validate.parameter("kovar", default=None, minimum=0, strict=True, optional=True)
     blend_time: float = validate.parameter("kovar", default=2.0, minimum=0)
     prune: bool = validate.parameter("kovar", default=True, kind="flag")
-    n_jobs: int = attrs.field(default=1)
+    n_jobs: int | None = attrs.field(default=None)
 
     capabilities = flockkit.Capabilities(progress=True)
 
     def __attrs_post_init__(self):
-        if validate.integer(self.n_jobs, "kovar parameter n_jobs") == 0:
-            raise ValidationError("kovar parameter n_jobs must be a non-zero integer; got 0")
+        if self.n_jobs is not None and validate.integer(self.n_jobs, "kovar parameter n_jobs") == 0:
+            raise ValidationError("kovar parameter n_jobs must be None or a non-zero integer; got 0")
 
     def build(
         self, motion: flockkit.Motion, metric, rng: np.random.Generator, *, progress=None
@@ -244,7 +244,8 @@ class _Matrix:
 
     def __init__(self, configs, metric, *, n_jobs, progress, needed):
         k = len(configs)
-        self.configs, self.metric, self.n_jobs, self.progress, self.needed = configs, metric, n_jobs, progress, needed
+        self.configs, self.metric, self.progress, self.needed = configs, metric, progress, needed
+        self.n_jobs = flockkit.parallel.jobs(n_jobs)
         self.offers = flockkit.capabilities(metric)
         self.values = np.full((k, k), np.inf)
         self.listed = np.full(k, -np.inf)  # per row, the threshold its pairs were listed at
@@ -271,15 +272,9 @@ class _Matrix:
             # threshold or above already are left out
             ranges = ranges or _row_ranges(len(self.configs), 4 * max(abs(self.n_jobs), 2))
             ranges = [run for a, b in ranges for run in _runs(self.listed[a:b] < threshold, a)]
-            batched = self.metric.pairs_within
-            if self.n_jobs == 1:
-                parts = (batched(self.configs, threshold, rows=rows) for rows in ranges)
-            else:
-                from joblib import Parallel, delayed
-
-                parts = Parallel(n_jobs=self.n_jobs, return_as="generator")(
-                    delayed(batched)(self.configs, threshold, rows=rows) for rows in ranges
-                )
+            parts = flockkit.parallel.imap(
+                _pairs_within, [(self.metric, self.configs, threshold, rows) for rows in ranges], n_jobs=self.n_jobs
+            )
             found = [np.zeros((0, 2), dtype=int)]
             for done, part in enumerate(parts, 1):
                 found.append(np.asarray(part, dtype=int).reshape(-1, 2))
@@ -315,15 +310,9 @@ def _distances(metric, configs, pairs, n_jobs, progress) -> np.ndarray:
     has one), through joblib when n_jobs != 1, reporting `progress(done, total, stage)`."""
     size = int(np.clip(len(pairs) // (8 * max(n_jobs, 1)), 64, 4096)) if n_jobs != 1 else 1024
     chunks = [pairs[s : s + size] for s in range(0, len(pairs), size)]
-    if n_jobs == 1:
-        results = (_chunk_distances(metric, configs, chunk) for chunk in chunks)
-    else:
-        from joblib import Parallel, delayed
-
-        # each job gets only the configurations its chunk uses
-        results = Parallel(n_jobs=n_jobs, return_as="generator")(
-            delayed(_chunk_distances)(metric, *_localized(configs, chunk)) for chunk in chunks
-        )
+    # each job gets only the configurations its chunk uses
+    calls = [(metric, *(_localized(configs, chunk) if n_jobs != 1 else (configs, chunk))) for chunk in chunks]
+    results = flockkit.parallel.imap(_chunk_distances, calls, n_jobs=n_jobs)
     found, done = [], 0
     for chunk, distances in zip(chunks, results):
         found.append(distances)
@@ -350,6 +339,10 @@ def _runs(mask: np.ndarray, offset: int) -> list[tuple[int, int]]:
 def _localized(configs, pairs):
     used, local = np.unique(pairs, return_inverse=True)
     return [configs[u] for u in used], local.reshape(pairs.shape)
+
+
+def _pairs_within(metric, configs, threshold, rows) -> np.ndarray:
+    return metric.pairs_within(configs, threshold, rows=rows)
 
 
 def _chunk_distances(metric, configs, pairs) -> np.ndarray:

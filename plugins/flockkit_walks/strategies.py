@@ -21,8 +21,15 @@ def _check_graph(graph) -> None:
         raise ValidationError(f"a walk needs a flockkit.MotionGraph; got {type(graph).__name__}")
 
 
-def _check_duration(duration) -> float:
-    return validate.number(duration, "walk duration (seconds)", minimum=0, strict=True)
+def _check_duration(duration, graph) -> int:
+    """The frames a walk of `duration` seconds plays, refused before any work if its motion
+    could not be held in memory."""
+    duration = validate.number(duration, "walk duration (seconds)", minimum=0, strict=True)
+    needed = math.ceil(duration / graph.motion.dt)
+    # synthesizing it holds the positions, their gather indices and placed copies: about 4 times them
+    what = f"a walk of {duration:g} s ({needed} frames)"
+    validate.allocation(4 * needed * graph.motion.n_agents * graph.motion.dims, what)
+    return needed
 
 
 def _start_node(graph, start, rng) -> int:
@@ -45,7 +52,7 @@ class RandomWalk:
 
     def walk(self, graph: flockkit.MotionGraph, rng: np.random.Generator, duration: float) -> flockkit.Walk:
         _check_graph(graph)
-        needed = math.ceil(_check_duration(duration) / graph.motion.dt)
+        needed = _check_duration(duration, graph)
         node = _start_node(graph, self.start, rng)
         start, since, played, edges = node, math.inf, 0, []
         while played < needed:
@@ -94,7 +101,7 @@ class RegionWalk:
 
     def walk(self, graph: flockkit.MotionGraph, rng: np.random.Generator, duration: float) -> flockkit.Walk:
         _check_graph(graph)
-        needed = math.ceil(_check_duration(duration) / graph.motion.dt)
+        needed = _check_duration(duration, graph)
         if self.region.dims != graph.motion.dims:
             raise ValidationError(f"region is {self.region.dims}D but the graph's motion is {graph.motion.dims}D")
         com = graph.motion.center_of_mass()

@@ -60,7 +60,7 @@ def test_trajectorytools_nan_handling(shared_data):
 
 def test_pedestrians_select_a_window(shared_data):
     path = shared_data / "eth-ucy-pedestrians" / "biwi_eth.txt"
-    with pytest.raises(ValidationError, match=r"agent \d+: frames \d+\.\.\d+"):
+    with pytest.raises(ValidationError, match=r"frames \d+\.\.\d+"):
         read_long(path, fps=2.5)
     table = np.loadtxt(path)
     frames_of = {a: set(table[table[:, 1] == a, 0]) for a in (2.0, 3.0)}
