@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 import zipfile
 from pathlib import Path
 
@@ -83,7 +84,8 @@ def _arrays(path: Path) -> dict[str, np.ndarray]:
         for info in archive.infolist():
             if not info.filename.endswith(".npy"):
                 raise FileFormatError(f"{path}: unexpected entry {info.filename!r} in the archive")
-            with archive.open(info) as handle:
+            with archive.open(info) as handle, warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # a damaged header's text may warn as numpy parses it
                 version = npy.read_magic(handle)
                 read_header = npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0
                 shape, fortran, dtype = read_header(handle)

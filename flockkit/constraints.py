@@ -556,9 +556,10 @@ class Problem:
     def __attrs_post_init__(self):
         if self.dims not in (2, 3):
             raise ValidationError(f"Problem.dims must be 2 or 3; got {self.dims!r}")
-        if self.n_frames > MAX_FRAMES:
+        if not self.duration / self.dt < MAX_FRAMES:
             raise ValidationError(
-                f"Problem: duration {self.duration:g} s at dt = {self.dt:g} s is {self.n_frames} frames; at most "
+                f"Problem: duration {self.duration:g} s at dt = {self.dt:g} s is {self.duration / self.dt:.3g} "
+                "frames; at most "
                 f"{MAX_FRAMES} are supported (the sampler holds and simulates every frame)"
             )
         if self.follow not in ("nearest", "random"):

@@ -14,6 +14,7 @@ from .interfaces import capabilities
 from .motion import Motion, State
 from .registry import get, label, require_dims, resolve
 from .validate import allocation, integer, number
+from .validate import dims as validate_dims
 from .validate import seed as validate_seed
 
 __all__ = ["simulate", "random_flock", "build_graph", "walk"]
@@ -31,8 +32,7 @@ def random_flock(
     (``extra`` is empty), so a model starts its own (boids: zero wander).
     """
     n_agents = integer(n_agents, "n_agents", minimum=1)
-    if dims not in (2, 3):
-        raise ValidationError(f"dims must be 2 or 3; got {dims!r}")
+    dims = validate_dims(dims)
     spacing = number(spacing, "spacing", minimum=0, strict=True)
     speed = number(speed, "speed", minimum=0, strict=True)
     unit_ball = math.pi if dims == 2 else 4.0 * math.pi / 3.0
@@ -83,8 +83,7 @@ def simulate(
     """
     n_agents = integer(n_agents, "n_agents", minimum=1)
     steps = integer(steps, "steps", minimum=1)
-    if dims not in (2, 3) or isinstance(dims, bool):
-        raise ValidationError(f"dims must be 2 or 3; got {dims!r}")
+    dims = validate_dims(dims)
     if isinstance(behavior, str):
         model = get("behavior", behavior, dt=0.1 if dt is None else dt, **params)
     elif dt is not None:

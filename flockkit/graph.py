@@ -21,6 +21,7 @@ from scipy.sparse.csgraph import connected_components
 from . import _npzfile
 from .errors import FileFormatError, ValidationError
 from .motion import Alignment, Motion
+from .validate import integer
 
 __all__ = ["MotionGraph", "Clip", "Transition", "Walk"]
 
@@ -66,6 +67,15 @@ class Transition:
     __hash__ = None
 
 
+def _sequence(value, field: str) -> list:
+    try:
+        if isinstance(value, str | bytes):
+            raise TypeError
+        return list(value)
+    except TypeError:
+        raise ValidationError(f"{field} must be a sequence; got {type(value).__name__}") from None
+
+
 def _edge(value) -> tuple[str, int]:
     kind, index = value if isinstance(value, (tuple, list)) and len(value) == 2 else (None, None)
     if (
@@ -92,8 +102,8 @@ class Walk:
         The start pose: source coordinates map to the world as ``rotation @ p + translation``.
     """
 
-    start: int = attrs.field(converter=int)
-    edges: tuple = attrs.field(converter=lambda edges: tuple(_edge(e) for e in edges))
+    start: int = attrs.field(converter=lambda v: integer(v, "Walk.start", minimum=0))
+    edges: tuple = attrs.field(converter=lambda edges: tuple(_edge(e) for e in _sequence(edges, "Walk.edges")))
     rotation: np.ndarray = attrs.field(default=None)
     translation: np.ndarray = attrs.field(default=None)
     _is_transition: np.ndarray = attrs.field(init=False, repr=False, eq=False)

@@ -35,7 +35,8 @@ def _dims(value) -> tuple[int, ...]:
         dims = tuple(value)
     except TypeError:
         dims = ()
-    if not dims or any(isinstance(d, bool) or d not in (2, 3) for d in dims) or len(set(dims)) != len(dims):
+    valid = all(isinstance(d, int | np.integer) and not isinstance(d, bool) and d in (2, 3) for d in dims)
+    if not dims or not valid or len(set(dims)) != len(dims):
         raise ValidationError(
             f"Capabilities.dims must be a non-empty tuple of distinct dimensions from (2, 3); got {value!r}"
         )

@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from . import validate
 from ._atomic import atomic_path
 from .errors import FileFormatError, ValidationError
 from .motion import Motion
@@ -193,8 +194,7 @@ def read_wide(
     """
     path = Path(path)
     dt = _dt(dt, fps)
-    if dims not in (2, 3):
-        raise ValidationError(f"dims must be 2 or 3; got {dims!r}")
+    dims = validate.dims(dims)
     table, _ = _table(path, delimiter)
     columns = table.shape[1] - 1
     if columns < dims or columns % dims:
@@ -226,8 +226,7 @@ def read_long(
     """
     path = Path(path)
     dt = _dt(dt, fps)
-    if dims not in (2, 3):
-        raise ValidationError(f"dims must be 2 or 3; got {dims!r}")
+    dims = validate.dims(dims)
     table, _ = _table(path, delimiter)
     if table.shape[1] != 2 + dims:
         raise FileFormatError(

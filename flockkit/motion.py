@@ -153,7 +153,10 @@ class Alignment:
 
 
 def _readonly_int(value, field: str) -> np.ndarray:
-    array = np.array(value, copy=True)
+    try:
+        array = np.array(value, copy=True)
+    except (TypeError, ValueError) as exc:
+        raise ValidationError(f"{field} must be an array of integers; got {type(value).__name__}: {exc}") from None
     if array.dtype.kind not in "iu":
         raise ValidationError(f"{field} must be an array of integers; got dtype {array.dtype}")
     array = array.astype(np.intp)

@@ -26,7 +26,7 @@ import numpy as np
 
 from .errors import ValidationError
 
-__all__ = ["number", "integer", "flag", "seed", "window", "parameter", "allocation"]
+__all__ = ["number", "integer", "dims", "flag", "seed", "window", "parameter", "allocation"]
 
 _NO_DEFAULT = object()
 
@@ -66,6 +66,13 @@ def integer(value, field: str, *, minimum=None, optional: bool = False) -> int |
     ):
         expected = f"an integer{_bound(minimum, False)}"
         raise ValidationError(f"{field} must be {'None or ' if optional else ''}{expected}; got {value!r}")
+    return int(value)
+
+
+def dims(value, field: str = "dims") -> int:
+    """`value` as a number of dimensions: the integer 2 or 3."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)) or value not in (2, 3):
+        raise ValidationError(f"{field} must be 2 or 3; got {value!r}")
     return int(value)
 
 

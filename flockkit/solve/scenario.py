@@ -27,6 +27,7 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
+from .. import validate
 from ..constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
 from ..errors import FileFormatError, FlockkitError, ValidationError
 
@@ -70,6 +71,11 @@ def load_scenario(path) -> tuple[Problem, dict]:
         _only(problem_table, set(_PROBLEM_KEYS), f"{path}: [problem]")
         settings = _table(data, "solve", path, required=False)
         _only(settings, _SOLVE_KEYS, f"{path}: [solve]")
+        if "seed" in settings:
+            validate.seed(settings["seed"], f"{path}: [solve] seed")
+        for key in ("iterations", "chains"):
+            if key in settings:
+                validate.integer(settings[key], f"{path}: [solve] {key}", minimum=0 if key == "iterations" else 1)
         constraints = []
         for kind, build in (("point", _point), ("com", _com), ("shape", _shape)):
             for index, entry in enumerate(_array(data, kind, path)):

@@ -20,7 +20,7 @@ from hypothesis.extra import numpy as hnp
 
 from ..motion import Configuration, Motion, State
 
-__all__ = ["configurations", "states", "motions"]
+__all__ = ["configurations", "states", "motions", "anything", "damaged"]
 
 
 def _check_count(name, value, low=1):
@@ -137,3 +137,47 @@ def motions(
         )
 
     return draw_motion()
+
+
+def anything(*, max_leaves: int = 4):
+    """Values of every kind a careless caller passes where a number, an array or a component is
+    expected: None, booleans, integers (huge and negative too), floats (NaN, infinities,
+    subnormals, 1e308), strings, bytes, numpy arrays of odd shapes and dtypes, and lists (nested
+    up to `max_leaves` values) of these. For robustness tests: a function given one must work or
+    raise a documented flockkit error."""
+    _check_count("max_leaves", max_leaves)
+    scalars = st.one_of(
+        st.none(),
+        st.booleans(),
+        st.integers(min_value=-(2**70), max_value=2**70),
+        st.floats(allow_nan=True, allow_infinity=True),
+        st.sampled_from([0.0, -0.0, 5e-324, 1e308, -1e308, 1e-300, 2.0, 3.0]),
+        st.text(max_size=6),
+        st.binary(max_size=6),
+    )
+    arrays = hnp.arrays(
+        dtype=st.sampled_from(["float64", "float32", "int64", "bool", "complex128"]),
+        shape=hnp.array_shapes(min_dims=0, max_dims=3, min_side=0, max_side=4),
+    )
+    return st.recursive(st.one_of(scalars, arrays), lambda inner: st.lists(inner, max_size=3), max_leaves=max_leaves)
+
+
+def damaged(data: bytes, *, max_flips: int = 3):
+    """Copies of the bytes `data` damaged as storage and transfers damage files: up to `max_flips`
+    bytes changed, or cut short at any length, or both."""
+    if not isinstance(data, bytes | bytearray) or not data:
+        raise InvalidArgument(f"data must be non-empty bytes; got {type(data).__name__}")
+    _check_count("max_flips", max_flips, low=0)
+    size = len(data)
+
+    @st.composite
+    def draw_damaged(draw):
+        damaged_data = bytearray(data)
+        for _ in range(draw(st.integers(0, max_flips))):
+            at = draw(st.integers(0, size - 1))
+            damaged_data[at] ^= draw(st.integers(1, 255))
+        if draw(st.booleans()):
+            damaged_data = damaged_data[: draw(st.integers(0, size - 1))]
+        return bytes(damaged_data)
+
+    return draw_damaged()

@@ -17,13 +17,17 @@ from flockkit._atomic import TERMINATED, atomic_path
 
 def test_sigterm_inside_a_write_removes_the_temporary_file(tmp_path):
     target = tmp_path / "out.npz"
-    with pytest.raises(SystemExit) as info, atomic_path(target) as tmp:
-        tmp.write_bytes(b"half")
-        os.kill(os.getpid(), signal.SIGTERM)
-        time.sleep(1)  # the handler raises SystemExit here
+    previous = signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the default action (Ray, Dask change it)
+    try:
+        with pytest.raises(SystemExit) as info, atomic_path(target) as tmp:
+            tmp.write_bytes(b"half")
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(1)  # the handler raises SystemExit here
+        assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # restored
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     assert info.value.code == TERMINATED
     assert list(tmp_path.iterdir()) == []
-    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # restored
 
 
 def _flockkit(*args, cwd):
