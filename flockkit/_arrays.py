@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
 from types import MappingProxyType
 
@@ -13,11 +14,10 @@ from .errors import ValidationError
 def readonly_float(value, *, field: str) -> np.ndarray:
     """Return `value` as a new read-only float64 array, or raise ValidationError naming `field`."""
     try:
-        raw = np.asarray(value)
-        if raw.dtype.kind == "c":
-            raise TypeError("complex values; expected real numbers")
-        array = np.array(raw, dtype=np.float64, copy=True)
-    except (TypeError, ValueError) as exc:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error", np.exceptions.ComplexWarning)  # complex values are refused
+            array = np.array(value, dtype=np.float64, copy=True)
+    except (TypeError, ValueError, np.exceptions.ComplexWarning) as exc:
         raise ValidationError(f"{field} must be an array of numbers; got {type(value).__name__}: {exc}") from None
     array.setflags(write=False)
     return array

@@ -562,7 +562,7 @@ class Problem:
                 "frames; at most "
                 f"{MAX_FRAMES} are supported (the sampler holds and simulates every frame)"
             )
-        if self.follow not in ("nearest", "random"):
+        if not isinstance(self.follow, str) or self.follow not in ("nearest", "random"):
             raise ValidationError(f"Problem.follow must be 'nearest' or 'random'; got {self.follow!r}")
         for index, constraint in enumerate(self.constraints):
             self._check_constraint(index, constraint)
