@@ -211,13 +211,9 @@ def _cmd_info(args) -> int:
             )
         )
         return 0
-    print(
-        json.dumps(
-            {"kind": "graph", **graph.stats(), "params": graph.params, "provenance": graph.provenance},
-            indent=2,
-            default=str,
-        )
-    )
+    # params and provenance are read-only mappings: JSON objects, like every other field
+    document = {"kind": "graph", **graph.stats(), "params": graph.params, "provenance": graph.provenance}
+    print(json.dumps(document, indent=2, default=dict))
     return 0
 
 
@@ -334,7 +330,8 @@ def _cmd_export(args) -> int:
 
     output = _require_suffix(args.output, EXPORT_SUFFIXES, "-o")
     motion = flockkit.Motion.load(args.motion)
-    export(motion, output)
+    options = {k: v for k, v in (("fps", args.fps), ("meters_per_unit", args.units)) if v is not None}
+    export(motion, output, **options)
     print(f"wrote {output}: {motion.n_frames} frames x {motion.n_agents} agents")
     return 0
 
@@ -438,6 +435,8 @@ def _render_arguments(parser) -> None:
 def _export_arguments(parser) -> None:
     parser.add_argument("motion", help="motion file (.npz)")
     _output(parser, "out.csv | out.json | out.usda | out.usdc")
+    parser.add_argument("--fps", type=float, help="USD: frame rate of the file's time line (default 24)")
+    parser.add_argument("--units", type=float, help="USD: meters per flockkit length unit (default 1)")
 
 
 def _import_arguments(parser) -> None:

@@ -277,10 +277,11 @@ def read_npy(path, *, dt=None, fps=None, max_gap: int = DEFAULT_MAX_GAP, agents=
 EXPORT_SUFFIXES = (".csv", ".json", ".usda", ".usdc")
 
 
-def export(motion: Motion, path) -> Path:
+def export(motion: Motion, path, **options) -> Path:
     """Write `motion` in the format its suffix names: .csv (long format: frame, agent, x, y[, z],
     readable by :func:`read_long`), .json, or .usda / .usdc (Universal Scene Description, needs
-    the ``usd`` extra). Atomic: an interrupted export leaves nothing behind."""
+    the ``usd`` extra; `options` ``fps`` and ``meters_per_unit`` as for :func:`write_usd`).
+    Atomic: an interrupted export leaves nothing behind."""
     if not isinstance(motion, Motion):
         raise ValidationError(f"export needs a flockkit.Motion; got {type(motion).__name__}")
     path = Path(path)
@@ -289,8 +290,12 @@ def export(motion: Motion, path) -> Path:
         raise ValidationError(
             f"{path}: unknown export extension {path.suffix!r}; expected {', '.join(EXPORT_SUFFIXES)}"
         )
-    writer = {".csv": write_csv, ".json": write_json}.get(suffix, write_usd)
-    writer(motion, path)
+    if suffix in (".csv", ".json"):
+        if options:
+            raise ValidationError(f"{path}: options {', '.join(options)} are for USD exports")
+        (write_csv if suffix == ".csv" else write_json)(motion, path)
+    else:
+        write_usd(motion, path, **options)
     return path
 
 
@@ -322,29 +327,48 @@ def write_json(motion: Motion, path) -> None:
         json.dump(document, handle)
 
 
-def write_usd(motion: Motion, path) -> None:
+# The frame rate of the time line a USD export is written on, unless asked otherwise: 24, the
+# default scene rate of Blender, Houdini and Maya. Blender ignores a stage's framesPerSecond and
+# reads its time codes as its own frames, so a time line at the rate the scene has is what plays
+# at the right speed there; every USD reader that honours timeCodesPerSecond agrees.
+USD_FPS = 24.0
+
+
+def write_usd(motion: Motion, path, *, fps: float | None = USD_FPS, meters_per_unit: float = 1.0) -> None:
     """A USD stage (.usda text or .usdc binary) holding /Flock/Agents, a UsdGeom.PointInstancer
-    with one time sample of positions and orientations (facing the velocity, the prototype's +x)
-    per frame; timeCodesPerSecond = 1 / dt, frames 0 .. T-1, up axis z (2D motions lie in z = 0).
-    Blender, Houdini and Maya import it."""
+    with, per frame of the motion, a time sample of positions, orientations (facing the velocity,
+    the prototype's +x), velocities and angular velocities; fixed ``ids`` (the agent indices), so
+    identity never rests on point order.
+
+    The stage's time line runs at `fps` (timeCodesPerSecond = framesPerSecond = fps; None: one
+    time code per frame, fps = 1 / dt), each frame sampled at its time, t * fps; USD interpolates
+    between samples. metersPerUnit is `meters_per_unit` (flockkit's units are meters by default),
+    the up axis z; a 2D motion lies in the ground plane z = 0. Blender, Houdini and Maya import it
+    at the right size and speed."""
     try:
         from pxr import Gf, Usd, UsdGeom, Vt
     except ImportError:
         from .errors import MissingDependencyError
 
         raise MissingDependencyError("USD export needs usd-core: pip install 'flockkit[usd]'") from None
+    fps = 1.0 / motion.dt if fps is None else validate.number(fps, "USD fps", minimum=0, strict=True)
+    meters_per_unit = validate.number(meters_per_unit, "USD meters_per_unit", minimum=0, strict=True)
     path = Path(path)
     positions = np.zeros((motion.n_frames, motion.n_agents, 3))
     positions[..., : motion.dims] = motion.positions
     velocities = np.zeros_like(positions)
     velocities[..., : motion.dims] = motion.velocities()
+    quaternions = _facing(velocities.reshape(-1, 3)).reshape(motion.n_frames, motion.n_agents, 4)
+    turning = _angular_velocities(velocities, motion.dt)
+    times = np.arange(motion.n_frames) * motion.dt * fps
     with atomic_path(path, create=False) as tmp:  # USD creates the layer itself
         stage = Usd.Stage.CreateNew(str(tmp))
         UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
-        stage.SetTimeCodesPerSecond(1.0 / motion.dt)
-        stage.SetFramesPerSecond(1.0 / motion.dt)
+        UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
+        stage.SetTimeCodesPerSecond(fps)
+        stage.SetFramesPerSecond(fps)
         stage.SetStartTimeCode(0)
-        stage.SetEndTimeCode(motion.n_frames - 1)
+        stage.SetEndTimeCode(float(times[-1]))
         root = UsdGeom.Xform.Define(stage, "/Flock")
         stage.SetDefaultPrim(root.GetPrim())
         instancer = UsdGeom.PointInstancer.Define(stage, "/Flock/Agents")
@@ -354,18 +378,35 @@ def write_usd(motion: Motion, path) -> None:
         body.CreateRadiusAttr(0.15)
         instancer.CreatePrototypesRel().SetTargets([body.GetPath()])
         instancer.CreateProtoIndicesAttr(Vt.IntArray([0] * motion.n_agents))
+        instancer.CreateIdsAttr(Vt.Int64Array(list(range(motion.n_agents))))
         points, turns = instancer.CreatePositionsAttr(), instancer.CreateOrientationsAttr()
-        for frame in range(motion.n_frames):
-            time = Usd.TimeCode(frame)
+        speeds, spins = instancer.CreateVelocitiesAttr(), instancer.CreateAngularVelocitiesAttr()
+        for frame, when in enumerate(times):
+            time = Usd.TimeCode(float(when))
             points.Set(Vt.Vec3fArray.FromNumpy(positions[frame].astype(np.float32)), time)
-            quaternions = _facing(velocities[frame])
+            speeds.Set(Vt.Vec3fArray.FromNumpy(velocities[frame].astype(np.float32)), time)
+            spins.Set(Vt.Vec3fArray.FromNumpy(turning[frame].astype(np.float32)), time)
             turns.Set(
                 Vt.QuathArray(
-                    [Gf.Quath(float(w), Gf.Vec3h(float(x), float(y), float(z))) for w, x, y, z in quaternions]
+                    [Gf.Quath(float(w), Gf.Vec3h(float(x), float(y), float(z))) for w, x, y, z in quaternions[frame]]
                 ),
                 time,
             )
         stage.GetRootLayer().Save()
+
+
+def _angular_velocities(velocities: np.ndarray, dt: float) -> np.ndarray:
+    """Degrees per second (USD's unit) about the axis turning each agent's heading at frame t
+    onto its heading at t + 1 (zero at the last frame and for agents at rest), shape (T, N, 3)."""
+    speed = np.linalg.norm(velocities, axis=2, keepdims=True)
+    heading = np.divide(velocities, speed, out=np.zeros_like(velocities), where=speed > 1e-12)
+    turning = np.zeros_like(velocities)
+    axis = np.cross(heading[:-1], heading[1:])
+    sine = np.linalg.norm(axis, axis=2, keepdims=True)
+    angle = np.arctan2(sine, np.sum(heading[:-1] * heading[1:], axis=2, keepdims=True))
+    unit = np.divide(axis, sine, out=np.zeros_like(axis), where=sine > 1e-12)
+    turning[:-1] = unit * np.degrees(angle) / dt
+    return turning
 
 
 def _facing(velocities: np.ndarray) -> np.ndarray:

@@ -1,4 +1,6 @@
 import json
+import os
+import subprocess
 
 import numpy as np
 import pytest
@@ -25,24 +27,30 @@ def test_json_holds_the_positions(motion, tmp_path):
     np.testing.assert_array_equal(np.array(document["positions"]), motion.positions)
 
 
-@pytest.mark.parametrize("suffix", [".usda", ".usdc"])
-def test_usd_has_a_time_sample_per_frame_facing_the_velocity(motion, tmp_path, suffix):
+@pytest.mark.parametrize("suffix, fps", [(".usda", None), (".usdc", 24.0), (".usda", 30.0)])
+def test_usd_has_a_time_sample_per_frame_facing_the_velocity(motion, tmp_path, suffix, fps):
     pytest.importorskip("pxr", reason="usd-core (flockkit[usd]) is not installed")
     from pxr import Gf, Usd, UsdGeom
 
     path = tmp_path / f"flock{suffix}"
-    flockkit.io.export(motion, path)
+    flockkit.io.export(motion, path, fps=fps, meters_per_unit=0.5)
     stage = Usd.Stage.Open(str(path))
-    assert stage.GetTimeCodesPerSecond() == pytest.approx(1 / motion.dt)
-    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z
-    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == (0, motion.n_frames - 1)
+    rate = 1 / motion.dt if fps is None else fps
+    assert stage.GetTimeCodesPerSecond() == pytest.approx(rate) and stage.GetFramesPerSecond() == pytest.approx(rate)
+    assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z and UsdGeom.GetStageMetersPerUnit(stage) == 0.5
+    times = np.arange(motion.n_frames) * motion.dt * rate
+    assert (stage.GetStartTimeCode(), stage.GetEndTimeCode()) == pytest.approx((0, times[-1]))
     instancer = UsdGeom.PointInstancer(stage.GetPrimAtPath("/Flock/Agents"))
-    assert instancer.GetPositionsAttr().GetTimeSamples() == list(range(motion.n_frames))
+    np.testing.assert_allclose(instancer.GetPositionsAttr().GetTimeSamples(), times)
+    assert list(instancer.GetIdsAttr().Get()) == list(range(motion.n_agents))
     velocities = motion.velocities()
     for frame in (0, 11, motion.n_frames - 1):
-        points = np.array(instancer.GetPositionsAttr().Get(Usd.TimeCode(frame)))
+        time = Usd.TimeCode(float(times[frame]))
+        points = np.array(instancer.GetPositionsAttr().Get(time))
         np.testing.assert_allclose(points[:, : motion.dims], motion.positions[frame], atol=1e-5)
-        for agent, q in enumerate(instancer.GetOrientationsAttr().Get(Usd.TimeCode(frame))):
+        speeds = np.array(instancer.GetVelocitiesAttr().Get(time))
+        np.testing.assert_allclose(speeds[:, : motion.dims], velocities[frame], rtol=1e-6, atol=1e-5)
+        for agent, q in enumerate(instancer.GetOrientationsAttr().Get(time)):
             facing = np.array(Gf.Rotation(Gf.Quatd(q)).TransformDir(Gf.Vec3d(1, 0, 0)))
             heading = np.zeros(3)
             heading[: motion.dims] = velocities[frame, agent] / np.linalg.norm(velocities[frame, agent])
@@ -64,3 +72,61 @@ def test_usd_without_usd_core_names_the_extra(tmp_path, monkeypatch):
     with pytest.raises(flockkit.errors.MissingDependencyError, match=r"flockkit\[usd\]"):
         flockkit.io.export(motion, tmp_path / "flock.usdc")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_usd_angular_velocities_turn_each_heading_onto_the_next(motion, tmp_path):
+    pytest.importorskip("pxr", reason="usd-core (flockkit[usd]) is not installed")
+    from pxr import Usd, UsdGeom
+    from scipy.spatial.transform import Rotation
+
+    flockkit.io.export(motion, tmp_path / "flock.usdc", fps=None)
+    stage = Usd.Stage.Open(str(tmp_path / "flock.usdc"))
+    instancer = UsdGeom.PointInstancer(stage.GetPrimAtPath("/Flock/Agents"))
+    velocities = np.zeros((motion.n_frames, motion.n_agents, 3))
+    velocities[..., : motion.dims] = motion.velocities()
+    heading = velocities / np.linalg.norm(velocities, axis=2, keepdims=True)
+    for frame in (3, 20):
+        spin = np.radians(np.array(instancer.GetAngularVelocitiesAttr().Get(Usd.TimeCode(frame)))) * motion.dt
+        turned = Rotation.from_rotvec(spin).apply(heading[frame])
+        np.testing.assert_allclose(turned, heading[frame + 1], atol=1e-5)
+
+
+BLENDER_PYTHON = os.environ.get("FLOCKKIT_BPY_PYTHON")  # a Python with Blender's bpy module (pip install bpy)
+BLENDER_CHECK = """
+import json, sys, bpy
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.wm.usd_import(filepath=sys.argv[1], relative_path=False)
+scene, agents = bpy.context.scene, bpy.data.objects["Agents"]
+found = {"fps": scene.render.fps / scene.render.fps_base, "scale": list(agents.scale), "frames": {}}
+for frame in map(int, sys.argv[2:]):
+    scene.frame_set(frame)
+    graph = bpy.context.evaluated_depsgraph_get()
+    found["frames"][frame] = [
+        [list(i.matrix_world.translation), list(i.matrix_world.to_3x3().col[0])]
+        for i in graph.object_instances if i.is_instance and i.parent and i.parent.name == "Agents"
+    ]
+print("RESULT" + json.dumps(found))
+"""
+
+
+@pytest.mark.skipif(
+    not BLENDER_PYTHON, reason="set FLOCKKIT_BPY_PYTHON to a Python with bpy (pip install bpy) to import in Blender"
+)
+def test_blender_imports_the_usd_at_the_right_size_speed_and_facing(motion, tmp_path):
+    path = tmp_path / "flock.usdc"
+    flockkit.io.export(motion, path)  # the default 24 fps time line: Blender's own
+    seconds = (0.0, 1.0, 2.5)
+    frames = [round(24 * t) for t in seconds]
+    done = subprocess.run([BLENDER_PYTHON, "-c", BLENDER_CHECK, str(path), *map(str, frames)], capture_output=True,
+                          text=True, timeout=300)  # fmt: skip
+    found = json.loads(done.stdout.split("RESULT", 1)[1])
+    assert found["fps"] == 24 and found["scale"] == [1.0, 1.0, 1.0]  # metersPerUnit = 1: no 0.01 scale
+    velocities = motion.velocities()
+    for t, frame in zip(seconds, frames):
+        placed = sorted(found["frames"][str(frame)], key=lambda p: p[0])  # Blender orders instances its own way
+        source = round(t / motion.dt)
+        expected = sorted(range(motion.n_agents), key=lambda a: list(motion.positions[source, a]) + [0.0])
+        for (position, facing), agent in zip(placed, expected):
+            np.testing.assert_allclose(position[: motion.dims], motion.positions[source, agent], atol=1e-4)
+            heading = velocities[source, agent] / np.linalg.norm(velocities[source, agent])
+            np.testing.assert_allclose(np.array(facing[: motion.dims]) / np.linalg.norm(facing), heading, atol=3e-3)
