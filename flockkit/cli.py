@@ -434,7 +434,7 @@ def _render_arguments(parser) -> None:
 
 def _export_arguments(parser) -> None:
     parser.add_argument("motion", help="motion file (.npz)")
-    _output(parser, "out.csv | out.json | out.usda | out.usdc")
+    _output(parser, "out.csv | out.json | out.glb | out.gltf | out.usda | out.usdc")
     parser.add_argument("--fps", type=float, help="USD: frame rate of the file's time line (default 24)")
     parser.add_argument("--units", type=float, help="USD: meters per flockkit length unit (default 1)")
 
@@ -485,7 +485,7 @@ COMMANDS = {
         _cmd_render,
     ),
     "export": (
-        "write a motion as CSV, JSON or USD (.usda/.usdc, needs flockkit[usd])",
+        "write a motion as CSV, JSON, glTF (.glb/.gltf) or USD (.usda/.usdc, needs flockkit[usd])",
         _export_arguments,
         _cmd_export,
     ),

@@ -14,6 +14,7 @@ of the recording; a longer run raises ValidationError naming the file, the agent
 from __future__ import annotations
 
 import csv
+import json
 import math
 from pathlib import Path
 
@@ -274,13 +275,14 @@ def read_npy(path, *, dt=None, fps=None, max_gap: int = DEFAULT_MAX_GAP, agents=
 
 # -- writing: exports for animation tools ------------------------------------------------------
 
-EXPORT_SUFFIXES = (".csv", ".json", ".usda", ".usdc")
+EXPORT_SUFFIXES = (".csv", ".json", ".usda", ".usdc", ".glb", ".gltf")
 
 
 def export(motion: Motion, path, **options) -> Path:
     """Write `motion` in the format its suffix names: .csv (long format: frame, agent, x, y[, z],
-    readable by :func:`read_long`), .json, or .usda / .usdc (Universal Scene Description, needs
-    the ``usd`` extra; `options` ``fps`` and ``meters_per_unit`` as for :func:`write_usd`).
+    readable by :func:`read_long`), .json, .glb / .gltf (glTF 2.0, for game engines and the web),
+    or .usda / .usdc (Universal Scene Description, needs the ``usd`` extra; `options` ``fps`` and
+    ``meters_per_unit`` as for :func:`write_usd`).
     Atomic: an interrupted export leaves nothing behind."""
     if not isinstance(motion, Motion):
         raise ValidationError(f"export needs a flockkit.Motion; got {type(motion).__name__}")
@@ -290,10 +292,10 @@ def export(motion: Motion, path, **options) -> Path:
         raise ValidationError(
             f"{path}: unknown export extension {path.suffix!r}; expected {', '.join(EXPORT_SUFFIXES)}"
         )
-    if suffix in (".csv", ".json"):
+    if suffix in (".csv", ".json", ".glb", ".gltf"):
         if options:
             raise ValidationError(f"{path}: options {', '.join(options)} are for USD exports")
-        (write_csv if suffix == ".csv" else write_json)(motion, path)
+        {".csv": write_csv, ".json": write_json}.get(suffix, write_gltf)(motion, path)
     else:
         write_usd(motion, path, **options)
     return path
@@ -312,7 +314,6 @@ def write_csv(motion: Motion, path) -> None:
 def write_json(motion: Motion, path) -> None:
     """{"format": "flockkit-motion", "version": 1, "dt", "frames", "agents", "dims", "positions"}
     with positions nested frame, agent, coordinate."""
-    import json
 
     document = {
         "format": "flockkit-motion",
@@ -417,3 +418,88 @@ def _facing(velocities: np.ndarray) -> np.ndarray:
     backwards = q[:, 0] < 1e-9
     q[backwards] = [0.0, 0.0, 0.0, 1.0]  # facing -x: half a turn about z
     return q / np.linalg.norm(q, axis=1, keepdims=True)
+
+
+# glTF is y up and flockkit (like USD here) z up: (x, y, z) -> (x, z, -y), a quarter turn about x
+_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+# the shared agent mesh: an arrow head 0.5 long and 0.3 wide pointing along +x (as the USD cone)
+_ARROW = np.array([[0.25, 0, 0], [-0.25, 0.15, 0], [-0.25, -0.075, 0.13], [-0.25, -0.075, -0.13]], dtype=np.float32)
+_ARROW_FACES = np.array([0, 1, 2, 0, 2, 3, 0, 3, 1, 1, 3, 2], dtype=np.uint16)
+_GLTF_FLOAT, _GLTF_UNSIGNED_SHORT = 5126, 5123  # glTF componentType codes
+
+
+def write_gltf(motion: Motion, path) -> None:
+    """A glTF 2.0 file (.glb binary, or .gltf with its buffer embedded as a data URI) that game
+    engines, three.js and Blender read: a node "Flock" with one child node per agent ("Agent k",
+    k the agent index) sharing a small arrow mesh that points along +x, and one animation,
+    "flock", with a translation and a rotation channel per agent (linear, one key per frame at
+    t = frame * dt seconds, the rotation facing the velocity). glTF is y up in meters: flockkit's
+    (x, y, z) becomes (x, z, -y), so a 2D motion lies in the ground plane y = 0."""
+    import base64
+    import struct
+
+    path = Path(path)
+    positions = np.zeros((motion.n_frames, motion.n_agents, 3))
+    positions[..., : motion.dims] = motion.positions
+    velocities = np.zeros_like(positions)
+    velocities[..., : motion.dims] = motion.velocities()
+    quaternions = _facing(velocities.reshape(-1, 3)).reshape(motion.n_frames, motion.n_agents, 4)  # w, x, y, z
+    rotations = np.concatenate([quaternions[..., 1:] @ _Y_UP.T, quaternions[..., :1]], axis=2)  # x, y, z, w
+    translations = positions @ _Y_UP.T
+    times = (np.arange(motion.n_frames) * motion.dt).astype(np.float32)
+    buffer, views, accessors = bytearray(), [], []
+
+    def accessor(array, kind, component=_GLTF_FLOAT, bounds=False, target=None):
+        array = np.ascontiguousarray(array)
+        buffer.extend(b"\0" * (-len(buffer) % 4))
+        views.append({"buffer": 0, "byteOffset": len(buffer), "byteLength": array.nbytes})
+        if target is not None:
+            views[-1]["target"] = target
+        buffer.extend(array.tobytes())
+        entry = {"bufferView": len(views) - 1, "componentType": component, "count": len(array), "type": kind}
+        if bounds:
+            flat = array.reshape(len(array), -1)
+            entry["min"], entry["max"] = flat.min(axis=0).tolist(), flat.max(axis=0).tolist()
+        accessors.append(entry)
+        return len(accessors) - 1
+
+    mesh = {
+        "name": "agent",
+        "primitives": [{"attributes": {"POSITION": accessor(_ARROW, "VEC3", bounds=True, target=34962)},
+                        "indices": accessor(_ARROW_FACES, "SCALAR", _GLTF_UNSIGNED_SHORT, target=34963)}],
+    }  # fmt: skip
+    clock = accessor(times, "SCALAR", bounds=True)  # every sampler shares the key times
+    nodes = [{"name": "Flock", "children": list(range(1, motion.n_agents + 1))}]
+    samplers, channels = [], []
+    for agent in range(motion.n_agents):
+        nodes.append({
+            "name": f"Agent {agent}", "mesh": 0,
+            "translation": translations[0, agent].tolist(), "rotation": rotations[0, agent].tolist(),
+        })  # fmt: skip
+        for target, values, kind in (("translation", translations, "VEC3"), ("rotation", rotations, "VEC4")):
+            samplers.append({"input": clock, "output": accessor(values[:, agent].astype(np.float32), kind)})
+            channels.append({"sampler": len(samplers) - 1, "target": {"node": agent + 1, "path": target}})
+    buffer.extend(b"\0" * (-len(buffer) % 4))
+    document = {
+        "asset": {"version": "2.0", "generator": f"flockkit {_version()}"},
+        "scene": 0, "scenes": [{"name": "flock", "nodes": [0]}], "nodes": nodes, "meshes": [mesh],
+        "animations": [{"name": "flock", "samplers": samplers, "channels": channels}],
+        "accessors": accessors, "bufferViews": views, "buffers": [{"byteLength": len(buffer)}],
+    }  # fmt: skip
+    with atomic_path(path) as tmp, open(tmp, "wb") as handle:
+        if path.suffix.lower() == ".gltf":
+            data = base64.b64encode(bytes(buffer)).decode("ascii")
+            document["buffers"][0]["uri"] = f"data:application/octet-stream;base64,{data}"
+            handle.write(json.dumps(document).encode("utf-8"))
+            return
+        text = json.dumps(document, separators=(",", ":")).encode("utf-8")
+        text += b" " * (-len(text) % 4)
+        handle.write(struct.pack("<4sII", b"glTF", 2, 12 + 8 + len(text) + 8 + len(buffer)))
+        handle.write(struct.pack("<I4s", len(text), b"JSON") + text)
+        handle.write(struct.pack("<I4s", len(buffer), b"BIN\0") + bytes(buffer))
+
+
+def _version() -> str:
+    from . import __version__
+
+    return __version__

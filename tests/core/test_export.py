@@ -130,3 +130,93 @@ def test_blender_imports_the_usd_at_the_right_size_speed_and_facing(motion, tmp_
             np.testing.assert_allclose(position[: motion.dims], motion.positions[source, agent], atol=1e-4)
             heading = velocities[source, agent] / np.linalg.norm(velocities[source, agent])
             np.testing.assert_allclose(np.array(facing[: motion.dims]) / np.linalg.norm(facing), heading, atol=3e-3)
+
+
+def _y_up(points):
+    """flockkit's z-up (x, y, z) in glTF's y-up frame: (x, z, -y)."""
+    full = np.zeros((*points.shape[:-1], 3))
+    full[..., : points.shape[-1]] = points
+    return np.stack([full[..., 0], full[..., 2], -full[..., 1]], axis=-1)
+
+
+@pytest.mark.parametrize("suffix", [".glb", ".gltf"])
+def test_gltf_has_a_node_per_agent_animated_along_the_motion(motion, tmp_path, suffix):
+    pygltflib = pytest.importorskip("pygltflib", reason="the glTF reader pygltflib (test extra) is not installed")
+    from scipy.spatial.transform import Rotation
+
+    path = tmp_path / f"flock{suffix}"
+    flockkit.io.export(motion, path)
+    document = pygltflib.GLTF2().load(str(path))
+    blob = document.binary_blob() if suffix == ".glb" else document.decode_data_uri(document.buffers[0].uri)
+
+    def read(index, width):
+        accessor = document.accessors[index]
+        view = document.bufferViews[accessor.bufferView]
+        data = np.frombuffer(blob, dtype=np.float32, count=accessor.count * width, offset=view.byteOffset)
+        return data.reshape(accessor.count, width) if width > 1 else data
+
+    agents = [node for node in document.nodes if node.name.startswith("Agent ")]
+    assert len(agents) == motion.n_agents and all(node.mesh == 0 for node in agents)
+    (animation,) = document.animations
+    assert len(animation.channels) == 2 * motion.n_agents
+    velocities = _y_up(motion.velocities())
+    for channel in animation.channels:
+        sampler = animation.samplers[channel.sampler]
+        np.testing.assert_allclose(read(sampler.input, 1), np.arange(motion.n_frames) * motion.dt, rtol=1e-6)
+        agent = int(document.nodes[channel.target.node].name.split()[1])
+        if channel.target.path == "translation":
+            np.testing.assert_allclose(read(sampler.output, 3), _y_up(motion.positions[:, agent]), atol=1e-5)
+        else:
+            facing = Rotation.from_quat(read(sampler.output, 4)).apply([1.0, 0.0, 0.0])  # glTF quaternions: x, y, z, w
+            heading = velocities[:, agent] / np.linalg.norm(velocities[:, agent], axis=1, keepdims=True)
+            np.testing.assert_allclose(facing, heading, atol=1e-5)
+
+
+VALIDATOR = os.environ.get("FLOCKKIT_GLTF_VALIDATOR")  # a folder with node_modules/gltf-validator (npm install)
+VALIDATE = """
+const validator = require(process.argv[1] + "/node_modules/gltf-validator");
+const data = new Uint8Array(require("fs").readFileSync(process.argv[2]));
+validator.validateBytes(data).then((r) => console.log(JSON.stringify(r.issues)));
+"""
+
+
+@pytest.mark.skipif(not VALIDATOR, reason="set FLOCKKIT_GLTF_VALIDATOR to a folder where npm installed gltf-validator")
+@pytest.mark.parametrize("suffix", [".glb", ".gltf"])
+def test_the_khronos_validator_finds_nothing_to_say(motion, tmp_path, suffix):
+    flockkit.io.export(motion, tmp_path / f"flock{suffix}")
+    done = subprocess.run(["node", "-e", VALIDATE, VALIDATOR, str(tmp_path / f"flock{suffix}")], capture_output=True,
+                          text=True, timeout=120)  # fmt: skip
+    issues = json.loads(done.stdout)
+    assert (issues["numErrors"], issues["numWarnings"], issues["numInfos"], issues["numHints"]) == (0, 0, 0, 0), issues
+
+
+BLENDER_GLTF = """
+import json, sys, bpy
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.import_scene.gltf(filepath=sys.argv[1])
+scene, found = bpy.context.scene, {}
+agents = sorted((o for o in bpy.data.objects if o.name.startswith("Agent ")), key=lambda o: int(o.name.split()[1]))
+for frame in map(int, sys.argv[2:]):
+    scene.frame_set(frame)
+    found[frame] = [[list(o.matrix_world.translation), list(o.matrix_world.to_3x3().col[0])] for o in agents]
+print("RESULT" + json.dumps({"fps": scene.render.fps / scene.render.fps_base, "frames": found}))
+"""
+
+
+@pytest.mark.skipif(
+    not BLENDER_PYTHON, reason="set FLOCKKIT_BPY_PYTHON to a Python with bpy (pip install bpy) to import in Blender"
+)
+def test_blenders_gltf_importer_places_and_turns_every_agent(motion, tmp_path):
+    flockkit.io.export(motion, tmp_path / "flock.glb")
+    seconds = (0.0, 1.0, 2.5)
+    frames = [str(round(24 * t)) for t in seconds]
+    argv = [BLENDER_PYTHON, "-c", BLENDER_GLTF, str(tmp_path / "flock.glb"), *frames]
+    done = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+    found = json.loads(done.stdout.split("RESULT", 1)[1])
+    velocities = motion.velocities()
+    for t in seconds:
+        source = round(t / motion.dt)
+        for agent, (position, facing) in enumerate(found["frames"][str(round(24 * t))]):  # Blender is z up again
+            np.testing.assert_allclose(position[: motion.dims], motion.positions[source, agent], atol=1e-4)
+            heading = velocities[source, agent] / np.linalg.norm(velocities[source, agent])
+            np.testing.assert_allclose(np.array(facing[: motion.dims]) / np.linalg.norm(facing), heading, atol=1e-3)
