@@ -318,7 +318,10 @@ def _cmd_render(args) -> int:
     from . import viz
 
     if output.suffix.lower() in ANIMATION_SUFFIXES:
-        viz.animate(motion, output, problem=problem, progress=_progress(args))
+        size = _size(args.size)
+        viz.animate(
+            motion, output, problem=problem, fps=args.fps, size=size, trail=args.trail, progress=_progress(args)
+        )
     else:
         viz.plot_motion(motion, output, problem=problem)
     print(f"wrote {output}")
@@ -425,8 +428,19 @@ def _demo_arguments(parser) -> None:
     _quiet(parser)
 
 
+def _size(text: str) -> tuple[int, int]:
+    """--size WIDTHxHEIGHT in pixels."""
+    width, sep, height = text.lower().partition("x")
+    if not (sep and width.isdigit() and height.isdigit()):
+        raise ValidationError(f"--size {text!r}: expected WIDTHxHEIGHT in pixels, e.g. 800x600")
+    return int(width), int(height)
+
+
 def _render_arguments(parser) -> None:
     parser.add_argument("motion", help="motion file (.npz)")
+    parser.add_argument("--fps", type=float, help="animation frames per second (default: real time, at most 25)")
+    parser.add_argument("--size", default="600x600", help="animation size WIDTHxHEIGHT in pixels (default 600x600)")
+    parser.add_argument("--trail", type=float, default=1.0, help="seconds of path behind each agent (default 1)")
     _output(parser, "out.png | out.pdf | out.svg | out.gif | out.mp4 (needs flockkit[viz])")
     parser.add_argument("--scenario", help="also draw this scenario's constraints and obstacles (.toml)")
     _quiet(parser)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ from ._progress import progress_bar
 from .constraints import ComConstraint, PointConstraint, ShapeConstraint
 from .errors import MissingDependencyError, ValidationError
 from .motion import Motion
+from .validate import integer, number
 
 __all__ = [
     "plot_motion",
@@ -123,46 +125,79 @@ def _save(figure, path: Path) -> None:
         plt.close(figure)
 
 
-def animate(motion: Motion, path, *, problem=None, obstacles=(), regions=(), fps=None, max_frames=400, progress=False):
-    """An animation of `motion`: agents as arrows facing their velocity, with a short trail, the
-    scene as in plot_motion. ``.gif`` through Pillow; ``.mp4`` through ffmpeg when it is on the
-    PATH. At most `max_frames` frames (evenly subsampled); `fps` defaults to real time.
-    `progress` shows a bar over the frames."""
+# GIF players and browsers show at most about 50 frames a second, and many fewer smoothly; above
+# this rate frames are skipped evenly instead (our choice: 25, the PAL rate).
+MAX_FPS = 25.0
+# Arrow length as a share of the scene's extent: big enough to show a heading at 600 pixels (a
+# 20-agent flock spread over 20 units gets arrows of 1 unit, 30 pixels), whatever the units.
+ARROW = 0.05
+
+
+def animate(
+    motion: Motion,
+    path,
+    *,
+    problem=None,
+    obstacles=(),
+    regions=(),
+    fps=None,
+    size=(600, 600),
+    trail=1.0,
+    max_frames=None,
+    progress=False,
+):
+    """An animation of `motion`: agents as arrows facing their velocity, each with a trail, the
+    scene as in plot_motion (with a `problem`, its point-constrained agents in red). ``.gif``
+    through Pillow; ``.mp4`` through ffmpeg when it is on the PATH.
+
+    It plays in real time by default: `fps` frames per second of video, default 1 / dt capped at
+    MAX_FPS (25) by showing every k-th frame, so that k * dt seconds pass per video frame. `size`
+    is (width, height) in pixels, `trail` the seconds of path drawn behind each agent (0: none),
+    `max_frames` an optional cap on the frames drawn (frames are then skipped evenly and the
+    animation plays faster). Arrows are ARROW (5%) of the scene's extent long, whatever its units
+    (a capture in pixels too). `progress` shows a bar over the frames."""
     if not isinstance(motion, Motion):
         raise ValidationError(f"animate needs a flockkit.Motion; got {type(motion).__name__}")
     path = _check_picture_path(path, ANIMATION_SUFFIXES, "animation")
     suffix = path.suffix.lower()
+    fps = None if fps is None else number(fps, "animate: fps", minimum=0, strict=True)
+    width, height = (integer(v, "animate: size", minimum=16) for v in _pair(size))
+    trail = number(trail, "animate: trail (seconds)", minimum=0)
     plt = _pyplot()
     from matplotlib import animation
 
     if suffix == ".mp4" and not animation.FFMpegWriter.isAvailable():
         raise MissingDependencyError("MP4 animations need ffmpeg on the PATH; write a .gif instead")
-    step = max(1, int(np.ceil(motion.n_frames / max_frames)))
+    step = max(1, math.ceil((1.0 / motion.dt) / (fps or MAX_FPS) - 1e-9))
+    if max_frames is not None:
+        step = max(step, math.ceil(motion.n_frames / integer(max_frames, "animate: max_frames", minimum=1)))
     frames = np.arange(0, motion.n_frames, step)
+    rate = fps or 1.0 / (motion.dt * step)
     xy, velocity = motion.positions[..., :2], motion.velocities()[..., :2]
     speed = np.linalg.norm(velocity, axis=2, keepdims=True)
     heading = np.divide(velocity, speed, out=np.zeros_like(velocity), where=speed > 1e-12)
-    figure = plt.figure(figsize=(6, 6))
+    figure = plt.figure(figsize=(width / 100, height / 100), dpi=100)
     ax = figure.add_subplot()
     _draw_scene(ax, problem, obstacles, regions)
-    _fit_view(ax, xy)
-    trails = [ax.plot([], [], color="0.6", linewidth=0.6)[0] for _ in range(motion.n_agents)]
+    extent = _fit_view(ax, xy)
+    colors = _roles(motion.n_agents, problem)
+    trails = [ax.plot([], [], color=c, alpha=0.35, linewidth=0.8)[0] for c in colors]
     arrows = ax.quiver(
-        xy[0, :, 0], xy[0, :, 1], heading[0, :, 0], heading[0, :, 1], angles="xy", scale_units="xy", scale=2.0,
-        width=0.006, headwidth=4, color="black", zorder=4,
+        xy[0, :, 0], xy[0, :, 1], heading[0, :, 0], heading[0, :, 1], angles="xy", scale_units="xy",
+        scale=1.0 / (ARROW * extent), units="dots", width=2.5, headwidth=3.5, headlength=4, color=colors, zorder=4,
     )  # fmt: skip
     label = ax.set_title("")
+    behind = round(trail / motion.dt)
 
     def draw(frame):
         arrows.set_offsets(xy[frame])
         arrows.set_UVC(heading[frame, :, 0], heading[frame, :, 1])
-        first = max(0, frame - 10)
-        for agent, trail in enumerate(trails):
-            trail.set_data(xy[first : frame + 1, agent, 0], xy[first : frame + 1, agent, 1])
+        first = max(0, frame - behind)
+        for agent, line in enumerate(trails):
+            line.set_data(xy[first : frame + 1, agent, 0], xy[first : frame + 1, agent, 1])
         label.set_text(f"t = {frame * motion.dt:.1f} s")
         return [arrows, label, *trails]
 
-    rate = fps or max(1.0, 1.0 / (motion.dt * step))
     writer = animation.PillowWriter(fps=rate) if suffix == ".gif" else animation.FFMpegWriter(fps=rate)
     try:
         _save_animation(animation.FuncAnimation(figure, draw, frames=frames, blit=False), path, writer, progress)
@@ -171,13 +206,30 @@ def animate(motion: Motion, path, *, problem=None, obstacles=(), regions=(), fps
     return path
 
 
-def _fit_view(ax, xy) -> None:
-    """Axis limits holding every position of (T, N, 2) `xy` with a margin, equal scales."""
+def _pair(size):
+    try:
+        width, height = size
+    except (TypeError, ValueError):
+        raise ValidationError(f"animate: size must be (width, height) in pixels; got {size!r}") from None
+    return width, height
+
+
+def _roles(n_agents: int, problem) -> list:
+    """A colour per agent: red for point-constrained agents of `problem`, blue for the others."""
+    pinned = set() if problem is None else {c.agent for c in problem.constraints if isinstance(c, PointConstraint)}
+    return ["tab:red" if agent in pinned else "tab:blue" for agent in range(n_agents)]
+
+
+def _fit_view(ax, xy) -> float:
+    """Axis limits holding every position of (T, N, 2) `xy` with a margin, equal scales; returns
+    the extent (the larger side) of the view in data units."""
     low, high = xy.reshape(-1, 2).min(axis=0), xy.reshape(-1, 2).max(axis=0)
-    margin = 0.05 * max(float(np.max(high - low)), 1.0) + 0.5
+    extent = max(float(np.max(high - low)), 1e-9)
+    margin = 0.06 * extent + 1e-9
     ax.set_xlim(low[0] - margin, high[0] + margin)
     ax.set_ylim(low[1] - margin, high[1] + margin)
     ax.set_aspect("equal")
+    return extent + 2 * margin
 
 
 def _save_animation(movie, path, writer, progress: bool) -> None:

@@ -22,13 +22,36 @@ def solved():
     return problem, flockkit.solve(problem, iterations=15, seed=1)
 
 
-def test_a_gif_has_one_frame_per_motion_frame(tmp_path, solved):
+def test_a_gif_plays_in_real_time_at_its_size(tmp_path, solved):
     from PIL import Image
 
     problem, solution = solved
-    viz.animate(solution.motion, tmp_path / "flock.gif", problem=problem)
-    with Image.open(tmp_path / "flock.gif") as image:
-        assert image.n_frames == solution.motion.n_frames
+    viz.animate(solution.motion, tmp_path / "flock.gif", problem=problem, size=(320, 240))
+    with Image.open(tmp_path / "flock.gif") as image:  # 10 Hz: every frame, 100 ms each
+        assert image.n_frames == solution.motion.n_frames and image.size == (320, 240)
+        assert image.info["duration"] == 100
+    fast = flockkit.Motion(positions=np.cumsum(np.ones((90, 3, 2)), axis=0), dt=1 / 30)
+    viz.animate(fast, tmp_path / "fast.gif", trail=0)
+    with Image.open(tmp_path / "fast.gif") as image:  # 30 Hz: every other frame, 1/15 s each, 3 s in all
+        assert image.n_frames == 45 and image.info["duration"] in (60, 70)  # GIF keeps hundredths of a second
+    viz.animate(fast, tmp_path / "slow.gif", fps=5)
+    with Image.open(tmp_path / "slow.gif") as image:  # 5 fps asked: every 6th frame, still real time
+        assert image.n_frames == 15 and image.info["duration"] == 200
+
+
+def test_arrows_scale_with_the_scene_whatever_its_units(tmp_path):
+    from PIL import Image
+
+    base = flockkit.simulate(n_agents=5, steps=20, seed=2)
+    pictures = []
+    for scale in (1.0, 500.0):  # the same flock in meters and in pixels
+        motion = flockkit.Motion(positions=base.positions * scale, dt=base.dt)
+        viz.animate(motion, tmp_path / f"{scale}.gif", trail=0, size=(200, 200))
+        with Image.open(tmp_path / f"{scale}.gif") as image:
+            pictures.append(np.asarray(image.convert("RGB")).astype(int))
+    # the agents are blue; axes and labels (which differ with the units) are black
+    inked = [int(np.count_nonzero((p[..., 2] > p[..., 0] + 40) & (p[..., 2] > p[..., 1] + 10))) for p in pictures]
+    assert inked[0] > 40 and abs(inked[0] - inked[1]) <= 0.2 * inked[0]  # as visible in both units
 
 
 def test_pictures_are_pngs(tmp_path, solved):
