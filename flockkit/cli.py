@@ -581,11 +581,17 @@ def _line(message) -> str:
 
 
 def _stop_workers() -> None:
-    """Stop the joblib worker processes a command started, rather than leave them idling."""
-    if "joblib.externals.loky" in sys.modules:
-        from joblib.externals.loky import get_reusable_executor
+    """Stop the worker processes a command started (joblib's loky workers idle for minutes
+    otherwise), however far their pool got: a SIGTERM may catch it half made."""
+    import multiprocessing
 
-        get_reusable_executor().shutdown(wait=True, kill_workers=True)
+    children = multiprocessing.active_children()
+    for child in children:
+        with contextlib.suppress(Exception):  # best effort: the command's result stands
+            child.terminate()
+    for child in children:
+        with contextlib.suppress(Exception):
+            child.join(timeout=10)
 
 
 if __name__ == "__main__":
