@@ -7,7 +7,17 @@ convenience layer (``simulate``, ``build_graph``, ``walk``, ``solve``), rigid mo
 """
 
 from . import errors, io, parallel, rigid, validate
-from .constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, Problem, Region, ShapeConstraint
+from .constraints import (
+    Ball,
+    Box,
+    ComConstraint,
+    PointConstraint,
+    Polygon,
+    Problem,
+    Region,
+    ShapeConstraint,
+    fence,
+)
 from .convenience import build_graph, random_flock, simulate, walk
 from .graph import Clip, MotionGraph, Transition, Walk
 from .hookspecs import hookimpl
@@ -37,6 +47,7 @@ __all__ = [
     "Box",
     "Polygon",
     "Region",
+    "fence",
     "PointConstraint",
     "ComConstraint",
     "ShapeConstraint",

@@ -30,7 +30,8 @@ from .registry import KINDS, describe
 # of one of these names would clash with them
 _RESERVED = {
     "simulate": {"dt": "--dt", "n_agents": "--agents", "steps": "--steps", "seed": "--seed", "dims": "--dims",
-                 "behavior": "--behavior", "progress": "--quiet", "initial": None},
+                 "behavior": "--behavior", "progress": "--quiet", "initial": None,
+                 "obstacles": "--obstacle or --arena"},
     "build": {"metric": "--metric", "builder": "--builder", "threshold": "--threshold", "n_jobs": "--jobs",
               "seed": None, "progress": "--quiet", "metric_params": None, "motion": None},
     "walk": {"duration": "--duration", "seed": "--seed", "strategy": "--strategy", "region": "--region",
@@ -91,6 +92,7 @@ def _cmd_simulate(args) -> int:
         seed=args.seed,
         progress=not args.quiet and sys.stderr.isatty(),
         **_parameters(args.param, "simulate"),
+        **_obstacles(args),
     )
     motion.save(output)
     print(f"wrote {output}: {motion!r}")
@@ -100,6 +102,15 @@ def _cmd_simulate(args) -> int:
         plot_motion(motion, picture)
         print(f"wrote {picture}")
     return 0
+
+
+def _obstacles(args) -> dict:
+    """The obstacles --arena and --obstacle ask for, as behavior parameters (none: no parameter)."""
+    obstacles = [
+        *(flockkit.fence(args.arena) if args.arena is not None else ()),
+        *(_region(o, "--obstacle") for o in args.obstacle or ()),
+    ]
+    return {"obstacles": obstacles} if obstacles else {}
 
 
 def _cmd_check(args) -> int:
@@ -153,7 +164,7 @@ def _cmd_build(args) -> int:
     return 0
 
 
-def _region(text: str):
+def _region(text: str, option: str = "--region"):
     """box:x0,y0,x1,y1 (or 3D: 6 numbers), ball:cx,cy[,cz],r, polygon:x0,y0,x1,y1,..."""
     kind, sep, numbers = text.partition(":")
     try:
@@ -168,7 +179,7 @@ def _region(text: str):
     if kind == "polygon" and len(values) >= 6 and len(values) % 2 == 0:
         return flockkit.Polygon(vertices=[values[i : i + 2] for i in range(0, len(values), 2)])
     raise ValidationError(
-        f"--region {text!r}: expected box:x0,y0,x1,y1 (or 6 numbers in 3D), ball:cx,cy[,cz],r or "
+        f"{option} {text!r}: expected box:x0,y0,x1,y1 (or 6 numbers in 3D), ball:cx,cy[,cz],r or "
         "polygon:x0,y0,x1,y1,x2,y2,..."
     )
 
@@ -380,6 +391,10 @@ def _simulate_arguments(parser) -> None:
     parser.add_argument("--seed", type=int, default=None, help="random seed; the same seed gives the same motion")
     parser.add_argument("--behavior", default="boids", help="behavior model (default boids)")
     _param(parser, "behavior")
+    parser.add_argument("--arena", type=float, metavar="R", help="fence the flock in a ring of posts R from the origin")
+    parser.add_argument(
+        "--obstacle", action="append", metavar="SPEC", help="an obstacle (as --region of walk), repeatable"
+    )
     _output(parser, "motion file to write (.npz)")
     parser.add_argument("--picture", help="also draw the trajectories (.png, .pdf or .svg; needs flockkit[viz])")
     _quiet(parser)

@@ -11,6 +11,7 @@ so that callers never need to ask which kind of region they hold.
 from __future__ import annotations
 
 import functools
+import math
 
 import attrs
 import numpy as np
@@ -20,6 +21,7 @@ from .errors import ValidationError
 from .validate import integer, number
 
 __all__ = [
+    "fence",
     "Ball",
     "Box",
     "Polygon",
@@ -325,6 +327,19 @@ class Polygon(Region):
         on_edge = ~normal.any(axis=1)
         normal[on_edge] = edge_normals[nearest[on_edge]]
         return distance * sign, normal
+
+
+def fence(radius: float, *, posts: int | None = None, post_radius: float = 2.2) -> tuple[Ball, ...]:
+    """A closed ring of round posts (2D Balls) centred `radius` from the origin: an arena that
+    obstacle-avoiding behaviors (boids) turn inside, so a recording turns. `posts` defaults to as
+    many as keep neighbouring posts overlapping (centres 1.6 post radii apart)."""
+    radius = number(radius, "fence radius", minimum=0, strict=True, maximum=EXTENT)
+    post_radius = number(post_radius, "fence post_radius", minimum=0, strict=True, maximum=EXTENT)
+    if posts is None:
+        posts = max(3, math.ceil(2 * math.pi * radius / (1.6 * post_radius)))
+    posts = integer(posts, "fence posts", minimum=3)
+    angles = np.linspace(0.0, 2 * np.pi, posts, endpoint=False)
+    return tuple(Ball(center=[radius * np.cos(a), radius * np.sin(a)], radius=post_radius) for a in angles)
 
 
 # -- constraints (paper 004, section 3.2) ----------------------------------------------------

@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .constraints import Ball, Box, ComConstraint, PointConstraint, Problem
+from .constraints import Box, ComConstraint, PointConstraint, Problem
+from .constraints import fence as arena
 from .convenience import build_graph, simulate, walk
 from .errors import ValidationError
 from .synthesis import synthesize
@@ -114,9 +115,7 @@ def _data_driven(tour: _Tour) -> dict:
     """Paper 000: a recording in an arena, its graph, and 2 minutes synthesized inside a box."""
     from . import viz
 
-    fence = [
-        Ball(center=[15 * np.cos(a), 15 * np.sin(a)], radius=2.2) for a in np.linspace(0, 2 * np.pi, 24, endpoint=False)
-    ]
+    fence = arena(15.0, posts=24)
     with tour.step("simulate 60 s of 20 boids"):
         recording = simulate(n_agents=20, steps=600, seed=1, obstacles=fence)
     with tour.step("build the motion graph"):

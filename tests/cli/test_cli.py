@@ -285,3 +285,19 @@ def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data
     assert summary["synthesized"]["seconds"] >= 120 and summary["synthesized"]["center of mass in the box"]
     assert max(summary["come-from-behind"]["residuals"]) <= 0.3 and summary["sticklebacks"]["transitions"] >= 3
     assert str((tmp_path / "demo").resolve()) in out
+
+
+def test_simulate_in_an_arena_and_around_obstacles(capsys, tmp_path):
+    out = tmp_path / "arena.npz"
+    code, _, err = run(capsys, "simulate", "--agents", "12", "--steps", "400", "--seed", "2", "--arena", "8",
+                       "--obstacle", "ball:4,4,1", "-o", str(out), "--quiet")  # fmt: skip
+    assert code == 0, err
+    motion = flockkit.Motion.load(out)
+    assert np.linalg.norm(motion.positions, axis=2).max() < 8.0  # 40 s of flight, and the fence turned them back
+    obstacles = [*flockkit.fence(8.0), flockkit.Ball(center=[4, 4], radius=1)]
+    assert motion == flockkit.simulate(n_agents=12, steps=400, seed=2, obstacles=obstacles)
+    code, _, err = run(capsys, "simulate", "--agents", "3", "--steps", "3", "--obstacle", "ball:0,0", "-o", str(out))
+    assert code == 1 and "--obstacle 'ball:0,0'" in err
+    code, _, err = run(capsys, "simulate", "--agents", "3", "--steps", "3", "--behavior", "vicsek", "--arena", "5",
+                       "-o", str(tmp_path / "v.npz"))  # fmt: skip
+    assert code == 1 and "obstacles" in err and not (tmp_path / "v.npz").exists()
