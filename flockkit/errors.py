@@ -4,7 +4,7 @@ Every error flockkit raises on purpose derives from :class:`FlockkitError`. The 
 also derive from the built-in exception they refine, so callers may catch either::
 
     try:
-        flockkit.get("behavior", "boidz")
+        flockkit.get("behavior", "no-such-model")
     except KeyError:  # or flockkit.errors.UnknownPluginError, or FlockkitError
         ...
 

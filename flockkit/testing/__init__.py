@@ -2,10 +2,9 @@
 
 Run every check of a kind that applies to a component::
 
-    import flockkit
     from flockkit.testing import check_plugin
 
-    report = check_plugin("behavior", flockkit.get("behavior", "boids"))
+    report = check_plugin("behavior", MyModel())
     print(report.passed, report.skipped)
 
 or one pytest test per check::

@@ -12,9 +12,8 @@ import joblib
 import pytest
 
 import flockkit
-from flockkit.errors import MissingDependencyError
 
-from .harness import cli_outcome
+from .harness import cli_outcome, outcome
 
 distributed = pytest.importorskip(
     "distributed", reason="the Dask checks need the scale extra: pip install 'flockkit[scale]'"
@@ -101,11 +100,9 @@ def test_workers_that_cannot_import_flockkit_are_named_not_waited_for(work, sche
     )
     env = {**os.environ, "PYTHONPATH": str(tmp_path)}
     recording = work[0]
-    begin = time.perf_counter()
     with _start_workers(scheduler, env), joblib.parallel_config(backend="dask", n_jobs=-1):
-        with pytest.raises(MissingDependencyError, match="cannot import 'flockkit"):
-            flockkit.build_graph(recording, seed=0)
-    assert time.perf_counter() - begin < 60
+        kind, what = outcome(lambda: flockkit.build_graph(recording, seed=0), seconds=60)  # a hang counts as one
+    assert kind == "named" and "MissingDependencyError: a joblib worker cannot import 'flockkit" in what, what
 
 
 def test_ray_gives_the_same_bytes(work):
