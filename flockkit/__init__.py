@@ -6,7 +6,7 @@ convenience layer (``simulate``, ``build_graph``, ``walk``, ``solve``), rigid mo
 (``flockkit.rigid``) and the checks plugins share (``flockkit.validate``).
 """
 
-from . import errors, io, parallel, rigid, validate
+from . import errors, graph, io, parallel, rigid, validate
 from .constraints import (
     Ball,
     Box,
@@ -66,6 +66,7 @@ __all__ = [
     "Proposal",
     "random_flock",
     "errors",
+    "graph",
     "io",
     "parallel",
     "rigid",

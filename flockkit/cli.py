@@ -328,13 +328,21 @@ def _cmd_render(args) -> int:
         problem = load_scenario(args.scenario)[0]
     from . import viz
 
+    regions = [_region(text) for text in args.region or ()]
     if output.suffix.lower() in ANIMATION_SUFFIXES:
-        size = _size(args.size)
+        size = None if args.size is None else _size(args.size)
         viz.animate(
-            motion, output, problem=problem, fps=args.fps, size=size, trail=args.trail, progress=_progress(args)
+            motion,
+            output,
+            problem=problem,
+            regions=regions,
+            fps=args.fps,
+            size=size,
+            trail=args.trail,
+            progress=_progress(args),
         )
     else:
-        viz.plot_motion(motion, output, problem=problem)
+        viz.plot_motion(motion, output, problem=problem, regions=regions)
     print(f"wrote {output}")
     return 0
 
@@ -353,7 +361,9 @@ def _cmd_export(args) -> int:
 def _cmd_import(args) -> int:
     output = _require_suffix(args.output, (".npz",), "-o")
     reader = {"long": flockkit.io.read_long, "wide": flockkit.io.read_wide}[args.format]
-    motion = reader(args.table, dt=args.dt, fps=args.fps, dims=args.dims, max_gap=args.max_gap)
+    motion = reader(
+        args.table, dt=args.dt, fps=args.fps, dims=args.dims, max_gap=args.max_gap, image_height=args.image_height
+    )
     motion.save(output)
     print(f"wrote {output}: {motion!r}")
     return 0
@@ -454,10 +464,17 @@ def _size(text: str) -> tuple[int, int]:
 def _render_arguments(parser) -> None:
     parser.add_argument("motion", help="motion file (.npz)")
     parser.add_argument("--fps", type=float, help="animation frames per second (default: real time, at most 25)")
-    parser.add_argument("--size", default="600x600", help="animation size WIDTHxHEIGHT in pixels (default 600x600)")
+    parser.add_argument(
+        "--size", help="animation size WIDTHxHEIGHT in pixels (default: 600 on the scene's longer side, in proportion)"
+    )
     parser.add_argument("--trail", type=float, default=1.0, help="seconds of path behind each agent (default 1)")
     _output(parser, "out.png | out.pdf | out.svg | out.gif | out.mp4 (needs flockkit[viz])")
     parser.add_argument("--scenario", help="also draw this scenario's constraints and obstacles (.toml)")
+    parser.add_argument(
+        "--region",
+        action="append",
+        help="also draw this region (repeatable): box:x0,y0,x1,y1 | ball:cx,cy,r | polygon:x0,y0,x1,y1,...",
+    )
     _quiet(parser)
 
 
@@ -478,6 +495,11 @@ def _import_arguments(parser) -> None:
     parser.add_argument("--dims", type=int, default=2, choices=(2, 3), help="2 or 3 coordinates per agent")
     parser.add_argument(
         "--max-gap", type=int, default=flockkit.io.DEFAULT_MAX_GAP, help="longest run of missing frames to fill"
+    )
+    parser.add_argument(
+        "--image-height",
+        type=float,
+        help="pixel positions in an image this tall, y pointing down (video trackers): y becomes HEIGHT - y",
     )
 
 

@@ -3,9 +3,12 @@
 1. simulate a 20-agent flock turning inside an arena (a fence of round obstacles), 60 s;
 2. build its motion graph, and draw the difference matrix with the chosen transitions marked,
    and the graph;
-3. synthesize 2 minutes of motion kept inside a box by a region walk;
+3. synthesize 2 minutes of motion kept inside a box by a region walk (a box a third of the
+   arena's width, so that the walk has to steer: the group turns at its walls);
 4. solve the come-from-behind scenario (paper 004, Figure 5) and draw its sampler trace;
-5. with the shared captures present, build a graph from the five sticklebacks and walk it.
+5. with the shared captures present, build a graph from the five sticklebacks (pixels of a
+   1280 x 720 video, read with y up) and walk it for a minute with the school's center kept one
+   group radius inside the video frame.
 """
 
 from __future__ import annotations
@@ -128,21 +131,23 @@ def _data_driven(tour: _Tour) -> dict:
     )
     viz.plot_graph(graph, tour.path("graph.png"))
 
-    com = recording.center_of_mass()
-    low, high = com.min(axis=0), com.max(axis=0)
-    box = Box(lower=(low + high) / 2 - 1.5 * (high - low), upper=(low + high) / 2 + 1.5 * (high - low))
+    box = Box(lower=[-10.0, -10.0], upper=[10.0, 10.0])  # the arena is 30 units across
     with tour.step("synthesize 2 min in a box"):
         synthesized = synthesize(graph, walk(graph, strategy="region", region=box, duration=120, seed=2))
-    title = "2 minutes synthesized, kept in the box"
-    viz.plot_motion(synthesized, tour.path("synthesized.png"), regions=[box], title=title)
-    viz.animate(synthesized, tour.path("synthesized.gif"), regions=[box], progress=tour.progress)
-    inside = bool(box.contains(synthesized.center_of_mass()).all())
+    title = "2 minutes synthesized, its center of mass kept in the box"
+    shown = {"region for the center of mass": box}
+    viz.plot_motion(synthesized, tour.path("synthesized.png"), regions=shown, title=title)
+    viz.animate(synthesized, tour.path("synthesized.gif"), regions=shown, progress=tour.progress)
+    com = synthesized.center_of_mass()
+    inside = bool(box.contains(com).all())
+    crossed = (com.max(axis=0) - com.min(axis=0)) / (box.upper - box.lower)
     return {
         "graph": graph.stats(),
         "synthesized": {
             "seconds": synthesized.duration,
             "agents": synthesized.n_agents,
             "center of mass in the box": inside,
+            "share of the box crossed": [round(float(c), 3) for c in crossed],
         },
     }
 
@@ -167,11 +172,20 @@ def _sticklebacks(tour: _Tour, folder: Path) -> dict:
     from . import viz
     from .io import read_wide
 
-    fish = read_wide(folder / STICKLEBACKS, fps=15)
+    fish = read_wide(folder / STICKLEBACKS, fps=15, image_height=720)  # pixels, y down in the video
+    com = fish.center_of_mass()
+    radius = float(np.sqrt(np.mean(np.sum((fish.positions - com[:, None]) ** 2, axis=-1))))
+    frame = Box(lower=[0.0, 0.0], upper=[1280.0, 720.0])
+    inner = Box(lower=[radius, radius], upper=[1280.0 - radius, 720.0 - radius])
     with tour.step("sticklebacks graph and 60 s walk"):
-        fish_graph = build_graph(fish, seed=0)
-        fish_walk = synthesize(fish_graph, walk(fish_graph, duration=60, seed=3))
-    title = "60 s synthesized from 20 s of five sticklebacks"
-    viz.plot_motion(fish_walk, tour.path("sticklebacks.png"), title=title)
-    viz.animate(fish_walk, tour.path("sticklebacks.gif"), progress=tour.progress)
-    return fish_graph.stats()
+        # fish swim 200 px/s and turn fast: short blends and 30 degree turns every second keep them in the frame
+        fish_graph = build_graph(fish, seed=0, blend_time=1.0, turn_angle=30.0, turn_interval=1.0)
+        fish_walk = synthesize(fish_graph, walk(fish_graph, strategy="region", region=inner, duration=60, seed=3))
+    title = "60 s synthesized from 20 s of five sticklebacks, kept in the video frame"
+    shown = {"video frame (1280 x 720 px)": frame, "where the school's center is kept": inner}
+    viz.plot_motion(fish_walk, tour.path("sticklebacks.png"), regions=shown, title=title)
+    viz.animate(fish_walk, tour.path("sticklebacks.gif"), regions=shown, progress=tour.progress)
+    return {
+        **fish_graph.stats(),
+        "center kept in the video frame": bool(inner.contains(fish_walk.center_of_mass()).all()),
+    }

@@ -18,12 +18,12 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from . import _npzfile
+from . import _npzfile, rigid
 from .errors import FileFormatError, ValidationError
-from .motion import Alignment, Motion
+from .motion import DEFAULT_UP, Alignment, Motion, heading_axes
 from .validate import integer
 
-__all__ = ["MotionGraph", "Clip", "Transition", "Walk"]
+__all__ = ["MotionGraph", "Clip", "Transition", "Walk", "turns"]
 
 GRAPH_FORMAT_VERSION = 1
 
@@ -50,6 +50,10 @@ class Transition:
     motion continuing from `end` onto the world of `start`, and agent i of `start` continues as
     agent ``alignment.assignment[i]`` of `end`. `blend` is the number of frames over which
     synthesis blends the two motions.
+
+    A transition from a frame to itself (`start` == `end`) is a *turn*: the same motion, rotated
+    about the group's center of mass, so that over the blend the group steers onto a new
+    heading. Builders add turns so that walks can steer a group that the recording barely turns.
     """
 
     source: int
@@ -65,6 +69,10 @@ class Transition:
         return attrs.astuple(self, recurse=False) == attrs.astuple(other, recurse=False)
 
     __hash__ = None
+
+    @property
+    def is_turn(self) -> bool:
+        return self.start == self.end
 
 
 def _sequence(value, field: str) -> list:
@@ -333,7 +341,7 @@ class MotionGraph:
 
     def stats(self) -> dict:
         """Plain numbers describing the graph; equal graphs give equal dicts."""
-        distances = np.array([t.alignment.distance for t in self.transitions])
+        distances = np.array([t.alignment.distance for t in self.transitions if not t.is_turn])
         lengths = np.array([c.n_frames - 1 for c in self.clips], dtype=float)
         summary = (
             {"min": float(distances.min()), "median": float(np.median(distances)), "max": float(distances.max())}
@@ -345,6 +353,7 @@ class MotionGraph:
             "edges": len(self.clips) + len(self.transitions),
             "clips": len(self.clips),
             "transitions": len(self.transitions),
+            "turns": sum(t.is_turn for t in self.transitions),
             "source_frames": self.motion.n_frames,
             "frames_kept": self.kept_frames(),
             "fraction_kept": self.kept_frames() / self.motion.n_frames,
@@ -444,6 +453,31 @@ class MotionGraph:
             )
         except (KeyError, IndexError, TypeError, ValueError, OverflowError) as exc:
             raise FileFormatError(f"{path}: invalid motion graph: {type(exc).__name__}: {exc}") from None
+
+
+def turns(motion: Motion, frames, *, angle: float, blend: int) -> list[tuple[int, int, Alignment, int]]:
+    """Turn transitions at source `frames`, as ``(frame, frame, alignment, blend)`` for
+    :meth:`MotionGraph.assemble`: the motion from each frame rotated by +-`angle` degrees about
+    the group's center of mass there (in 3D about the up axis, and about the horizontal axis
+    across the group's heading, so that it can also climb and dive). Its blend steers the group
+    onto the new heading over `blend` frames; its distance is the jump that blend absorbs, the
+    mean squared distance between the configuration and its turned copy."""
+    radians = np.radians(angle)
+    found = []
+    for frame in (int(f) for f in frames):
+        configuration = motion.configuration(frame)
+        center = configuration.center_of_mass()
+        if motion.dims == 2:
+            rotations = [rigid.rotation(radians), rigid.rotation(-radians)]
+        else:
+            across = heading_axes(configuration.velocities)[1]  # horizontal, left of the heading
+            rotations = [rigid.rotation(s * radians, axis) for axis in (DEFAULT_UP, across) for s in (1, -1)]
+        for r in rotations:
+            identity = np.arange(motion.n_agents)
+            turned = Alignment(distance=0.0, assignment=identity, rotation=r, translation=center - r @ center)
+            distance = turned.residual(configuration, configuration)
+            found.append((frame, frame, attrs.evolve(turned, distance=distance), blend))
+    return found
 
 
 def _clips(nodes) -> list[Clip]:

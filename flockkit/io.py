@@ -107,9 +107,23 @@ def _plain(value):
 
 
 def _motion(
-    positions, dt, max_gap, source, *, frames=None, agents=None, agent_names=None, frame_numbers=None
+    positions,
+    dt,
+    max_gap,
+    source,
+    *,
+    frames=None,
+    agents=None,
+    agent_names=None,
+    frame_numbers=None,
+    image_height=None,
 ) -> Motion:
     positions = np.asarray(positions, dtype=np.float64)
+    if image_height is not None:
+        # image rows count down from the top; flockkit's y points up (pictures, exports)
+        height = validate.number(image_height, f"{source}: image_height (pixels)", minimum=0, strict=True)
+        positions = positions.copy()
+        positions[..., 1] = height - positions[..., 1]
     agent_names = np.arange(positions.shape[1]) if agent_names is None else np.asarray(agent_names)
     frame_numbers = np.arange(positions.shape[0]) if frame_numbers is None else np.asarray(frame_numbers)
     if agents is not None:
@@ -186,12 +200,23 @@ def _unique_rows(path, keys: np.ndarray, what: str) -> None:
 
 
 def read_wide(
-    path, *, dt=None, fps=None, dims: int = 2, delimiter=None, max_gap: int = DEFAULT_MAX_GAP, agents=None
+    path,
+    *,
+    dt=None,
+    fps=None,
+    dims: int = 2,
+    delimiter=None,
+    max_gap: int = DEFAULT_MAX_GAP,
+    agents=None,
+    image_height=None,
 ) -> Motion:
     """Read a wide table: one row per frame, ``frame, x1, y1, [z1,] x2, y2, ...``.
 
     A header line is skipped. `agents` selects agents (0-based) before the missing-value policy.
     Frame numbers may step by any constant; frames absent from the grid count as missing.
+    `image_height` (pixels): the positions are image coordinates, y pointing down, as video
+    trackers write them; y becomes ``image_height - y`` so that it points up, as flockkit's
+    pictures and exports expect.
     """
     path = Path(path)
     dt = _dt(dt, fps)
@@ -213,17 +238,26 @@ def read_wide(
     slots, numbers = _frame_index(path, table[:, 0], count, dims, max_gap)
     positions = np.full((len(numbers), count, dims), np.nan)
     positions[slots] = table[:, 1:].reshape(len(table), -1, dims)
-    return _motion(positions, dt, max_gap, str(path), agents=agents, frame_numbers=numbers)
+    return _motion(positions, dt, max_gap, str(path), agents=agents, frame_numbers=numbers, image_height=image_height)
 
 
 def read_long(
-    path, *, dt=None, fps=None, dims: int = 2, delimiter=None, max_gap: int = DEFAULT_MAX_GAP, agents=None, frames=None
+    path,
+    *,
+    dt=None,
+    fps=None,
+    dims: int = 2,
+    delimiter=None,
+    max_gap: int = DEFAULT_MAX_GAP,
+    agents=None,
+    frames=None,
+    image_height=None,
 ) -> Motion:
     """Read a long table: one row per agent and frame, ``frame, agent, x, y[, z]``.
 
     Agents are ordered by id; `agents` selects ids (as in the file), `frames` a slice of frame
     slots, both before the missing-value policy (so a window where a crowd's members are all
-    present can be read from a scene where people come and go).
+    present can be read from a scene where people come and go). `image_height` as in read_wide.
     """
     path = Path(path)
     dt = _dt(dt, fps)
@@ -248,11 +282,21 @@ def read_long(
     keep = np.array([agent in column for agent in table[:, 1].tolist()])
     positions = np.full((len(numbers), len(ids), dims), np.nan)
     positions[slots[keep], [column[a] for a in table[keep, 1].tolist()]] = table[keep, 2:]
-    return _motion(positions, dt, max_gap, str(path), frames=frames, agent_names=ids, frame_numbers=numbers)
+    return _motion(
+        positions,
+        dt,
+        max_gap,
+        str(path),
+        frames=frames,
+        agent_names=ids,
+        frame_numbers=numbers,
+        image_height=image_height,
+    )
 
 
-def read_npy(path, *, dt=None, fps=None, max_gap: int = DEFAULT_MAX_GAP, agents=None) -> Motion:
-    """Read a (T, N, D) float array saved with ``numpy.save`` (never pickled objects)."""
+def read_npy(path, *, dt=None, fps=None, max_gap: int = DEFAULT_MAX_GAP, agents=None, image_height=None) -> Motion:
+    """Read a (T, N, D) float array saved with ``numpy.save`` (never pickled objects);
+    `image_height` as in read_wide."""
     path = Path(path)
     dt = _dt(dt, fps)
     if not path.is_file():
@@ -270,7 +314,7 @@ def read_npy(path, *, dt=None, fps=None, max_gap: int = DEFAULT_MAX_GAP, agents=
         raise FileFormatError(
             f"{path}: expected a numeric (T, N, D) array with D in {{2, 3}}; got {getattr(array, 'shape', '?')}"
         )
-    return _motion(array, dt, max_gap, str(path), agents=agents)
+    return _motion(array, dt, max_gap, str(path), agents=agents, image_height=image_height)
 
 
 # -- writing: exports for animation tools ------------------------------------------------------

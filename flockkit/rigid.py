@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["apply", "rotate", "compose", "invert", "chain", "kabsch", "turn"]
+__all__ = ["apply", "rotate", "compose", "invert", "chain", "kabsch", "turn", "rotation"]
 
 
 def rotate(rotation, vectors) -> np.ndarray:
@@ -102,6 +102,17 @@ def turn(source, target) -> np.ndarray:
         return 2 * np.outer(axis, axis) - np.eye(3)
     k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]]) / sine
     return np.eye(3) + sine * k + (1 - cosine) * k @ k
+
+
+def rotation(angle: float, axis=None) -> np.ndarray:
+    """The rotation by `angle` radians: in 2D (no `axis`) counter-clockwise; in 3D about `axis`
+    (3,), right-handed (Rodrigues' formula)."""
+    if axis is None:
+        return _plane(angle)
+    k = np.asarray(axis, dtype=np.float64)
+    k = k / np.linalg.norm(k)
+    cross = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + np.sin(angle) * cross + (1 - np.cos(angle)) * cross @ cross
 
 
 def _plane(angle) -> np.ndarray:

@@ -55,45 +55,93 @@ def _draw_region(ax, region, **style):
 
 
 def plot_motion(motion: Motion, path=None, *, problem=None, obstacles=(), regions=(), ax=None, title=None):
-    """Draw every agent's trajectory (x-y plane), its start (dot) and end (arrow along the last
-    velocity), obstacles (grey), regions (outlined) and, with a `problem`, its constraints: point
-    targets (crosses), COM targets (stars) and shapes (dashed). Returns the matplotlib Figure;
-    writes it to `path` if given (.png, .pdf or .svg; atomically)."""
+    """Draw every agent's trajectory (x-y plane), its start (dot) and end (arrow along its last
+    heading, ARROW of the scene's extent long), obstacles (grey), `regions` (outlined; a
+    sequence, or a mapping from legend label to region) and, with a `problem`, its
+    constraints: point targets (crosses), COM targets (stars) and shapes (dashed),
+    and its point-constrained agents in red, the others in blue. The legend names every kind of
+    mark; the figure takes the scene's proportions. Returns the matplotlib Figure; writes it to
+    `path` if given (.png, .pdf or .svg; atomically)."""
     if not isinstance(motion, Motion):
         raise ValidationError(f"plot_motion needs a flockkit.Motion; got {type(motion).__name__}")
     if path is not None:
         path = _check_picture_path(path)
+    regions = _named(regions)
     plt = _pyplot()
-    figure = ax.figure if ax is not None else plt.figure(figsize=(7, 7))
-    ax = ax or figure.add_subplot()
     xy = motion.positions[..., :2]
-    colors = plt.get_cmap("viridis")(np.linspace(0, 1, motion.n_agents))
-    for agent in range(motion.n_agents):
-        ax.plot(xy[:, agent, 0], xy[:, agent, 1], color=colors[agent], linewidth=0.8, alpha=0.8)
-    ax.scatter(xy[0, :, 0], xy[0, :, 1], s=8, color="0.4", label="start", zorder=3)
-    travel = 0.5 * motion.velocities()[-1, :, :2]  # arrows show half a second of travel
-    ax.quiver(
-        xy[-1, :, 0],
-        xy[-1, :, 1],
-        travel[:, 0],
-        travel[:, 1],
-        color="black",
-        angles="xy",
-        scale_units="xy",
-        scale=1.0,
-        width=0.004,
-        zorder=4,
-        label="end",
-    )
+    low, high = _scene_bounds(xy, problem, obstacles, regions)
+    given = ax is not None
+    figure, ax = (ax.figure, ax) if given else _scene_figure(plt, low, high, None, keyed=True, longer=800)
+    colors = _roles(motion.n_agents, problem)
+    pinned = [c == _PINNED for c in colors]
+    for agent in np.argsort(pinned, kind="stable"):  # the constrained agents on top
+        ax.plot(xy[:, agent, 0], xy[:, agent, 1], color=colors[agent], linewidth=1.6 if pinned[agent] else 0.8,
+                alpha=0.9 if pinned[agent] else 0.6)  # fmt: skip
+    ax.scatter(xy[0, :, 0], xy[0, :, 1], s=10, color="0.3", zorder=3)
+    extent = _fit_view(ax, low, high)
+    heading = _unit(motion.velocities()[-1, :, :2]) * ARROW * extent
+    ax.quiver(xy[-1, :, 0], xy[-1, :, 1], heading[:, 0], heading[:, 1], color=colors, angles="xy",
+              scale_units="xy", scale=1.0, width=0.004, zorder=4)  # fmt: skip
     _draw_scene(ax, problem, obstacles, regions)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("x")
-    ax.set_ylabel("y")
     ax.set_title(title or f"{motion.n_agents} agents, {motion.duration:g} s")
-    ax.legend(loc="upper right")
+    _legend(ax, problem, obstacles, regions, inside=given)
     if path is not None:
         _save(figure, path)
     return figure
+
+
+_PINNED, _FREE = "tab:red", "tab:blue"
+
+
+def _scene_figure(plt, low, high, size, *, keyed: bool, longer: int = 600):
+    """A figure and axes for the scene from `low` to `high`: `size` (width, height) in pixels, by
+    default `longer` on the scene's longer side in its proportions (within 1:3 and 3:1), with
+    room above for the title and below for tick labels and, if `keyed`, the legend."""
+    title, key = 30, (75 if keyed else 25)  # pixels
+    if size is None:
+        ratio = float(np.clip((high[1] - low[1]) / max(high[0] - low[0], 1e-12), 1 / 3, 3))
+        width = longer if ratio <= 1 else round(longer / ratio)
+        size = (width, round(0.88 * width * ratio) + title + key)
+    width, height = (integer(v, "animate: size", minimum=16) for v in _pair(size))
+    figure = plt.figure(figsize=(width / 100, height / 100), dpi=100)
+    bottom, top = min(key / height, 0.4), max(1 - title / height, 0.6)
+    return figure, figure.add_axes((0.08, bottom, 0.88, top - bottom))
+
+
+def _unit(vectors) -> np.ndarray:
+    length = np.linalg.norm(vectors, axis=-1, keepdims=True)
+    return np.divide(vectors, length, out=np.zeros_like(vectors), where=length > 1e-12)
+
+
+_REGION_COLORS = ("tab:green", "tab:olive", "tab:cyan", "tab:brown")
+
+
+def _named(regions) -> dict:
+    """`regions` (a sequence of regions, or a mapping from legend label to region) as a mapping."""
+    from .constraints import Region
+
+    named = dict(regions) if isinstance(regions, dict) else {f"region {i + 1}": r for i, r in enumerate(regions)}
+    if len(named) == 1 and not isinstance(regions, dict):
+        named = {"region": next(iter(named.values()))}
+    for label, region in named.items():
+        if not isinstance(region, Region):
+            raise ValidationError(f"regions: {label!r} must be a flockkit region; got {type(region).__name__}")
+    return named
+
+
+def _scene_bounds(xy, problem, obstacles, regions):
+    """The (lower, upper) x-y corners of everything drawn: paths, obstacles, regions, targets."""
+    points = [xy.reshape(-1, 2)]
+    obstacles = tuple(obstacles) + (tuple(problem.obstacles) if problem is not None else ())
+    points += [shape.outline()[:, :2] for shape in (*obstacles, *regions.values())]
+    if problem is not None:
+        for c in problem.constraints:
+            if isinstance(c, (PointConstraint, ComConstraint)):
+                points.append(np.asarray(c.position)[None, :2])
+            elif isinstance(c, ShapeConstraint):
+                points.append(c.shape.outline()[:, :2])
+    points = np.concatenate(points)
+    return points.min(axis=0), points.max(axis=0)
 
 
 def _draw_scene(ax, problem, obstacles, regions):
@@ -101,17 +149,51 @@ def _draw_scene(ax, problem, obstacles, regions):
     obstacles = tuple(obstacles) + (tuple(problem.obstacles) if problem is not None else ())
     for obstacle in obstacles:
         _draw_region(ax, obstacle, facecolor="0.75", edgecolor="0.3")
-    for region in regions:
-        _draw_region(ax, region, fill=False, edgecolor="tab:blue", linewidth=1.5)
+    for region, color in zip(regions.values(), _REGION_COLORS * len(regions)):
+        _draw_region(ax, region, fill=False, edgecolor=color, linewidth=1.5)
     if problem is None:
         return
     for c in problem.constraints:
         if isinstance(c, PointConstraint):
-            ax.scatter(*c.position[:2], marker="x", s=60, color="tab:red", zorder=5)
+            ax.scatter(*c.position[:2], marker="x", s=70, linewidths=2, color="darkred", zorder=5)
         elif isinstance(c, ComConstraint):
-            ax.scatter(*c.position[:2], marker="*", s=120, color="tab:orange", zorder=5)
+            ax.scatter(*c.position[:2], marker="*", s=140, color="tab:orange", edgecolors="black", zorder=5)
         elif isinstance(c, ShapeConstraint):
-            _draw_region(ax, c.shape, fill=False, edgecolor="tab:red", linestyle="--", linewidth=1.2)
+            _draw_region(ax, c.shape, fill=False, edgecolor="tab:purple", linestyle="--", linewidth=1.2)
+
+
+def _legend(ax, problem, obstacles, regions, *, inside: bool = False, ends: bool = True) -> None:
+    """A legend with one entry for every kind of mark drawn (`ends`: start dots and end arrows),
+    at the bottom of the figure (where _scene_figure left room) or `inside` the axes."""
+    from matplotlib.lines import Line2D
+    from matplotlib.patches import Patch
+
+    kinds = {type(c) for c in problem.constraints} if problem is not None else set()
+    pinned = sorted({c.agent for c in problem.constraints if isinstance(c, PointConstraint)}) if problem else []
+    entries = []
+    if pinned:
+        names = ", ".join(map(str, pinned))
+        entries.append(Line2D([], [], color=_PINNED, linewidth=1.6, label=f"constrained agent {names}"))
+    entries.append(Line2D([], [], color=_FREE, linewidth=1, label="other agents" if pinned else "agents"))
+    if ends:
+        entries.append(Line2D([], [], linestyle="", marker="o", markersize=4, color="0.3", label="start"))
+        entries.append(Line2D([], [], linestyle="", marker=">", markersize=6, color="black", label="end, heading"))
+    if obstacles or (problem is not None and problem.obstacles):
+        entries.append(Patch(facecolor="0.75", edgecolor="0.3", label="obstacle"))
+    for label, color in zip(regions, _REGION_COLORS * len(regions)):
+        entries.append(Patch(fill=False, edgecolor=color, linewidth=1.5, label=label))
+    if PointConstraint in kinds:
+        entries.append(Line2D([], [], linestyle="", marker="x", markersize=8, markeredgewidth=2, color="darkred",
+                              label="point target"))  # fmt: skip
+    if ComConstraint in kinds:
+        entries.append(Line2D([], [], linestyle="", marker="*", markersize=11, color="tab:orange",
+                              markeredgecolor="black", label="center-of-mass target"))  # fmt: skip
+    if ShapeConstraint in kinds:
+        entries.append(Patch(fill=False, edgecolor="tab:purple", linestyle="--", label="shape"))
+    if inside:
+        ax.legend(handles=entries, loc="best", fontsize=8)
+    else:
+        ax.figure.legend(handles=entries, loc="lower center", ncol=min(len(entries), 4), frameon=False, fontsize=8)
 
 
 def _save(figure, path: Path) -> None:
@@ -141,7 +223,7 @@ def animate(
     obstacles=(),
     regions=(),
     fps=None,
-    size=(600, 600),
+    size=None,
     trail=1.0,
     max_frames=None,
     progress=False,
@@ -152,16 +234,17 @@ def animate(
 
     It plays in real time by default: `fps` frames per second of video, default 1 / dt capped at
     MAX_FPS (25) by showing every k-th frame, so that k * dt seconds pass per video frame. `size`
-    is (width, height) in pixels, `trail` the seconds of path drawn behind each agent (0: none),
-    `max_frames` an optional cap on the frames drawn (frames are then skipped evenly and the
-    animation plays faster). Arrows are ARROW (5%) of the scene's extent long, whatever its units
-    (a capture in pixels too). `progress` shows a bar over the frames."""
+    is (width, height) in pixels (default: 600 on the scene's longer side, the scene's
+    proportions within 1:3 and 3:1, plus room for the title and legend), `trail` the seconds of
+    path drawn behind each agent (0: none), `max_frames` an optional cap on the frames drawn
+    (frames are then skipped evenly and the animation plays faster). Arrows are ARROW (5%) of
+    the scene's extent long, whatever its units (a capture in pixels too). `progress` shows a bar over the frames."""
     if not isinstance(motion, Motion):
         raise ValidationError(f"animate needs a flockkit.Motion; got {type(motion).__name__}")
     path = _check_picture_path(path, ANIMATION_SUFFIXES, "animation")
+    regions = _named(regions)
     suffix = path.suffix.lower()
     fps = None if fps is None else number(fps, "animate: fps", minimum=0, strict=True)
-    width, height = (integer(v, "animate: size", minimum=16) for v in _pair(size))
     trail = number(trail, "animate: trail (seconds)", minimum=0)
     plt = _pyplot()
     from matplotlib import animation
@@ -173,13 +256,14 @@ def animate(
         step = max(step, math.ceil(motion.n_frames / integer(max_frames, "animate: max_frames", minimum=1)))
     frames = np.arange(0, motion.n_frames, step)
     rate = fps or 1.0 / (motion.dt * step)
-    xy, velocity = motion.positions[..., :2], motion.velocities()[..., :2]
-    speed = np.linalg.norm(velocity, axis=2, keepdims=True)
-    heading = np.divide(velocity, speed, out=np.zeros_like(velocity), where=speed > 1e-12)
-    figure = plt.figure(figsize=(width / 100, height / 100), dpi=100)
-    ax = figure.add_subplot()
+    xy, heading = motion.positions[..., :2], _unit(motion.velocities()[..., :2])
+    low, high = _scene_bounds(xy, problem, obstacles, regions)
+    keyed = problem is not None or bool(obstacles) or bool(regions)
+    figure, ax = _scene_figure(plt, low, high, size, keyed=keyed)
     _draw_scene(ax, problem, obstacles, regions)
-    extent = _fit_view(ax, xy)
+    extent = _fit_view(ax, low, high)
+    if keyed:
+        _legend(ax, problem, obstacles, regions, ends=False)
     colors = _roles(motion.n_agents, problem)
     trails = [ax.plot([], [], color=c, alpha=0.35, linewidth=0.8)[0] for c in colors]
     arrows = ax.quiver(
@@ -217,18 +301,17 @@ def _pair(size):
 def _roles(n_agents: int, problem) -> list:
     """A colour per agent: red for point-constrained agents of `problem`, blue for the others."""
     pinned = set() if problem is None else {c.agent for c in problem.constraints if isinstance(c, PointConstraint)}
-    return ["tab:red" if agent in pinned else "tab:blue" for agent in range(n_agents)]
+    return [_PINNED if agent in pinned else _FREE for agent in range(n_agents)]
 
 
-def _fit_view(ax, xy) -> float:
-    """Axis limits holding every position of (T, N, 2) `xy` with a margin, equal scales; returns
-    the extent (the larger side) of the view in data units."""
-    low, high = xy.reshape(-1, 2).min(axis=0), xy.reshape(-1, 2).max(axis=0)
+def _fit_view(ax, low, high) -> float:
+    """Axis limits holding the box from `low` to `high` with a margin, equal scales; returns the
+    extent (the larger side) of the view in data units."""
     extent = max(float(np.max(high - low)), 1e-9)
     margin = 0.06 * extent + 1e-9
     ax.set_xlim(low[0] - margin, high[0] + margin)
     ax.set_ylim(low[1] - margin, high[1] + margin)
-    ax.set_aspect("equal")
+    ax.set_aspect("equal", adjustable="datalim")  # the axes keep their box: the scene fills it
     return extent + 2 * margin
 
 
@@ -268,7 +351,8 @@ def plot_difference_matrix(values, path=None, *, marked=(), title="difference ma
 
 def plot_graph(graph, path=None):
     """A motion graph drawn along the source's time axis: nodes at their frames, clips as arcs
-    below the axis, transitions as arcs above it (colored by cost)."""
+    below the axis, transitions as arcs above it coloured by cost (the colour bar), turns as
+    triangles on the nodes that offer them; the legend names each."""
     from .graph import MotionGraph
 
     if not isinstance(graph, MotionGraph):
@@ -276,42 +360,50 @@ def plot_graph(graph, path=None):
     if path is not None:
         path = _check_picture_path(path)
     plt = _pyplot()
+    from matplotlib.colors import Normalize
+    from matplotlib.lines import Line2D
     from matplotlib.patches import Arc
 
-    figure, ax = plt.subplots(figsize=(10, 4))
+    figure, ax = plt.subplots(figsize=(10, 4.2))
     seconds = np.asarray(graph.nodes, dtype=float) * graph.motion.dt
-    costs = np.array([t.alignment.distance for t in graph.transitions])
+    matched = [t for t in graph.transitions if not t.is_turn]
+    costs = np.array([t.alignment.distance for t in matched])
     cmap = plt.get_cmap("plasma")
-    scale = costs.max() if len(costs) and costs.max() > 0 else 1.0
+    norm = Normalize(costs.min(), costs.max()) if len(costs) and costs.max() > costs.min() else Normalize(0.0, 1.0)
     for clip in graph.clips:
         a, b = seconds[clip.source], seconds[clip.target]
-        ax.add_patch(
-            Arc(((a + b) / 2, 0), abs(b - a), abs(b - a) * 0.3, theta1=180, theta2=360, color="0.5", linewidth=0.8)
-        )
-    for transition, cost in zip(graph.transitions, costs):
+        ax.add_patch(Arc(((a + b) / 2, 0), b - a, (b - a) * 0.3, theta1=180, theta2=360, color="0.5", linewidth=0.8))
+    for transition, cost in zip(matched, costs):
         a, b = seconds[transition.source], seconds[transition.target]
+        width = abs(b - a)
         ax.add_patch(
-            Arc(
-                ((a + b) / 2, 0),
-                abs(b - a),
-                abs(b - a) * 0.6,
-                theta1=0,
-                theta2=180,
-                color=cmap(cost / scale),
-                linewidth=0.8,
-            )
+            Arc(((a + b) / 2, 0), width, width * 0.6, theta1=0, theta2=180, color=cmap(norm(cost)), linewidth=0.8)
         )
-    ax.scatter(seconds, np.zeros_like(seconds), s=10, color="black", zorder=3)
     span = graph.motion.duration
+    turning = sorted({t.source for t in graph.transitions if t.is_turn})
+    lift = 0.02 * max([abs(seconds[t.target] - seconds[t.source]) for t in matched] + [0.05 * span])
+    ax.scatter(seconds[turning], np.full(len(turning), lift), marker="^", s=14, color="tab:green", zorder=3)
+    ax.scatter(seconds, np.zeros_like(seconds), s=10, color="black", zorder=4)
     ax.set_xlim(-0.02 * span, 1.02 * span)
-    ax.set_ylim(-0.17 * span, 0.32 * span)
+    reach = max([abs(seconds[t.target] - seconds[t.source]) for t in matched] + [0.05 * span])
+    dip = max([float(seconds[c.target] - seconds[c.source]) for c in graph.clips] + [0.05 * span])
+    ax.set_ylim(-0.15 * dip - 0.03 * reach, 0.36 * reach)  # arcs rise 0.3 of their width, clips dip 0.15
     ax.set_yticks([])
     ax.set_xlabel("source time (s)")
+    figure.colorbar(plt.cm.ScalarMappable(norm=norm, cmap=cmap), ax=ax, label="transition cost E", pad=0.01)
     stats = graph.stats()
-    ax.set_title(
-        f"motion graph: {stats['nodes']} nodes, {stats['clips']} clips (below), {stats['transitions']} transitions "
-        "(above)"
-    )
+    angle = graph.params.get("turn_angle")
+    entries = [
+        Line2D([], [], linestyle="", marker="o", markersize=4, color="black", label=f"node ({stats['nodes']})"),
+        Line2D([], [], color="0.5", label=f"clip: plays the recording ({stats['clips']})"),
+        Line2D([], [], color=cmap(0.5), label=f"transition, coloured by cost ({len(matched)})"),
+    ]
+    if turning:
+        about = f" of \u00b1{angle:g}\u00b0" if isinstance(angle, (int, float)) else ""
+        label = f"node with turns{about} ({len(turning)} nodes, {stats['turns']} turns)"
+        entries.append(Line2D([], [], linestyle="", marker="^", color="tab:green", label=label))
+    ax.legend(handles=entries, loc="upper left", fontsize=8, frameon=False)
+    ax.set_title(f"motion graph of {span:g} s of recording")
     if path is not None:
         _save(figure, path)
     return figure

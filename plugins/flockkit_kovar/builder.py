@@ -5,6 +5,10 @@
 3. Transitions at local minima of E (over its 8 neighbors, the diagonal excluded) at least
    `min_gap` seconds apart and at most the threshold; both directions of each minimum.
 4. ``flockkit.MotionGraph.assemble``: clips between transition frames, dead ends trimmed.
+5. Turns (``flockkit.graph.turns``): every `turn_interval` seconds of the kept recording, the same
+   motion rotated by +-`turn_angle` degrees about the group's center of mass, so that walks can
+   steer a group whose recording barely turns (a default boids flock turns under 5 degrees a
+   second; a region walk needs more). ``turn_angle=0`` builds the paper's graph without them.
 
 Threshold. Given `threshold` it is absolute. Otherwise it is adaptive: with `wanted` =
 max(`min_transitions`, `transitions_per_minute` per minute of recording), the lowest `wanted` local
@@ -65,6 +69,15 @@ class Kovar:
         Use the paper's rule instead: the lowest ceil(per_second * duration) local minima.
     blend_time : float
         Seconds over which synthesis blends across a transition.
+    turn_angle : float
+        Degrees of each turn (0: no turns). A turn is played over `blend_time`, so 15 degrees over
+        2 s turns at most 7.5 degrees a second. The formation turns with the heading, as in any
+        rigid turn, so an agent r from the center moves up to about 1.5 r times the turn rate
+        faster for a moment (the default keeps synthesized steps within 1.3 times the recording's
+        largest on boids); the blend shrinks the group by at most 1 - cos(turn_angle / 2) half way
+        (0.9% at 15 degrees).
+    turn_interval : float
+        Seconds between the frames that offer turns.
     prune : bool
         Skip exact evaluations the metric's declared ``pairs_within`` (or ``lower_bound``) rules out.
     n_jobs : int, optional
@@ -79,6 +92,8 @@ class Kovar:
     transitions_per_minute: float = validate.parameter("kovar", default=20.0, minimum=0)
     per_second: float | None = validate.parameter("kovar", default=None, minimum=0, strict=True, optional=True)
     blend_time: float = validate.parameter("kovar", default=2.0, minimum=0)
+    turn_angle: float = validate.parameter("kovar", default=15.0, minimum=0, maximum=90)
+    turn_interval: float = validate.parameter("kovar", default=2.0, minimum=0, strict=True)
     prune: bool = validate.parameter("kovar", default=True, kind="flag")
     n_jobs: int | None = attrs.field(default=None)
 
@@ -126,7 +141,16 @@ class Kovar:
             "candidates": len(frames),
             "evaluated": matrix.evaluated,
             "prune": self.prune,
+            "turn_angle": self.turn_angle,
+            "turn_interval": self.turn_interval,
         }
+        if self.turn_angle > 0:
+            # inside the graph the transitions make, so that turns change no choice made above
+            nodes = flockkit.MotionGraph.assemble(motion, transitions).nodes
+            every = max(1, round(self.turn_interval / motion.dt))
+            transitions += flockkit.graph.turns(
+                motion, np.arange(nodes[0], nodes[-1] - blend + 1, every), angle=self.turn_angle, blend=blend
+            )
         return flockkit.MotionGraph.assemble(motion, transitions, params=params, provenance={"builder": "kovar"})
 
     def _choose(self, motion, frames, far, matrix, blend, configs, offers):

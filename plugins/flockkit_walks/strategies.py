@@ -1,7 +1,9 @@
 """Walk strategies of paper 000 section 5: random walks (5.1) and walks kept inside a region (5.2).
 
 Both respect blends: a transition is only taken once the previous one's blend has played out
-(``MotionGraph.allowed_edges``), so synthesis never overlaps two blends.
+(``MotionGraph.allowed_edges``), so synthesis never overlaps two blends. Turns (transitions from a
+frame to itself, ``Transition.is_turn``) steer the group: a region walk takes them when it needs
+to, a random walk only when asked.
 """
 
 from __future__ import annotations
@@ -44,11 +46,17 @@ def _frames_of(graph, edge) -> int:
     return graph.clips[edge[1]].n_frames - 1 if edge[0] == "clip" else 0
 
 
+def _is_turn(graph, edge) -> bool:
+    return edge[0] == "transition" and graph.transitions[edge[1]].is_turn
+
+
 @attrs.frozen(kw_only=True)
 class RandomWalk:
-    """Uniformly random edges from `start` (None: a random node) until `duration` seconds are played."""
+    """Uniformly random edges from `start` (None: a random node) until `duration` seconds are
+    played; turns only with `turns` (otherwise the group heads where its recording does)."""
 
     start: int | None = validate.parameter("walk", default=None, kind="integer", minimum=0, optional=True)
+    turns: bool = validate.parameter("walk", default=False, kind="flag")
 
     def walk(self, graph: flockkit.MotionGraph, rng: np.random.Generator, duration: float) -> flockkit.Walk:
         _check_graph(graph)
@@ -57,6 +65,8 @@ class RandomWalk:
         start, since, played, edges = node, math.inf, 0, []
         while played < needed:
             options = graph.allowed_edges(node, since)
+            if not self.turns:
+                options = [e for e in options if not _is_turn(graph, e)] or options
             edge = options[int(rng.integers(len(options)))]
             edges.append(edge)
             played += _frames_of(graph, edge)
@@ -77,11 +87,21 @@ def _region(value):
 class RegionWalk:
     """Keep the group's center of mass inside `region` (paper 000 section 5.2).
 
-    At each node the outgoing edges are tried in random order; an edge is taken if a depth-first
-    search finds a path starting with it whose center of mass stays inside the region over the
-    whole edge and `horizon` seconds from its start (across a transition both the old motion's
-    continuation, which its blend mixes in, and the new one are checked). The walk starts with the
-    group's center of mass at the region's center (for a polygon, an interior point).
+    At each node the allowed edges are tried in an order that steers: each is scored by where
+    the group would be a little after it (its position and heading at the edge's end, carried on
+    for a third of the region's inner radius), edges that keep that point deep inside come first,
+    turns after other edges unless they help, with random ties so that walks differ. An edge is
+    taken if a depth-first search finds a path starting with it whose center of mass stays
+    inside the region over the whole edge and `horizon` seconds from its start (across a
+    transition both the old motion's continuation, which its blend mixes in, and the new one are
+    checked); when no edge at a node has one, the walk steps back and tries the previous node's
+    next edge. The walk starts with the group's center of mass at the region's center (for a
+    polygon, an interior point).
+
+    A graph with turns (``Transition.is_turn``; kovar adds them by default) can be kept in a
+    region a few turning circles wide; when a region cannot hold the group, the error says why in
+    numbers: how far the group travels between transitions, how tight it can turn, and the
+    region's width.
 
     Parameters
     ----------
@@ -106,14 +126,16 @@ class RegionWalk:
             raise ValidationError(f"region is {self.region.dims}D but the graph's motion is {graph.motion.dims}D")
         com = graph.motion.center_of_mass()
         node = _start_node(graph, self.start, rng)
-        rotation = np.eye(graph.motion.dims)
-        translation = self.region.interior_point() - com[graph.nodes[node]]
-        if not self.region.contains(com[graph.nodes[node]] + translation):
+        frame = graph.nodes[node]
+        rotation = _start_heading(self.region, com, frame, math.ceil(self.horizon / graph.motion.dt), rng)
+        translation = self.region.interior_point() - rotation @ com[frame]
+        if not self.region.contains(rotation @ com[frame] + translation):
             raise ValidationError("the region cannot hold the group's center of mass even at the start")
         search = _Search(graph, self.region, com, math.ceil(self.horizon / graph.motion.dt), self.budget)
+        steer = _Steer(graph, self.region, com)
         # Depth-first over decisions: each entry holds a state and the edges still to try there;
         # when none is left, step back and try the previous decision's next edge.
-        stack = [(node, math.inf, rotation, translation, 0, self._order(graph, node, math.inf, rng))]
+        stack = [(node, math.inf, rotation, translation, 0, steer.order(node, math.inf, rotation, translation, rng))]
         edges, tries = [], 0
         while stack[-1][4] < needed:
             node, since, rotation, translation, played, options = stack[-1]
@@ -125,11 +147,7 @@ class RegionWalk:
             else:
                 stack.pop()
                 if not stack or tries > 20 * self.budget:
-                    raise ValidationError(
-                        f"cannot keep the group inside the region for {duration} s: every path leaves it within "
-                        f"{self.horizon} s look-ahead (searched {tries} edges); use a larger region or horizon, or a "
-                        "graph with more transitions"
-                    )
+                    raise ValidationError(_impossible(graph, self.region, com, duration, self.horizon, tries))
                 edges.pop()
                 continue
             edges.append(edge)
@@ -137,18 +155,80 @@ class RegionWalk:
             frames = _frames_of(graph, edge)
             since = since + frames if edge[0] == "clip" else 0
             target = graph.edge_target(edge)
-            stack.append(
-                (target, since, rotation, translation, played + frames, self._order(graph, target, since, rng))
-            )
-        return flockkit.Walk(
-            start=stack[0][0], edges=edges, rotation=np.eye(graph.motion.dims), translation=stack[0][3]
-        )
+            order = steer.order(target, since, rotation, translation, rng)
+            stack.append((target, since, rotation, translation, played + frames, order))
+        return flockkit.Walk(start=stack[0][0], edges=edges, rotation=stack[0][2], translation=stack[0][3])
 
-    @staticmethod
-    def _order(graph, node, since, rng) -> list:
-        """The edges allowed at `node`, in the random order they will be tried (last first)."""
-        options = graph.allowed_edges(node, since)
-        return [options[i] for i in rng.permutation(len(options))]
+
+def _start_heading(region, com, frame, horizon, rng) -> np.ndarray:
+    """A rotation of the start (about the up axis in 3D) that heads the group where the region is
+    deep: of 16 headings, a random one among those whose next `horizon` frames (straight on, as
+    recorded) keep at least 90% of the best depth."""
+    path = com[frame : frame + max(horizon, 1) + 1] - com[frame]
+    axis = None if com.shape[1] == 2 else flockkit.DEFAULT_UP
+    rotations = [rigid.rotation(angle, axis) for angle in np.linspace(0, 2 * np.pi, 16, endpoint=False)]
+    depth = np.array([-region.signed_distance(path @ r.T + region.interior_point()).max() for r in rotations])
+    good = np.flatnonzero(depth >= depth.max() - 0.1 * abs(depth.max()))
+    return rotations[int(rng.choice(good))]
+
+
+class _Steer:
+    """Orders a node's edges so that the walk turns before the region's boundary, not at it."""
+
+    def __init__(self, graph, region, com):
+        self.graph, self.region, self.com = graph, region, com
+        self.velocity = np.gradient(com, graph.motion.dt, axis=0)
+        self.depth = max(-float(region.signed_distance(region.interior_point())), 1e-12)  # the inner radius
+        speed = float(np.median(np.linalg.norm(self.velocity, axis=1)))
+        self.ahead = self.depth / 3 / max(speed, 1e-12)  # seconds
+
+    def order(self, node, since, rotation, translation, rng) -> list:
+        """The edges allowed at `node`, the one to try first last (it is popped)."""
+        options = self.graph.allowed_edges(node, since)
+        points = []
+        for edge in options:
+            r, t = _advance(self.graph, edge, rotation, translation)
+            frame = self.graph.clips[edge[1]].stop if edge[0] == "clip" else self.graph.transitions[edge[1]].end
+            points.append(r @ (self.com[frame] + self.ahead * self.velocity[frame]) + t)
+        inside = -self.region.signed_distance(np.array(points)) / self.depth  # 1 deep inside, < 0 outside
+        turn = np.array([_is_turn(self.graph, edge) for edge in options])
+        # near the boundary the score dominates; deep inside, chance and a preference for the recording's own motion
+        score = 4 * np.maximum(0.5 - inside, 0) + 0.3 * turn + 0.5 * rng.random(len(options))
+        return [options[i] for i in np.argsort(-score, kind="stable")]
+
+
+def _turn_degrees(rotation) -> float:
+    cosine = rotation[0, 0] if len(rotation) == 2 else (np.trace(rotation) - 1) / 2
+    return float(np.degrees(np.arccos(np.clip(cosine, -1, 1))))
+
+
+def _impossible(graph, region, com, duration, horizon, tries) -> str:
+    """Why a region walk failed, in numbers, and what to change."""
+    blend = max(int(graph.tables.transition_blend.max()), 1)
+    dt = graph.motion.dt
+    travel = float(np.linalg.norm(com[blend:] - com[:-blend], axis=1).min()) if len(com) > blend else 0.0
+    width = 2 * max(-float(region.signed_distance(region.interior_point())), 0.0)
+    angles = [_turn_degrees(t.alignment.rotation) for t in graph.transitions if t.is_turn]
+    if angles:
+        turning = f"it turns at most {max(angles):.3g} degrees per transition"
+        circle = travel * 360 / max(angles) / np.pi
+        change = "a graph with larger turn_angle or shorter blend_time"
+    else:
+        velocity = np.diff(com, axis=0)
+        cosine = np.sum(velocity[blend:] * velocity[:-blend], axis=1) / np.maximum(
+            np.linalg.norm(velocity[blend:], axis=1) * np.linalg.norm(velocity[:-blend], axis=1), 1e-300
+        )
+        degrees = max(float(np.degrees(np.arccos(np.clip(cosine, -1, 1))).max()), 1e-9) if len(cosine) else 1e-9
+        turning = f"the graph has no turns and its recording turns at most {degrees:.3g} degrees per blend"
+        circle = travel * 360 / degrees / np.pi
+        change = "a graph with turns (kovar turn_angle > 0, its default)"
+    return (
+        f"cannot keep the group inside the region for {duration:g} s (searched {tries} edges): after each "
+        f"transition the group travels at least {travel:.3g} units before it may take another "
+        f"({blend * dt:g} s blend); {turning}, so its tightest circle is about {circle:.3g} units across, "
+        f"against a region {width:.3g} units across at its narrowest. Use a region wider than that circle, a "
+        f"horizon longer than {horizon:g} s, or {change}"
+    )
 
 
 def _advance(graph, edge, rotation, translation):

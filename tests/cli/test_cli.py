@@ -1,12 +1,15 @@
 import json
 import shutil
 import subprocess
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import flockkit
 from flockkit.cli import main
+
+SCENARIOS = Path(__file__).resolve().parents[2] / "examples" / "scenarios"
 
 
 def run(capsys, *argv):
@@ -283,8 +286,49 @@ def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data
     }
     summary = json.loads((tmp_path / "demo" / "summary.json").read_text())
     assert summary["synthesized"]["seconds"] >= 120 and summary["synthesized"]["center of mass in the box"]
+    assert min(summary["synthesized"]["share of the box crossed"]) > 0.6  # the box binds: the walk turns at its walls
+    assert summary["sticklebacks"]["center kept in the video frame"]
     assert max(summary["come-from-behind"]["residuals"]) <= 0.3 and summary["sticklebacks"]["transitions"] >= 3
     assert str((tmp_path / "demo").resolve()) in out
+
+
+def test_the_issue_region_walk_on_a_default_flock_from_the_command_line(capsys, tmp_path):
+    """`flockkit walk graph.npz --duration 120 --strategy region --region box:-20,-20,20,20` on a
+    flock from `flockkit simulate` failed after 12 s; turns make it work. A box the group cannot
+    turn in is refused in one line, with the numbers."""
+    recording, graph_file, walked = tmp_path / "flock.npz", tmp_path / "graph.npz", tmp_path / "walk.npz"
+    code, _, err = run(capsys, "simulate", "--agents", "20", "--steps", "1500", "--seed", "0", "-o", str(recording),
+                       "--quiet")  # fmt: skip
+    assert code == 0, err
+    code, _, err = run(capsys, "build", str(recording), "-o", str(graph_file), "--jobs", "1", "--quiet")
+    assert code == 0, err
+    region = ["--strategy", "region", "--region", "box:-20,-20,20,20", "-o", str(walked)]
+    code, _, err = run(capsys, "walk", str(graph_file), "--duration", "120", "--seed", "0", *region)
+    assert code == 0, err
+    motion = flockkit.Motion.load(walked)
+    assert (
+        motion.duration >= 120
+        and flockkit.Box(lower=[-20, -20], upper=[20, 20]).contains(motion.center_of_mass()).all()
+    )
+    code, _, err = run(capsys, "walk", str(graph_file), "--duration", "60", "--strategy", "region", "--region",
+                       "box:-1,-1,1,1", "-o", str(tmp_path / "no.npz"))  # fmt: skip
+    assert code == 1 and len(err.strip().splitlines()) == 1 and "tightest circle is about" in err
+    assert not (tmp_path / "no.npz").exists()
+
+
+def test_render_draws_regions_and_scenarios(capsys, tmp_path, recording):
+    from PIL import Image
+
+    for name in ("boxed.png", "boxed.gif"):
+        regions = ["--region", "box:-30,-30,30,30", "--region", "ball:0,0,10"]
+        scenario = ["--scenario", str(SCENARIOS / "come-from-behind.toml")]
+        code, _, err = run(capsys, "render", str(recording), "-o", str(tmp_path / name), *regions, *scenario,
+                           "--size", "300x200")  # fmt: skip
+        assert code == 0, err
+    with Image.open(tmp_path / "boxed.gif") as image:
+        assert image.size == (300, 200)
+    code, _, err = run(capsys, "render", str(recording), "-o", str(tmp_path / "x.png"), "--region", "box:1")
+    assert code == 1 and "--region 'box:1'" in err
 
 
 def test_simulate_in_an_arena_and_around_obstacles(capsys, tmp_path):

@@ -41,6 +41,11 @@ def test_sticklebacks(shared_data):
     table = np.loadtxt(path, delimiter=",")
     np.testing.assert_array_equal(motion.positions, table[:, 1:].reshape(-1, 5, 2))
     assert motion.dt == pytest.approx(1 / 15)
+    upright = read_wide(path, fps=15, image_height=720)  # pixels of a 1280 x 720 video, y down
+    np.testing.assert_array_equal(upright.positions[..., 0], motion.positions[..., 0])
+    np.testing.assert_array_equal(upright.positions[..., 1], 720 - motion.positions[..., 1])
+    with pytest.raises(ValidationError, match="image_height"):
+        read_wide(path, fps=15, image_height=-1)
 
 
 def test_trajectorytools_nan_handling(shared_data):

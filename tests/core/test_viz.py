@@ -90,3 +90,56 @@ def test_bad_drawings_are_refused_and_nothing_is_written(tmp_path, solved, call,
     with pytest.raises(ValidationError, match=match):
         call(solved[1].motion, tmp_path)
     assert list(tmp_path.iterdir()) == []
+
+
+def _legend_labels(figure):
+    legends = [*figure.legends, *(ax.get_legend() for ax in figure.axes if ax.get_legend())]
+    return [text.get_text() for legend in legends for text in legend.get_texts()]
+
+
+def test_the_legend_names_every_kind_of_mark(solved):
+    problem, solution = solved
+    named = {"arena": flockkit.Box(lower=[-5, -5], upper=[8, 8])}
+    labels = _legend_labels(viz.plot_motion(solution.motion, problem=problem, regions=named))
+    expected = {"constrained agent 0", "other agents", "start", "end, heading", "obstacle", "arena", "point target",
+                "shape"}  # fmt: skip
+    assert set(labels) == expected
+    plain = _legend_labels(viz.plot_motion(solution.motion, regions=[named["arena"]]))
+    assert set(plain) == {"agents", "start", "end, heading", "region"}
+    com = flockkit.Problem(
+        n_agents=3,
+        duration=1.0,
+        constraints=[flockkit.ComConstraint(time=1.0, position=[1.0, 0.0], velocity=[1.0, 0.0])],
+    )
+    three = flockkit.simulate(n_agents=3, steps=10, seed=0)
+    assert "center-of-mass target" in _legend_labels(viz.plot_motion(three, problem=com))
+
+
+def test_a_wide_scene_fills_a_wide_canvas(tmp_path):
+    """A flock crossing a long, narrow scene gets a picture in its proportions, not a square with
+    a strip in the middle: its axes fill most of the canvas."""
+    from PIL import Image
+
+    x = np.linspace(0, 30, 61)[:, None, None] + np.array([[0.0], [0.5], [1.0]])[None]
+    y = np.zeros_like(x) + np.array([0.0, 0.5, 1.0])[None, :, None]
+    motion = flockkit.Motion(positions=np.concatenate([x, y], axis=2), dt=0.1)
+    figure = viz.plot_motion(motion)
+    ax = figure.axes[0]
+    box = ax.get_position()
+    width, height = figure.get_size_inches()
+    assert width / height > 2  # wide like the scene
+    drawn = ax.get_window_extent()
+    assert drawn.width * drawn.height > 0.4 * figure.bbox.width * figure.bbox.height
+    viz.animate(motion, tmp_path / "wide.gif", trail=0)
+    with Image.open(tmp_path / "wide.gif") as image:
+        assert image.size[0] == 600 and image.size[1] < 300
+    assert box.width > 0.8
+
+
+def test_the_graph_picture_keys_its_colours_and_turns():
+    graph = flockkit.build_graph(flockkit.simulate(n_agents=6, steps=200, seed=2))
+    figure = viz.plot_graph(graph)
+    labels = _legend_labels(figure)
+    assert any(label.startswith("transition, coloured by cost") for label in labels)
+    assert any("node with turns of \u00b115\u00b0" in label for label in labels)
+    assert any(ax.get_ylabel() == "transition cost E" for ax in figure.axes)  # the colour bar

@@ -24,6 +24,11 @@ def fish(shared_data):
     return flockkit.Motion(positions=table[:, 1:].reshape(-1, 5, 2), dt=1 / 15)
 
 
+def matched(graph):
+    """The transitions the metric found (turns left out)."""
+    return [t for t in graph.transitions if not t.is_turn]
+
+
 def structure(graph):
     return list(graph.nodes), graph.clips, graph.transitions
 
@@ -35,7 +40,7 @@ def test_pruning_gives_the_identical_graph(recording, graph):
 
 
 def test_pruning_identical_with_an_absolute_threshold(recording, graph):
-    threshold = min(t.alignment.distance for t in graph.transitions)
+    threshold = min(t.alignment.distance for t in matched(graph))
     pruned, full = (
         flockkit.get("builder", "kovar", threshold=threshold, prune=prune).build(
             recording, METRIC, np.random.default_rng(0)
@@ -90,8 +95,8 @@ def test_adaptive_threshold_is_the_last_local_minimum_taken(recording):
     minima = {(int(frames[i]), int(frames[j])): values[i, j] for i, j in zip(*np.nonzero(is_min))}
     threshold = graph.params["threshold"]
     assert threshold in minima.values()
-    assert {(t.start, t.end) for t in graph.transitions} <= {ij for ij, value in minima.items() if value <= threshold}
-    assert len(graph.transitions) >= 4
+    assert {(t.start, t.end) for t in matched(graph)} <= {ij for ij, value in minima.items() if value <= threshold}
+    assert len(matched(graph)) >= 4
 
 
 def test_graph_is_strongly_connected_and_consistent(recording, graph):
@@ -99,7 +104,7 @@ def test_graph_is_strongly_connected_and_consistent(recording, graph):
     assert stats["transitions"] >= 2 and 0 < stats["fraction_kept"] <= 1
     network = graph.to_networkx()
     assert nx.is_strongly_connected(network) and network.number_of_edges() == stats["edges"]
-    for t in graph.transitions:
+    for t in matched(graph):
         assert abs(t.end - t.start) >= 10  # min_gap 1 s at dt 0.1
         a, b = recording.configuration(t.start), recording.configuration(t.end)
         assert t.alignment.residual(a, b) <= t.alignment.distance * (1 + 1e-9)  # positions, plus the velocity term
@@ -109,7 +114,7 @@ def test_graph_is_strongly_connected_and_consistent(recording, graph):
 def test_transitions_are_local_minima_of_the_difference_matrix(recording, graph):
     stride = graph.params["stride"]
     last = (graph.params["candidates"] - 1) * stride  # the builder's last candidate frame
-    for t in graph.transitions[:6]:
+    for t in matched(graph)[:6]:
         for di in (-stride, 0, stride):
             for dj in (-stride, 0, stride):
                 i, j = t.start + di, t.end + dj
@@ -153,7 +158,7 @@ def test_paper_rule_and_absolute_threshold(recording):
     per_second = flockkit.get("builder", "kovar", per_second=0.2).build(recording, METRIC, np.random.default_rng(0))
     assert per_second.params["threshold_rule"] == "per_second"
     minima = int(np.ceil(0.2 * recording.duration))
-    assert 1 <= len(per_second.transitions) <= 2 * minima  # both directions of each chosen minimum
+    assert 1 <= len(matched(per_second)) <= 2 * minima  # both directions of each chosen minimum
     with pytest.raises(ValidationError, match="leaves no transition") as info:
         flockkit.get("builder", "kovar", threshold=1e-12).build(recording, METRIC, np.random.default_rng(0))
     working = float(str(info.value).split("threshold=")[1].split()[0])
@@ -209,3 +214,61 @@ def test_assemble_trims_dead_ends(recording):
     assert list(graph.nodes) == [50, 100] and len(graph.transitions) == 1 and graph.kept_frames() == 51
     with pytest.raises(ValidationError, match="no transitions"):
         flockkit.MotionGraph.assemble(recording, [])
+
+
+def test_turns_rotate_the_motion_about_the_center_of_mass(recording, graph):
+    """Every turn_interval seconds inside the kept recording, two turns (+-turn_angle) that lay the
+    same motion, rotated about the group's center of mass, onto it; turn_angle=0 leaves the
+    metric's transitions exactly as they were."""
+    turns = [t for t in graph.transitions if t.is_turn]
+    blend, every = graph.params["blend_frames"], 20  # 2 s at dt 0.1
+    frames = sorted({t.start for t in turns})
+    assert frames == list(range(int(graph.nodes[0]), int(graph.nodes[-1]) - blend + 1, every))
+    for t in turns:
+        a = t.alignment
+        center = recording.positions[t.start].mean(axis=0)
+        assert np.allclose(a.rotation @ center + a.translation, center)  # about the center of mass
+        assert np.isclose(abs(np.degrees(np.arctan2(a.rotation[1, 0], a.rotation[0, 0]))), 15.0)
+        turned = recording.positions[t.start] @ a.rotation.T + a.translation
+        assert np.isclose(a.distance, np.mean(np.sum((turned - recording.positions[t.start]) ** 2, axis=1)))
+        assert list(a.assignment) == list(range(recording.n_agents))
+    plain = flockkit.get("builder", "kovar", turn_angle=0).build(recording, METRIC, np.random.default_rng(0))
+
+    def frames(transitions):
+        return [(t.start, t.end, t.alignment.distance, list(t.alignment.assignment)) for t in transitions]
+
+    assert plain.stats()["turns"] == 0 and frames(plain.transitions) == frames(matched(graph))
+
+
+def test_turns_in_3d_yaw_and_pitch():
+    recording = flockkit.simulate(n_agents=6, steps=160, seed=11, dims=3)
+    graph = flockkit.get("builder", "kovar", turn_angle=20).build(recording, METRIC, np.random.default_rng(0))
+    turns = [t for t in graph.transitions if t.is_turn]
+    assert len(turns) == 4 * len({t.start for t in turns})
+    for t in turns:
+        r = t.alignment.rotation
+        assert np.isclose(np.degrees(np.arccos((np.trace(r) - 1) / 2)), 20.0) and np.isclose(np.linalg.det(r), 1)
+        axis = np.array([r[2, 1] - r[1, 2], r[0, 2] - r[2, 0], r[1, 0] - r[0, 1]])
+        heading = recording.configuration(t.start).velocities.mean(axis=0)
+        # about the up axis (yaw), or about a horizontal axis across the heading (pitch)
+        assert np.allclose(axis[:2], 0) or (abs(axis[2]) < 1e-9 and abs(axis[:2] @ heading[:2]) < 1e-9)
+
+
+def test_a_turn_steers_the_synthesized_group_by_its_angle(graph):
+    """Playing a turn: positions continue (no jump), and once its blend has played out the group
+    heads turn_angle (15 degrees) away from where the recording heads."""
+    turn = next(i for i, t in enumerate(graph.transitions) if t.is_turn and t.start + 60 <= graph.nodes[-1])
+    t = graph.transitions[turn]
+    blend = t.blend
+    walk = flockkit.Walk(
+        start=t.source, edges=[("transition", turn)] + [("clip", k) for k in range(t.source, t.source + 4)]
+    )
+    played = flockkit.synthesize(graph, walk)
+    com, source = played.center_of_mass(), graph.motion.center_of_mass()
+    assert np.allclose(com[0], source[t.start])
+    after = blend + 1  # the blend has played out
+    moved, recorded = com[after + 1] - com[after], source[t.start + after + 1] - source[t.start + after]
+    angle = np.degrees(np.arctan2(recorded[0] * moved[1] - recorded[1] * moved[0], recorded @ moved))
+    assert np.isclose(abs(angle), 15.0)
+    steps = np.linalg.norm(np.diff(com, axis=0), axis=1)
+    assert steps.max() <= 1.5 * np.linalg.norm(np.diff(source, axis=0), axis=1).max()  # no jump

@@ -76,8 +76,10 @@ def test_region_walk_keeps_the_flock_in_the_box_for_five_minutes(graph, recordin
     assert_quality(motion, recording)
 
 
-def test_region_walk_checks_each_edge_it_takes_whole(graph, recording):
-    """Clips longer than the look-ahead are checked to their end, not only for `horizon` seconds."""
+def test_region_walk_checks_each_edge_it_takes_whole(recording):
+    """Clips longer than the look-ahead are checked to their end, not only for `horizon` seconds
+    (a graph without turns, whose clips are long)."""
+    graph = flockkit.build_graph(recording, seed=1, n_jobs=2, turn_angle=0)
     box = com_box(recording)
     middle, half = (box.lower + box.upper) / 2, (box.upper - box.lower) / 4
     pen = flockkit.Box(lower=middle - half, upper=middle + half)
@@ -89,6 +91,67 @@ def test_region_walk_checks_each_edge_it_takes_whole(graph, recording):
             graph, flockkit.walk(graph, strategy="region", region=pen, duration=120, seed=seed, horizon=0.5)
         )
         assert pen.contains(motion.center_of_mass()).all()
+
+
+@pytest.fixture(scope="module")
+def default_flock():
+    """The issue's case: a default flock (it barely turns: under 5 degrees a second) and its
+    default graph."""
+    recording = flockkit.simulate(n_agents=20, steps=1500, seed=0)
+    return recording, flockkit.build_graph(recording, seed=0, n_jobs=2)
+
+
+def start_box(recording, times=3.0, least=20.0):
+    """A box centred on the group's start, its half-size `times` the flock's extent, at least `least`."""
+    com = recording.center_of_mass()
+    extent = np.linalg.norm(recording.positions - com[:, None], axis=-1).max()
+    half = max(times * extent, least)
+    return flockkit.Box(lower=com[0] - half, upper=com[0] + half)
+
+
+def test_a_default_flock_is_kept_in_a_box_three_times_its_extent_for_five_minutes(default_flock):
+    """Turns let the walk steer: every seed succeeds, the group roams the box (not one corner)
+    and keeps the quality bars; without turns the same region is refused, and says why."""
+    recording, graph = default_flock
+    box = start_box(recording)
+    half = (box.upper - box.lower) / 2
+    for seed in range(3):
+        motion = flockkit.synthesize(
+            graph, flockkit.walk(graph, strategy="region", region=box, duration=300, seed=seed)
+        )
+        com = motion.center_of_mass()
+        assert motion.duration >= 300 and box.contains(com).all()
+        assert np.all(com.max(axis=0) - com.min(axis=0) > half)  # roams more than half the box each way
+        assert_quality(motion, recording)
+    plain = flockkit.build_graph(recording, seed=0, n_jobs=2, turn_angle=0)
+    with pytest.raises(ValidationError, match="the graph has no turns") as info:
+        flockkit.walk(plain, strategy="region", region=box, duration=300, seed=0)
+    assert "tightest circle is about" in str(info.value) and "40 units across" in str(info.value)
+
+
+def test_an_impossible_region_says_why_in_numbers(default_flock):
+    """How far the group goes between transitions and how tight it turns, against the region's width."""
+    recording, graph = default_flock
+    com = recording.center_of_mass()
+    blend = graph.transitions[0].blend
+    travel = np.linalg.norm(com[blend:] - com[:-blend], axis=1).min()
+    with pytest.raises(ValidationError) as info:
+        flockkit.walk(
+            graph, strategy="region", region=flockkit.Ball(center=[0.0, 0.0], radius=2.0), duration=60, seed=0
+        )
+    message = str(info.value)
+    assert f"travels at least {travel:.3g} units" in message and "turns at most 15 degrees per transition" in message
+    assert f"about {travel * 24 / np.pi:.3g} units across" in message and "region 4 units across" in message
+
+
+def test_random_walks_take_turns_only_when_asked(default_flock):
+    _, graph = default_flock
+
+    def turns(walk):
+        return sum(graph.transitions[i].is_turn for kind, i in walk.edges if kind == "transition")
+
+    assert turns(flockkit.walk(graph, duration=120, seed=0)) == 0
+    assert turns(flockkit.walk(graph, duration=120, seed=0, turns=True)) > 0
 
 
 def test_sticklebacks(fish):
