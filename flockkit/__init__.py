@@ -22,6 +22,7 @@ from .convenience import build_graph, random_flock, simulate, walk
 from .graph import Clip, MotionGraph, Transition, Walk
 from .hookspecs import hookimpl
 from .interfaces import Capabilities, capabilities
+from .mesh import AnimatedMesh
 from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State, heading_axes
 from .registry import available, get, resolve
 from .solve import Proposal, Solution, solve
@@ -31,6 +32,7 @@ __version__ = "0.1.0"
 
 __all__ = [
     "Motion",
+    "AnimatedMesh",
     "Configuration",
     "ConfigurationFrame",
     "heading_axes",

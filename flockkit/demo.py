@@ -125,7 +125,7 @@ def _data_driven(tour: _Tour) -> dict:
         graph = build_graph(recording, seed=1, n_jobs=-1, progress=tour.progress)
     viz.plot_motion(recording, tour.path("recording.png"), obstacles=fence, title="the recording: 20 boids, 60 s")
     values, stride = difference_matrix(recording, interval=0.5)
-    marked = [(t.start // stride, t.end // stride) for t in graph.transitions]
+    marked = [(t.start // stride, t.end // stride) for t in graph.transitions if not t.is_turn]
     viz.plot_difference_matrix(
         values, tour.path("difference-matrix.png"), marked=marked, title="E, frames 0.5 s apart (circles: transitions)"
     )

@@ -1,5 +1,6 @@
 """Files in and out: captured motion read into a Motion (wide and long text tables, (T, N, D)
-.npy arrays), and motions exported for other tools (CSV, JSON, USD).
+.npy arrays), animated meshes (glTF, OBJ sequences, USD; ``read_mesh_animation``, from
+``flockkit.mesh``), and motions exported for other tools (CSV, JSON, glTF, USD).
 
 Captures do not record their frame rate in a form these readers can trust, so every reader takes
 ``dt=`` (seconds per frame) or ``fps=``.
@@ -23,6 +24,7 @@ import numpy as np
 from . import validate
 from ._atomic import atomic_path
 from .errors import FileFormatError, ValidationError
+from .mesh import list_clips, read_mesh_animation
 from .motion import Motion
 from .validate import allocation, integer
 
@@ -30,6 +32,8 @@ __all__ = [
     "read_wide",
     "read_long",
     "read_npy",
+    "read_mesh_animation",
+    "list_clips",
     "fill_gaps",
     "export",
     "write_csv",

@@ -305,14 +305,23 @@ def _roles(n_agents: int, problem) -> list:
 
 
 def _fit_view(ax, low, high) -> float:
-    """Axis limits holding the box from `low` to `high` with a margin, equal scales; returns the
+    """Axis limits holding the box from `low` to `high` with a margin, widened along one axis to
+    the axes' own proportions so that scales are equal and the scene fills them; returns the
     extent (the larger side) of the view in data units."""
     extent = max(float(np.max(high - low)), 1e-9)
     margin = 0.06 * extent + 1e-9
-    ax.set_xlim(low[0] - margin, high[0] + margin)
-    ax.set_ylim(low[1] - margin, high[1] + margin)
-    ax.set_aspect("equal", adjustable="datalim")  # the axes keep their box: the scene fills it
-    return extent + 2 * margin
+    low, high = np.asarray(low, dtype=float) - margin, np.asarray(high, dtype=float) + margin
+    box = ax.get_window_extent()
+    wanted = box.height / max(box.width, 1e-9)  # height over width of the axes, on the canvas
+    center, size = (low + high) / 2, high - low
+    if size[1] / size[0] < wanted:
+        size[1] = size[0] * wanted
+    else:
+        size[0] = size[1] / wanted
+    ax.set_xlim(center[0] - size[0] / 2, center[0] + size[0] / 2)
+    ax.set_ylim(center[1] - size[1] / 2, center[1] + size[1] / 2)
+    ax.set_aspect("equal")
+    return float(max(high - low))
 
 
 def _save_animation(movie, path, writer, progress: bool) -> None:
