@@ -22,6 +22,7 @@ from .convenience import build_graph, random_flock, simulate, walk
 from .graph import Clip, MotionGraph, Transition, Walk
 from .hookspecs import hookimpl
 from .interfaces import Capabilities, capabilities
+from .layers import Segmentation, segment
 from .mesh import AnimatedMesh
 from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State, heading_axes
 from .registry import available, get, resolve
@@ -62,6 +63,8 @@ __all__ = [
     "hookimpl",
     "simulate",
     "build_graph",
+    "segment",
+    "Segmentation",
     "walk",
     "solve",
     "Solution",

@@ -52,6 +52,11 @@ def flockkit_register_objectives(registry):
     """Register sampler objective terms (protocol ``flockkit.interfaces.Objective``)."""
 
 
+@hookspec
+def flockkit_register_segmenters(registry):
+    """Register segmenters (protocol ``flockkit.interfaces.Segmenter``)."""
+
+
 # kind -> hook name; one row per extension kind.
 HOOKS = {
     "behavior": "flockkit_register_behaviors",
@@ -60,4 +65,5 @@ HOOKS = {
     "walk": "flockkit_register_walks",
     "proposal": "flockkit_register_proposals",
     "objective": "flockkit_register_objectives",
+    "segmenter": "flockkit_register_segmenters",
 }

@@ -27,6 +27,7 @@ __all__ = [
     "WalkStrategy",
     "ProposalMove",
     "Objective",
+    "Segmenter",
 ]
 
 
@@ -122,6 +123,7 @@ KIND_FIELDS: dict[str, frozenset] = {
     "walk": frozenset(),
     "proposal": frozenset(),
     "objective": frozenset(),
+    "segmenter": frozenset(),
 }
 
 
@@ -266,6 +268,22 @@ class Objective(Protocol):
     def log_terms(self, motion: Motion, problem, start: int = 0, stop: int | None = None) -> np.ndarray: ...
 
 
+@runtime_checkable
+class Segmenter(Protocol):
+    """Splits a group of points into parts that move independently (paper 002, section 4.1).
+
+    Contract
+    --------
+    ``segment(motion, rng)``
+        Return a ``flockkit.Segmentation`` of `motion`'s points (agents): one label per point,
+        every part non-empty. Points that move together share a part; points that never move are
+        not in a part with moving ones. Deterministic given `rng`; the partition does not depend
+        on the order of the points (only the names of the parts may).
+    """
+
+    def segment(self, motion: Motion, rng: np.random.Generator): ...
+
+
 class _Guided(Protocol):
     def forward(self, initial, steps, rng, *, guide=None): ...
 
@@ -311,4 +329,5 @@ PROTOCOLS: dict[str, type] = {
     "walk": WalkStrategy,
     "proposal": ProposalMove,
     "objective": Objective,
+    "segmenter": Segmenter,
 }

@@ -7,7 +7,7 @@ from flockkit.testing import parametrize_with_checks
 PARAMS = {("walk", "region"): {"region": flockkit.Ball(center=[0.0, 0.0], radius=60.0)}}
 COMPONENTS = [
     (kind, flockkit.get(kind, name, **PARAMS.get((kind, name), {})))
-    for kind in ("behavior", "metric", "builder", "walk", "proposal", "objective")
+    for kind in ("behavior", "metric", "builder", "walk", "proposal", "objective", "segmenter")
     for name in flockkit.available(kind)
 ]
 

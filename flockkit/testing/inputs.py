@@ -15,7 +15,7 @@ from .. import rigid
 from ..graph import MotionGraph
 from ..motion import Alignment, Motion
 
-__all__ = ["recording", "graph", "WOBBLE_PERIOD"]
+__all__ = ["recording", "graph", "parts", "WOBBLE_PERIOD"]
 
 # The group circles the origin once every LAP seconds while its members wobble about their places
 # every WOBBLE_PERIOD seconds. The two periods are incommensurate, so a configuration recurs up
@@ -88,3 +88,31 @@ def _alignment(motion: Motion, a: int, b: int) -> Alignment:
     return Alignment(
         distance=residual, assignment=np.arange(motion.n_agents), rotation=rotation, translation=translation
     )
+
+
+def parts(*, dims: int = 3, seconds: float = 6.0, dt: float = 0.1) -> tuple[Motion, np.ndarray]:
+    """A motion of three groups of points and the group of each (0, 1, 2): group 0 (12 points)
+    never moves; group 1 (16 points, a flap) swings about an axis in the first half and rests in
+    the second; group 2 (16 points, a tail) rests in the first half and swings in the second. Each
+    moving group is rigid, and the two move at different times, so any segmenter that splits by
+    motion finds them."""
+    rng = np.random.default_rng(12)
+    t = np.arange(round(seconds / dt) + 1) * dt
+    half = seconds / 2
+    base = [rng.uniform(-1, 1, (12, dims)), rng.uniform(-1, 1, (16, dims)) + 3, rng.uniform(-1, 1, (16, dims)) - 3]
+    positions = np.empty((len(t), 44, dims))
+    positions[:, :12] = base[0]
+    for group, (points, active) in enumerate(((base[1], t < half), (base[2], t >= half)), 1):
+        angle = np.where(active, 0.6 * np.sin(2 * np.pi * 1.3 * group * t), 0.0)
+        c, s = np.cos(angle), np.sin(angle)
+        center = points.mean(axis=0)
+        offset = points - center
+        turned = np.empty((len(t), len(points), dims))
+        turned[..., 0] = c[:, None] * offset[:, 0] - s[:, None] * offset[:, 1]
+        turned[..., 1] = s[:, None] * offset[:, 0] + c[:, None] * offset[:, 1]
+        if dims == 3:
+            turned[..., 2] = offset[:, 2]
+        columns = slice(12, 28) if group == 1 else slice(28, 44)
+        positions[:, columns] = turned + center
+    truth = np.repeat([0, 1, 2], [12, 16, 16])
+    return Motion(positions=positions, dt=dt), truth

@@ -577,3 +577,76 @@ BROKEN_BY_KIND["proposal"] = {
     "check_reports_changes": UnderReports,
     "check_input_unchanged": MutatesCurrent,
 }
+
+
+# -- segmenters: the built-in ica-kmeans is the correct base ----------------------------------
+
+from flockkit_ica import IcaKmeans  # noqa: E402
+
+import flockkit  # noqa: E402
+
+
+class NoSegment:
+    def split(self, motion, rng):
+        return None
+
+
+class DropsAPoint(IcaKmeans):
+    def segment(self, motion, rng):
+        found = super().segment(motion, rng)
+        return flockkit.Segmentation(labels=found.labels[:-1], n_parts=found.n_parts)
+
+
+class ByPosition(IcaKmeans):
+    """Splits by where points are, not how they move: left and right of the first coordinate's median."""
+
+    def segment(self, motion, rng):
+        if not isinstance(motion, flockkit.Motion):
+            raise flockkit.errors.ValidationError("not a Motion")
+        x = motion.positions[0, :, 0]
+        return flockkit.Segmentation(labels=(x > np.median(x)).astype(int), n_parts=2)
+
+
+class UnseededSegment(IcaKmeans):
+    """Names its parts differently on every call (state kept between calls, not from `rng`)."""
+
+    calls = 0
+
+    def segment(self, motion, rng):
+        found = super().segment(motion, rng)
+        UnseededSegment.calls += 1
+        names = np.roll(np.arange(found.n_parts), UnseededSegment.calls)
+        return flockkit.Segmentation(labels=names[found.labels], n_parts=found.n_parts)
+
+
+class OrderDependent(IcaKmeans):
+    """Splits the first half of the points from the second, whatever they do."""
+
+    def segment(self, motion, rng):
+        super().segment(motion, rng)
+        return flockkit.Segmentation(labels=(np.arange(motion.n_agents) >= motion.n_agents // 2).astype(int), n_parts=2)
+
+
+class MutatesMotionSegment(IcaKmeans):
+    def segment(self, motion, rng):
+        motion.positions.setflags(write=True)
+        motion.positions[0, 0] += 1.0
+        return super().segment(motion, rng)
+
+
+class AcceptsArrays(IcaKmeans):
+    def segment(self, motion, rng):
+        if not isinstance(motion, flockkit.Motion):
+            motion = flockkit.Motion(positions=motion, dt=0.1)
+        return super().segment(motion, rng)
+
+
+BROKEN_BY_KIND["segmenter"] = {
+    "check_interface": NoSegment,
+    "check_labels_cover_every_point": DropsAPoint,
+    "check_still_points_apart_from_moving_ones": ByPosition,
+    "check_deterministic": UnseededSegment,
+    "check_order_of_points_does_not_matter": OrderDependent,
+    "check_inputs_unchanged": MutatesMotionSegment,
+    "check_rejects_bad_motion": AcceptsArrays,
+}

@@ -8,7 +8,17 @@ from hypothesis.errors import InvalidArgument
 from flockkit.testing import check_plugin, checks_for, parametrize_with_checks
 from flockkit.testing import strategies as fst
 
-from .fakes import BROKEN_BY_KIND, ComTerm, Declaring, IcpHungarian, Kovar, RandomVelocity, RandomWalk, Retime
+from .fakes import (
+    BROKEN_BY_KIND,
+    ComTerm,
+    Declaring,
+    IcaKmeans,
+    IcpHungarian,
+    Kovar,
+    RandomVelocity,
+    RandomWalk,
+    Retime,
+)
 
 CASES = [(kind, name) for kind, fakes in BROKEN_BY_KIND.items() for name in sorted(fakes)]
 
@@ -31,6 +41,7 @@ def test_every_check_has_a_broken_fake(kind):
         ("walk", RandomWalk()),
         ("objective", ComTerm()),
         ("proposal", Retime()),
+        ("segmenter", IcaKmeans()),
     ]
 )
 def test_correct_components_pass(component, check):

@@ -1,0 +1,86 @@
+"""Conformance checks for segmenters (``flockkit.interfaces.Segmenter``).
+
+Each check is ``check_<property>(name, segmenter)``; they segment the kit's ``inputs.parts``: a
+motion of three groups of points, one still and two that move at different times, so every
+segmenter has an answer that is clearly right.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..layers import Segmentation, same_partition
+from ..motion import Motion
+from ._expect import dims_of, expect_validation_error, on_input
+from .inputs import parts
+
+
+def _segment(segmenter, motion, seed=0):
+    return segmenter.segment(motion, np.random.default_rng(seed))
+
+
+def check_labels_cover_every_point(name, segmenter):
+    """segment returns a Segmentation with one label per point, every part non-empty."""
+    for dims in dims_of(segmenter):
+        motion, _ = parts(dims=dims)
+        with on_input(name, segmenter, dims, "the kit's parts"):
+            result = _segment(segmenter, motion)
+        assert isinstance(result, Segmentation), f"{name}.segment returned {type(result).__name__}, not a Segmentation"
+        assert result.n_points == motion.n_agents, (
+            f"{name}.segment labels {result.n_points} points; the motion has {motion.n_agents}"
+        )
+
+
+def check_still_points_apart_from_moving_ones(name, segmenter):
+    """Points that never move share no part with points that move, and points that move together
+    (a rigid group) share one."""
+    for dims in dims_of(segmenter):
+        motion, truth = parts(dims=dims)
+        labels = _segment(segmenter, motion).labels
+        still = truth == 0
+        assert not np.isin(labels[still], labels[~still]).any(), f"{name}.segment puts still points with moving ones"
+        for group in np.unique(truth[~still]):
+            assert len(np.unique(labels[truth == group])) == 1, f"{name}.segment splits a group that moves as one"
+
+
+def check_deterministic(name, segmenter):
+    """The same seed gives the same labels."""
+    motion, _ = parts(dims=dims_of(segmenter)[0])
+    for seed in (3, 4):
+        first, second = _segment(segmenter, motion, seed), _segment(segmenter, motion, seed)
+        assert np.array_equal(first.labels, second.labels), f"{name}.segment differs for the same seed"
+
+
+def check_order_of_points_does_not_matter(name, segmenter):
+    """Shuffling the points shuffles the labels with them: the same partition, up to part names."""
+    motion, _ = parts(dims=dims_of(segmenter)[0])
+    order = np.random.default_rng(5).permutation(motion.n_agents)
+    shuffled = Motion(positions=motion.positions[:, order], dt=motion.dt)
+    labels = _segment(segmenter, motion).labels
+    again = _segment(segmenter, shuffled).labels
+    assert same_partition(labels[order], again), f"{name}.segment depends on the order of the points"
+
+
+def check_inputs_unchanged(name, segmenter):
+    """segment leaves the motion as it was."""
+    motion, _ = parts(dims=dims_of(segmenter)[0])
+    before = motion.positions.copy()
+    _segment(segmenter, motion)
+    assert np.array_equal(before, motion.positions), f"{name}.segment changed its motion"
+
+
+def check_rejects_bad_motion(name, segmenter):
+    """Something that is not a Motion raises flockkit.errors.ValidationError."""
+    motion, _ = parts(dims=dims_of(segmenter)[0])
+    expect_validation_error(lambda: segmenter.segment(motion.positions, np.random.default_rng(0)),
+                            f"{name}.segment(an array, not a Motion)")  # fmt: skip
+
+
+CHECKS = (
+    check_labels_cover_every_point,
+    check_still_points_apart_from_moving_ones,
+    check_deterministic,
+    check_order_of_points_does_not_matter,
+    check_inputs_unchanged,
+    check_rejects_bad_motion,
+)
