@@ -6,7 +6,7 @@ convenience layer (``simulate``, ``build_graph``, ``walk``, ``solve``), rigid mo
 (``flockkit.rigid``) and the checks plugins share (``flockkit.validate``).
 """
 
-from . import errors, graph, io, parallel, rigid, validate
+from . import errors, graph, io, layers, parallel, rigid, validate
 from .constraints import (
     Ball,
     Box,
@@ -22,7 +22,7 @@ from .convenience import build_graph, random_flock, simulate, walk
 from .graph import Clip, MotionGraph, Transition, Walk
 from .hookspecs import hookimpl
 from .interfaces import Capabilities, capabilities
-from .layers import Segmentation, segment
+from .layers import GraphLayers, LayeredWalk, Segmentation, build_layers, segment
 from .mesh import AnimatedMesh
 from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State, heading_axes
 from .registry import available, get, resolve
@@ -65,6 +65,9 @@ __all__ = [
     "build_graph",
     "segment",
     "Segmentation",
+    "build_layers",
+    "GraphLayers",
+    "LayeredWalk",
     "walk",
     "solve",
     "Solution",
@@ -73,6 +76,7 @@ __all__ = [
     "errors",
     "graph",
     "io",
+    "layers",
     "parallel",
     "rigid",
     "validate",

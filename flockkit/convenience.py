@@ -170,7 +170,13 @@ def walk(
 ) -> Walk:
     """A walk through `graph` with a walk strategy (an installed name with `params`: ``random``,
     ``region`` with ``region=``; or an instance) covering `duration` seconds (default: the length
-    of the graph's source motion)."""
+    of the graph's source motion). On ``flockkit.GraphLayers`` every part is walked on its own,
+    each with its own stream of random numbers from `seed`, giving a ``flockkit.LayeredWalk``."""
+    from .layers import GraphLayers, walk_layers
+
+    if isinstance(graph, GraphLayers):
+        duration = graph.source.duration if duration is None else duration
+        return walk_layers(graph, strategy=strategy, duration=duration, seed=validate_seed(seed), params=params)
     if not isinstance(graph, MotionGraph):
         raise ValidationError(f"walk needs a flockkit.MotionGraph; got {type(graph).__name__}")
     duration = graph.motion.duration if duration is None else number(duration, "walk: duration", minimum=0, strict=True)

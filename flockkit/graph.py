@@ -23,7 +23,7 @@ from .errors import FileFormatError, ValidationError
 from .motion import DEFAULT_UP, Alignment, Motion, heading_axes
 from .validate import integer
 
-__all__ = ["MotionGraph", "Clip", "Transition", "Walk", "turns"]
+__all__ = ["MotionGraph", "Clip", "Transition", "Walk", "turns", "local_minima"]
 
 GRAPH_FORMAT_VERSION = 1
 
@@ -278,8 +278,8 @@ class MotionGraph:
         """Build a graph from transitions ``(start_frame, end_frame, alignment, blend)``: nodes at
         every transition frame, clips between consecutive nodes, trimmed to the largest strongly
         connected component (ties: the one holding the earliest frame). Transitions that land less
-        than their blend before the last kept frame are dropped (and the trimming repeated), so a
-        walk can always continue.
+        than the longest blend before the last kept frame are dropped (and the trimming repeated),
+        so a walk can always continue.
 
         Raises ValidationError if no transitions are given (a graph needs at least one loop).
         """
@@ -293,9 +293,10 @@ class MotionGraph:
             nodes = _strongly_connected_frames(transitions)
             last = nodes[-1] if len(nodes) else -1
             kept = {int(f) for f in nodes}
-            # A transition must land at least its blend before the last frame, so that a walk can
-            # always go on: clips are always allowed, and at the last node every blend is done.
-            usable = [t for t in transitions if t[0] in kept and t[1] in kept and t[1] + t[3] <= last]
+            # A transition must land at least the longest blend before the last frame, so that a
+            # walk can always go on: clips are always allowed, and at the last node every blend is done.
+            longest = max(t[3] for t in transitions)
+            usable = [t for t in transitions if t[0] in kept and t[1] in kept and t[1] + longest <= last]
             if len(usable) == len(transitions):
                 break
             transitions = usable
@@ -327,13 +328,11 @@ class MotionGraph:
         return (self.clips if kind == "clip" else self.transitions)[index].target
 
     def allowed_edges(self, node: int, frames_since_transition: int) -> list[tuple[str, int]]:
-        """Edges a walk may take at `node`: a transition only once its blend has played out
-        (`frames_since_transition` frames of clips since the last one), so blends never overlap."""
-        return [
-            edge
-            for edge in self.out_edges(node)
-            if edge[0] == "clip" or frames_since_transition >= self.transitions[edge[1]].blend
-        ]
+        """Edges a walk may take at `node`: a transition only once `frames_since_transition`
+        frames of clips since the last one cover the longest blend of the graph, so that the last
+        one's blend has played out whichever it was, and blends never overlap."""
+        longest = int(self.tables.transition_blend.max())
+        return [edge for edge in self.out_edges(node) if edge[0] == "clip" or frames_since_transition >= longest]
 
     def kept_frames(self) -> int:
         """Source frames that some clip plays."""
@@ -397,33 +396,28 @@ class MotionGraph:
 
     # -- files -----------------------------------------------------------------------------
 
-    def save(self, path) -> None:
-        """Write the graph and its source motion to one .npz with JSON metadata (atomic)."""
+    def _to_arrays(self) -> dict[str, np.ndarray]:
+        """The graph's own arrays (its motion's are written separately)."""
         tables = self.tables
-        arrays = {
-            **self.motion._to_arrays(),
+        return {
             "nodes": self.nodes,
-            "transition_nodes": np.stack([tables.transition_source, tables.transition_target], axis=1),
+            "transition_nodes": np.stack([tables.transition_source, tables.transition_target], axis=1).reshape(-1, 2),
             "transition_blend": tables.transition_blend,
             "transition_distance": np.array([t.alignment.distance for t in self.transitions]),
             "transition_assignment": tables.assignment,
             "transition_rotation": tables.rotation,
             "transition_translation": tables.translation,
         }
-        metadata = {"dt": self.motion.dt, "params": _thaw(self.params), "provenance": _thaw(self.provenance)}
-        _npzfile.write(path, kind="graph", version=GRAPH_FORMAT_VERSION, arrays=arrays, metadata=metadata)
 
     @classmethod
-    def load(cls, path) -> MotionGraph:
-        """Read a graph written by :meth:`save`; FileFormatError naming the file if it is not one."""
-        arrays, header = _npzfile.read(path, kind="graph", versions=(GRAPH_FORMAT_VERSION,))
+    def _from_arrays(cls, arrays, motion: Motion, params, provenance, source) -> MotionGraph:
+        """The inverse of :meth:`_to_arrays` over `motion`; FileFormatError naming `source`."""
         names = ("transition_nodes", "transition_blend", "transition_distance", "transition_assignment",
                  "transition_rotation", "transition_translation")  # fmt: skip
         lengths = {name: len(arrays[name]) if name in arrays and arrays[name].ndim else None for name in names}
         if len(set(lengths.values())) != 1:
-            raise FileFormatError(f"{path}: invalid motion graph: its transition arrays differ in length: {lengths}")
+            raise FileFormatError(f"{source}: invalid motion graph: its transition arrays differ in length: {lengths}")
         try:
-            motion = Motion._from_arrays(arrays, header["dt"])
             nodes = arrays["nodes"]
             transitions = [
                 Transition(
@@ -434,25 +428,28 @@ class MotionGraph:
                     blend=int(blend),
                     alignment=Alignment(distance=dist, assignment=assign, rotation=rot, translation=shift),
                 )
-                for (s, e), blend, dist, assign, rot, shift in zip(
-                    arrays["transition_nodes"],
-                    arrays["transition_blend"],
-                    arrays["transition_distance"],
-                    arrays["transition_assignment"],
-                    arrays["transition_rotation"],
-                    arrays["transition_translation"],
-                )
+                for (s, e), blend, dist, assign, rot, shift in zip(*(arrays[name] for name in names))
             ]
-            return cls(
-                motion=motion,
-                nodes=nodes,
-                clips=_clips(nodes),
-                transitions=transitions,
-                params=header.get("params"),
-                provenance=header.get("provenance"),
-            )
+            return cls(motion=motion, nodes=nodes, clips=_clips(nodes), transitions=transitions, params=params,
+                       provenance=provenance)  # fmt: skip
         except (KeyError, IndexError, TypeError, ValueError, OverflowError) as exc:
+            raise FileFormatError(f"{source}: invalid motion graph: {type(exc).__name__}: {exc}") from None
+
+    def save(self, path) -> None:
+        """Write the graph and its source motion to one .npz with JSON metadata (atomic)."""
+        arrays = {**self.motion._to_arrays(), **self._to_arrays()}
+        metadata = {"dt": self.motion.dt, "params": _thaw(self.params), "provenance": _thaw(self.provenance)}
+        _npzfile.write(path, kind="graph", version=GRAPH_FORMAT_VERSION, arrays=arrays, metadata=metadata)
+
+    @classmethod
+    def load(cls, path) -> MotionGraph:
+        """Read a graph written by :meth:`save`; FileFormatError naming the file if it is not one."""
+        arrays, header = _npzfile.read(path, kind="graph", versions=(GRAPH_FORMAT_VERSION,))
+        try:
+            motion = Motion._from_arrays(arrays, header["dt"])
+        except (KeyError, ValidationError) as exc:
             raise FileFormatError(f"{path}: invalid motion graph: {type(exc).__name__}: {exc}") from None
+        return cls._from_arrays(arrays, motion, header.get("params"), header.get("provenance"), path)
 
 
 def turns(motion: Motion, frames, *, angle: float, blend: int) -> list[tuple[int, int, Alignment, int]]:
@@ -478,6 +475,22 @@ def turns(motion: Motion, frames, *, angle: float, blend: int) -> list[tuple[int
             distance = turned.residual(configuration, configuration)
             found.append((frame, frame, attrs.evolve(turned, distance=distance), blend))
     return found
+
+
+def local_minima(values: np.ndarray, far: np.ndarray) -> list[tuple[int, int]]:
+    """The local minima of a difference matrix `values` (K, K) where builders place transitions:
+    cells (i, j), i != j, at most each of their 8 neighbors (the diagonal ignored), with far[i, j]."""
+    k = len(values)
+    padded = np.full((k + 2, k + 2), np.inf)
+    padded[1:-1, 1:-1] = values
+    np.fill_diagonal(padded[1:-1, 1:-1], np.inf)
+    centre = padded[1:-1, 1:-1]
+    is_min = np.isfinite(centre) & far
+    for di in (-1, 0, 1):
+        for dj in (-1, 0, 1):
+            if di or dj:
+                is_min &= centre <= padded[1 + di : k + 1 + di, 1 + dj : k + 1 + dj]
+    return [(int(i), int(j)) for i, j in zip(*np.nonzero(is_min))]
 
 
 def _clips(nodes) -> list[Clip]:

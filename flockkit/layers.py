@@ -9,8 +9,6 @@ of the whole object from a short source. Where parts meet on a mesh, the seams a
 
 from __future__ import annotations
 
-import json
-
 import attrs
 import numpy as np
 
@@ -19,9 +17,14 @@ from .errors import FileFormatError, ValidationError
 from .mesh import AnimatedMesh
 from .motion import Motion
 
-__all__ = ["Segmentation", "segment"]
+__all__ = ["Segmentation", "segment", "GraphLayers", "LayeredWalk", "build_layers", "seam_stretch"]
 
 SEGMENTATION_FORMAT_VERSION = 1
+LAYERS_FORMAT_VERSION = 1
+# Rings of mesh neighbors around a seam whose displacements are smoothed, and the smoothing
+# passes (our choice: enough to spread a tear over a few edges, measured on the Fox).
+SEAM_RINGS = 2
+SEAM_PASSES = 8
 
 
 def _labels(value) -> np.ndarray:
@@ -125,5 +128,242 @@ def same_partition(a, b) -> bool:
     return np.array_equal(_canonical(np.asarray(a)), _canonical(np.asarray(b)))
 
 
-def _json(value) -> str:
-    return json.dumps(value)
+def _faces_or_none(value):
+    if value is None:
+        return None
+    return AnimatedMesh(motion=Motion(positions=np.zeros((1, int(np.max(value)) + 1, 3)), dt=1.0), faces=value).faces
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class GraphLayers:
+    """One motion graph per part of an object (paper 002's motion graph layer).
+
+    Attributes
+    ----------
+    source : Motion
+        The whole object's motion (a mesh's vertices, a flock's agents).
+    segmentation : Segmentation
+        The part of each point.
+    graphs : tuple of MotionGraph
+        Graph k over the motion of part k's points (``segmentation.parts()[k]``, in that order).
+    faces : ndarray (F, 3 or 4), optional
+        The mesh's faces, when the source is a mesh: synthesis smooths the seams between parts.
+    """
+
+    source: Motion
+    segmentation: Segmentation
+    graphs: tuple = attrs.field(converter=tuple)
+    faces: np.ndarray | None = attrs.field(default=None, converter=_faces_or_none)
+
+    def __attrs_post_init__(self):
+        from .graph import MotionGraph
+
+        self.segmentation.check_fits(self.source, "the layers' source")
+        if len(self.graphs) != self.segmentation.n_parts:
+            raise ValidationError(
+                f"GraphLayers has {len(self.graphs)} graphs for {self.segmentation.n_parts} parts; it needs one a part"
+            )
+        for k, (graph, points) in enumerate(zip(self.graphs, self.segmentation.parts())):
+            if not isinstance(graph, MotionGraph) or graph.motion.n_agents != len(points):
+                raise ValidationError(
+                    f"GraphLayers.graphs[{k}] must be a MotionGraph over part {k}'s {len(points)} points"
+                )
+        if self.faces is not None and len(self.faces) and self.faces.max() >= self.source.n_agents:
+            raise ValidationError(f"GraphLayers.faces index points beyond the source's {self.source.n_agents}")
+
+    @property
+    def n_parts(self) -> int:
+        return self.segmentation.n_parts
+
+    def stats(self) -> dict:
+        return {
+            "parts": self.n_parts,
+            "points": self.source.n_agents,
+            "points_per_part": [len(p) for p in self.segmentation.parts()],
+            "graphs": [graph.stats() for graph in self.graphs],
+        }
+
+    def __eq__(self, other):
+        if not isinstance(other, GraphLayers):
+            return NotImplemented
+        faces_equal = (self.faces is None and other.faces is None) or (
+            self.faces is not None and other.faces is not None and np.array_equal(self.faces, other.faces)
+        )
+        return (
+            self.source == other.source and self.segmentation == other.segmentation and self.graphs == other.graphs
+            and faces_equal
+        )  # fmt: skip
+
+    __hash__ = None
+
+    def save(self, path) -> None:
+        """Write the source, the segmentation, the faces and every part's graph to one .npz (atomic)."""
+        from .graph import _thaw
+
+        arrays = {**self.source._to_arrays(), "labels": self.segmentation.labels}
+        if self.faces is not None:
+            arrays["faces"] = self.faces
+        for k, graph in enumerate(self.graphs):
+            arrays.update({f"part{k}.{name}": array for name, array in graph._to_arrays().items()})
+        metadata = {
+            "dt": self.source.dt,
+            "n_parts": self.n_parts,
+            "params": [_thaw(g.params) for g in self.graphs],
+            "provenance": [_thaw(g.provenance) for g in self.graphs],
+        }
+        _npzfile.write(path, kind="layers", version=LAYERS_FORMAT_VERSION, arrays=arrays, metadata=metadata)
+
+    @classmethod
+    def load(cls, path) -> GraphLayers:
+        """Read a file written by :meth:`save`; FileFormatError naming the file if it is not one."""
+        from .graph import MotionGraph
+
+        arrays, header = _npzfile.read(path, kind="layers", versions=(LAYERS_FORMAT_VERSION,))
+        try:
+            source = Motion._from_arrays(arrays, header["dt"])
+            segmentation = Segmentation(labels=arrays["labels"], n_parts=header["n_parts"])
+            graphs = []
+            for k, points in enumerate(segmentation.parts()):
+                own = {name.split(".", 1)[1]: a for name, a in arrays.items() if name.startswith(f"part{k}.")}
+                graphs.append(MotionGraph._from_arrays(own, _part_motion(source, points), header["params"][k],
+                                                       header["provenance"][k], path))  # fmt: skip
+            return cls(source=source, segmentation=segmentation, graphs=graphs, faces=arrays.get("faces"))
+        except (KeyError, IndexError, TypeError, ValidationError) as exc:
+            raise FileFormatError(f"{path}: invalid motion graph layers: {type(exc).__name__}: {exc}") from None
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class LayeredWalk:
+    """One walk per part of a GraphLayers, in part order."""
+
+    walks: tuple = attrs.field(converter=tuple)
+
+    def __eq__(self, other):
+        if not isinstance(other, LayeredWalk):
+            return NotImplemented
+        return self.walks == other.walks
+
+    __hash__ = None
+
+
+def _part_motion(source: Motion, points: np.ndarray) -> Motion:
+    return Motion(positions=source.positions[:, points], dt=source.dt)
+
+
+def build_layers(
+    source,
+    *,
+    segmentation: Segmentation | None = None,
+    segmenter="ica-kmeans",
+    segmenter_params: dict | None = None,
+    builder="windowed",
+    seed: int | None = None,
+    **params,
+) -> GraphLayers:
+    """Graph layers of `source` (a Motion, or an AnimatedMesh whose faces are kept for seams): its
+    points split by `segmentation` (default: `segmenter` with `segmenter_params`), then one graph
+    per part built by `builder` with `params` (as for :func:`flockkit.build_graph`)."""
+    from .convenience import build_graph
+
+    motion = motion_of(source)
+    if segmentation is None:
+        segmentation = segment(motion, segmenter=segmenter, seed=seed, **dict(segmenter_params or {}))
+    elif not isinstance(segmentation, Segmentation):
+        raise ValidationError(f"segmentation must be a flockkit.Segmentation; got {type(segmentation).__name__}")
+    segmentation.check_fits(motion)
+    graphs = [build_graph(_part_motion(motion, points), builder=builder, seed=seed, **params)
+              for points in segmentation.parts()]  # fmt: skip
+    faces = source.faces if isinstance(source, AnimatedMesh) else None
+    return GraphLayers(source=motion, segmentation=segmentation, graphs=graphs, faces=faces)
+
+
+def walk_layers(layers: GraphLayers, *, strategy, duration, seed, params) -> LayeredWalk:
+    """Every part walked on its own, each with its own stream of random numbers from `seed`."""
+    from .convenience import walk
+
+    streams = np.random.SeedSequence(seed).spawn(layers.n_parts)
+    return LayeredWalk(
+        walks=[
+            walk(graph, strategy=strategy, duration=duration, seed=int(stream.generate_state(1)[0]), **params)
+            for graph, stream in zip(layers.graphs, streams)
+        ]
+    )
+
+
+def synthesize_layers(layers: GraphLayers, walk: LayeredWalk) -> Motion:
+    """The whole object played from its parts' walks, cut to the shortest: every part continuous
+    across its own transitions (blended as synthesize does). On a mesh, the seams are smoothed:
+    within SEAM_RINGS rings of mesh neighbors of a face that spans two parts, each point's
+    displacement from its mean position in the source is replaced, SEAM_PASSES times, by the mean
+    of its neighbors' (points farther away keep theirs), so a seam bends over a few edges instead of
+    tearing."""
+    from .synthesis import _positions
+
+    if not isinstance(walk, LayeredWalk) or len(walk.walks) != layers.n_parts:
+        raise ValidationError(f"synthesizing {layers.n_parts} layers needs a LayeredWalk of {layers.n_parts} walks")
+    played = [_positions(graph, w) for graph, w in zip(layers.graphs, walk.walks)]  # no Motion each: no copies
+    frames = min(len(p) for p in played)
+    positions = np.empty((frames, layers.source.n_agents, layers.source.dims))
+    for points, part in zip(layers.segmentation.parts(), played):
+        positions[:, points] = part[:frames]
+    if layers.faces is not None and layers.n_parts > 1:
+        positions = _smooth_seams(positions, layers)
+    return Motion(positions=positions, dt=layers.source.dt)
+
+
+def _adjacency(n_points: int, faces: np.ndarray):
+    from scipy.sparse import coo_matrix
+
+    ring = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
+    rows, cols = np.concatenate([ring[:, 0], ring[:, 1]]), np.concatenate([ring[:, 1], ring[:, 0]])
+    adjacency = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_points, n_points)).tocsr()
+    adjacency.data[:] = 1.0
+    return adjacency
+
+
+def seam_points(layers: GraphLayers) -> np.ndarray:
+    """Points of faces that span two or more parts."""
+    labels = layers.segmentation.labels[layers.faces]
+    spanning = np.any(labels != labels[:, :1], axis=1)
+    return np.unique(layers.faces[spanning])
+
+
+def _smooth_seams(positions: np.ndarray, layers: GraphLayers) -> np.ndarray:
+    adjacency = _adjacency(layers.source.n_agents, layers.faces)
+    zone = np.zeros(layers.source.n_agents, dtype=bool)
+    zone[seam_points(layers)] = True
+    for _ in range(SEAM_RINGS):
+        zone |= (adjacency @ zone.astype(float)) > 0
+    # the passes read the zone and its neighbors only: work on that block of points
+    involved = np.flatnonzero(zone | ((adjacency @ zone.astype(float)) > 0))
+    inner = np.flatnonzero(zone[involved])
+    local = adjacency[involved][:, involved]
+    degree = np.asarray(adjacency.sum(axis=1)).ravel()[involved]
+    mean_of_neighbors = local[inner].multiply(1.0 / np.maximum(degree[inner], 1)[:, None]).tocsr()
+    rest = layers.source.positions.mean(axis=0)[involved]
+    frames, _, d = positions.shape
+    displacement = (positions[:, involved] - rest).transpose(1, 0, 2).reshape(len(involved), frames * d)
+    for _ in range(SEAM_PASSES):
+        displacement[inner] = mean_of_neighbors @ displacement
+    positions[:, involved] = displacement.reshape(len(involved), frames, d).transpose(1, 0, 2) + rest
+    return positions
+
+
+def seam_stretch(motion: Motion, faces, labels=None, *, reference: Motion | None = None) -> float:
+    """The largest relative change of an edge's length, |length / rest - 1|, where rest is the
+    edge's mean length in `reference` (default: `motion` itself), over the edges of faces that
+    span two parts of `labels` (default: every edge)."""
+    faces = np.asarray(faces)
+    if labels is not None:
+        labels = np.asarray(labels)[faces]
+        faces = faces[np.any(labels != labels[:, :1], axis=1)]
+    if not len(faces):
+        return 0.0
+    edges = np.unique(np.sort(np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2), axis=1), axis=0)
+
+    def length(positions):
+        return np.linalg.norm(positions[:, edges[:, 0]] - positions[:, edges[:, 1]], axis=2)
+
+    lengths = length(motion.positions)
+    mean = length((reference or motion).positions).mean(axis=0)
+    return float(np.max(np.abs(lengths / np.maximum(mean, 1e-300) - 1)))

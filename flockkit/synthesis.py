@@ -45,11 +45,12 @@ def _plan(graph: MotionGraph, walk: Walk):
     taken = transition_index[at]
     blend = tables.transition_blend[taken]
     since = np.diff(np.concatenate([[-np.inf], before[at]]))  # clip frames since the previous transition
-    if np.any(since < blend):
-        first = int(np.argmax(since < blend))
+    previous = np.concatenate([[0], blend[:-1]])  # the blend that must have played out
+    if np.any(since < previous):
+        first = int(np.argmax(since < previous))
         raise ValidationError(
-            f"Walk.edges[{int(at[first])}] takes a transition {int(since[first])} frames after the previous one; "
-            f"its blend needs {int(blend[first])}"
+            f"Walk.edges[{int(at[first])}] takes a transition {int(since[first])} frames after the previous one, "
+            f"whose blend needs {int(previous[first])}"
         )
     rotations, translations, mappings = _compose(walk, tables, taken, graph.motion.n_agents, graph.motion.dims)
     # A segment (the stretch between two transitions) starts at a node and plays consecutive
@@ -97,12 +98,18 @@ def _compose(walk, tables, taken, n_agents, dims):
 
 
 def _place(source, frames, segments, rotations, translations, mappings) -> np.ndarray:
-    """Source frames placed in the world: a flat gather, then each frame's segment placement."""
+    """Source frames placed in the world: a flat gather, then each frame's segment placement
+    (skipped where every placement is the identity, as for graphs of objects that stay in place)."""
     t, n, d = source.shape
-    flat = source.reshape(t * n, d)
-    index = np.take(mappings, segments, axis=0)
-    index += (frames * n)[:, None]
-    gathered = np.take(flat, index.ravel(), axis=0).reshape(len(frames), n, d)  # take: much faster than [ ]
+    if np.array_equal(mappings, np.broadcast_to(np.arange(n), mappings.shape)):
+        gathered = np.take(source, frames, axis=0)
+    else:
+        flat = source.reshape(t * n, d)
+        index = np.take(mappings, segments, axis=0)
+        index += (frames * n)[:, None]
+        gathered = np.take(flat, index.ravel(), axis=0).reshape(len(frames), n, d)  # take: much faster than [ ]
+    if not np.any(translations) and np.array_equal(rotations, np.broadcast_to(np.eye(d), rotations.shape)):
+        return gathered
     return rigid.apply(rotations[segments][:, None], translations[segments][:, None], gathered)
 
 
@@ -133,8 +140,14 @@ def synthesize(graph: MotionGraph, walk: Walk) -> Motion:
     """The motion of `walk` through `graph`: one Motion of the graph's agents, at the source dt.
 
     Raises ValidationError if the walk does not fit the graph (an edge that does not leave the
-    node reached, or a transition taken before the previous blend has played out).
+    node reached, or a transition taken before the previous blend has played out). On
+    ``flockkit.GraphLayers`` with a ``LayeredWalk``, the whole object from its parts' walks
+    (``flockkit.layers.synthesize_layers``: seams between parts of a mesh smoothed).
     """
+    from .layers import GraphLayers, synthesize_layers
+
+    if isinstance(graph, GraphLayers):
+        return synthesize_layers(graph, walk)
     if not isinstance(graph, MotionGraph):
         raise ValidationError(f"synthesize needs a flockkit.MotionGraph; got {type(graph).__name__}")
     return Motion(positions=_positions(graph, walk), dt=graph.motion.dt)

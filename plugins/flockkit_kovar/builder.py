@@ -159,7 +159,7 @@ class Kovar:
         if self.per_second is not None:
             matrix.fill(matrix.all_pairs())
             count = math.ceil(self.per_second * motion.duration)
-            minima = _local_minima(matrix.values, far)
+            minima = flockkit.graph.local_minima(matrix.values, far)
             chosen = sorted(minima, key=lambda ij: (matrix.values[ij], ij))[:count]
             return float(max((matrix.values[ij] for ij in chosen), default=0.0)), chosen
         prune = self.prune and (offers.pairs_within or offers.lower_bound)
@@ -169,7 +169,7 @@ class Kovar:
             else:
                 matrix.fill(matrix.all_pairs())
             return self.threshold, [
-                ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= self.threshold
+                ij for ij in flockkit.graph.local_minima(matrix.values, far) if matrix.values[ij] <= self.threshold
             ]
         spread = float(np.mean([np.mean(np.sum((c.positions - c.center_of_mass()) ** 2, axis=1)) for c in configs]))
         wanted = max(self.min_transitions, math.ceil(self.transitions_per_minute * motion.duration / 60))
@@ -187,7 +187,7 @@ class Kovar:
             else:
                 matrix.fill(matrix.all_pairs())
             minima = sorted(
-                (ij for ij in _local_minima(matrix.values, far) if matrix.values[ij] <= probe),
+                (ij for ij in flockkit.graph.local_minima(matrix.values, far) if matrix.values[ij] <= probe),
                 key=lambda ij: (matrix.values[ij], ij),
             )
             # the lowest minima, adding the shortfall until enough survive the trimming of dead ends
@@ -221,7 +221,7 @@ class Kovar:
             matrix.fill_within(probe, ranges=strips)
             values = sorted(
                 matrix.values[i, j]
-                for i, j in _local_minima(matrix.values, far)
+                for i, j in flockkit.graph.local_minima(matrix.values, far)
                 if i < j and interior[i] and matrix.values[i, j] <= probe
             )
             if len(values) >= needed:
@@ -233,7 +233,7 @@ class Kovar:
     def _no_transition_message(self, motion, frames, far, matrix, blend, threshold) -> str:
         """Say that no transition is left, with the smallest cost seen and a threshold that works."""
         matrix.fill(matrix.all_pairs())
-        minima = sorted(_local_minima(matrix.values, far), key=lambda ij: matrix.values[ij])
+        minima = sorted(flockkit.graph.local_minima(matrix.values, far), key=lambda ij: matrix.values[ij])
         smallest = f"{matrix.values[minima[0]]:.4g}" if minima else "none (no local minimum at least min_gap apart)"
         for count in range(1, len(minima) + 1):
             if _kept(motion, frames, minima[:count], matrix, blend):
@@ -373,18 +373,3 @@ def _chunk_distances(metric, configs, pairs) -> np.ndarray:
     if flockkit.capabilities(metric).pairwise:
         return np.asarray(metric.pairwise(configs, pairs), dtype=np.float64)
     return np.array([metric.compare(configs[i], configs[j]).distance for i, j in pairs])
-
-
-def _local_minima(values: np.ndarray, far: np.ndarray) -> list[tuple[int, int]]:
-    """Cells (i, j), i != j, at most each of their 8 neighbors (diagonal ignored), with far[i, j]."""
-    k = len(values)
-    padded = np.full((k + 2, k + 2), np.inf)
-    padded[1:-1, 1:-1] = values
-    np.fill_diagonal(padded[1:-1, 1:-1], np.inf)
-    centre = padded[1:-1, 1:-1]
-    is_min = np.isfinite(centre) & far
-    for di in (-1, 0, 1):
-        for dj in (-1, 0, 1):
-            if di or dj:
-                is_min &= centre <= padded[1 + di : k + 1 + di, 1 + dj : k + 1 + dj]
-    return [(int(i), int(j)) for i, j in zip(*np.nonzero(is_min))]
