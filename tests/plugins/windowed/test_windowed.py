@@ -1,0 +1,97 @@
+"""The windowed builder and graph layers on real meshes (paper 002, section 4)."""
+
+import numpy as np
+import pytest
+
+import flockkit
+from flockkit.errors import FileFormatError, ValidationError
+from flockkit.layers import seam_stretch
+
+WINDOWED = flockkit.get("builder", "windowed")
+
+
+def fox(shared_data, clip):
+    return flockkit.io.read_mesh_animation(shared_data / "fox-gltf" / "Fox.glb", clip=clip)
+
+
+def largest_step(motion):
+    return np.linalg.norm(np.diff(motion.positions, axis=0), axis=-1).max()
+
+
+def test_the_cost_is_the_papers_on_a_hand_computed_case():
+    """D(p, q) sums alpha d_x + beta d_v over the window; here by loops, point by point."""
+    rng = np.random.default_rng(0)
+    motion = flockkit.Motion(positions=np.cumsum(rng.normal(size=(12, 4, 3)), axis=0), dt=0.1)
+    builder = flockkit.get("builder", "windowed", window=1, alpha=2.0, beta=0.5)
+    total, _, _ = builder.costs(motion)
+    x = motion.positions
+    v = np.concatenate([np.diff(x, axis=0), np.diff(x, axis=0)[-1:]])
+    p, q = 4, 8
+    expected = sum(
+        2.0 * np.mean(np.sum((x[p + k] - x[q + k]) ** 2, axis=1))
+        + 0.5 * np.mean(np.sum((v[p + k] - v[q + k]) ** 2, axis=1))
+        for k in (-1, 0, 1)
+    )
+    assert total[p, q] == pytest.approx(expected)
+
+
+def test_the_walk_clip_loops(shared_data):
+    """The Fox's Walk clip loops: its graph has the transition from its last frame to its first."""
+    walk = fox(shared_data, "Walk")
+    graph = flockkit.build_graph(walk.motion, builder="windowed")
+    last = walk.motion.n_frames - 1
+    assert any(t.start == last and t.end == 0 for t in graph.transitions)
+    assert all(np.array_equal(t.alignment.rotation, np.eye(3)) for t in graph.transitions)
+
+
+def test_a_layered_fox_plays_a_minute_without_jumps_or_tears(shared_data):
+    survey = fox(shared_data, "Survey")
+    layers = flockkit.build_layers(survey, seed=0)
+    assert layers.n_parts >= 2 and layers.faces is not None
+    played = flockkit.synthesize(layers, flockkit.walk(layers, duration=60, seed=1))
+    assert played.duration >= 60 and played.n_agents == survey.motion.n_agents
+    assert largest_step(played) <= 1.5 * largest_step(survey.motion)
+    seam = seam_stretch(played, survey.faces, layers.segmentation.labels, reference=survey.motion)
+    assert seam <= 1.5 * seam_stretch(survey.motion, survey.faces)
+    # the parts are out of step: not one part's frames replayed for all
+    walks = flockkit.walk(layers, duration=60, seed=1).walks
+    assert len({(w.start, tuple(w.edges[:3])) for w in walks}) > 1
+
+
+def test_seams_are_smoothed(shared_data, monkeypatch):
+    """Without the smoothing the same walk stretches its seams more."""
+    import flockkit.layers
+
+    survey = fox(shared_data, "Survey")
+    layers = flockkit.build_layers(survey, seed=0)
+    walk = flockkit.walk(layers, duration=30, seed=2)
+    smooth = seam_stretch(
+        flockkit.synthesize(layers, walk), survey.faces, layers.segmentation.labels, reference=survey.motion
+    )
+    monkeypatch.setattr(flockkit.layers, "SEAM_PASSES", 0)
+    raw = seam_stretch(
+        flockkit.synthesize(layers, walk), survey.faces, layers.segmentation.labels, reference=survey.motion
+    )
+    assert smooth < raw
+
+
+def test_layers_save_load_and_walk_deterministically(tmp_path, shared_data):
+    layers = flockkit.build_layers(fox(shared_data, "Survey"), seed=0)
+    layers.save(tmp_path / "fox-layers.npz")
+    loaded = flockkit.GraphLayers.load(tmp_path / "fox-layers.npz")
+    assert loaded == layers
+    assert flockkit.walk(loaded, duration=10, seed=4) == flockkit.walk(layers, duration=10, seed=4)
+    flockkit.segment(layers.source, seed=0).save(tmp_path / "parts.npz")
+    with pytest.raises(FileFormatError, match="parts.npz"):
+        flockkit.GraphLayers.load(tmp_path / "parts.npz")
+
+
+def test_layers_refuse_what_does_not_fit(shared_data):
+    survey = fox(shared_data, "Survey")
+    with pytest.raises(ValidationError, match="labels 3 points but the motion has 1728"):
+        flockkit.build_layers(survey, segmentation=flockkit.Segmentation(labels=[0, 1, 1], n_parts=2))
+    layers = flockkit.build_layers(survey, seed=0)
+    with pytest.raises(ValidationError, match="LayeredWalk"):
+        flockkit.synthesize(layers, flockkit.walk(layers.graphs[0], duration=5, seed=0))
+    with pytest.raises(ValidationError, match="one a part"):
+        flockkit.GraphLayers(source=layers.source, segmentation=layers.segmentation, graphs=layers.graphs[:1])
