@@ -74,6 +74,25 @@ def read(path, *, kind: str, versions: tuple[int, ...]) -> tuple[dict[str, np.nd
     return arrays, header
 
 
+def kind_of(path) -> str:
+    """The kind of flockkit file at `path` ("motion", "graph", ...), from its metadata alone;
+    FileNotFoundError or FileFormatError, naming the file, as for :func:`read`."""
+    path = Path(path)
+    if not path.is_file():
+        raise (
+            FileNotFoundError(f"{path}: no such file") if not path.exists() else FileFormatError(f"{path}: not a file")
+        )
+    try:
+        with zipfile.ZipFile(path) as archive, archive.open(METADATA_KEY + ".npy") as handle:
+            from numpy.lib import format as npy
+
+            raw = npy.read_array(handle, allow_pickle=False)
+        header = json.loads(raw.tobytes().decode("utf-8"))
+        return str(header["format"])
+    except Exception as exc:  # noqa: BLE001 - whatever went wrong, it is not a flockkit file
+        raise FileFormatError(f"{path}: not a flockkit file (.npz with flockkit metadata): {exc}") from None
+
+
 def _arrays(path: Path) -> dict[str, np.ndarray]:
     """The arrays of an .npz, each header checked against the size its archive entry declares
     before the array is read (a corrupt header cannot make us allocate what is not there)."""

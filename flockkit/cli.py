@@ -33,7 +33,9 @@ _RESERVED = {
                  "behavior": "--behavior", "progress": "--quiet", "initial": None,
                  "obstacles": "--obstacle or --arena"},
     "build": {"metric": "--metric", "builder": "--builder", "threshold": "--threshold", "n_jobs": "--jobs",
-              "seed": None, "progress": "--quiet", "metric_params": None, "motion": None},
+              "seed": "--seed", "progress": "--quiet", "metric_params": None, "motion": None,
+              "segmentation": "--parts", "segmenter": None, "segmenter_params": None, "source": None},
+    "segmenter": {"n_parts": "--parts"},
     "walk": {"duration": "--duration", "seed": "--seed", "strategy": "--strategy", "region": "--region",
              "graph": None},
 }  # fmt: skip
@@ -145,16 +147,26 @@ def _progress(args) -> bool:
 
 def _cmd_build(args) -> int:
     output = _require_suffix(args.output, (".npz",), "-o")
-    motion = flockkit.Motion.load(args.motion)
+    source = _source(args.motion, args.clip, args.fps)
     params = _parameters(args.param, "build")
     if args.threshold is not None:
         params["threshold"] = args.threshold
+    if args.layers or args.parts:
+        segmentation = flockkit.Segmentation.load(args.parts) if args.parts else None
+        layers = flockkit.build_layers(source, segmentation=segmentation, builder=args.builder or "windowed",
+                                       seed=args.seed, **params)  # fmt: skip
+        layers.save(output)
+        counts = ", ".join(str(g.stats()["transitions"]) for g in layers.graphs)
+        print(f"wrote {output}: {layers.n_parts} parts, each a graph (transitions: {counts})")
+        return 0
+    motion = source.motion if isinstance(source, flockkit.AnimatedMesh) else source
     if args.jobs is not None and args.backend is None:
         params["n_jobs"] = args.jobs
     with _backend(args):
         graph = flockkit.build_graph(
-            motion, builder=args.builder, metric=args.metric, progress=_progress(args), **params
-        )
+            motion, builder=args.builder or "kovar", metric=args.metric, seed=args.seed, progress=_progress(args),
+            **params,
+        )  # fmt: skip
     graph.save(output)
     stats = graph.stats()
     print(
@@ -185,45 +197,85 @@ def _region(text: str, option: str = "--region"):
 
 
 def _cmd_walk(args) -> int:
+    from ._npzfile import kind_of
+
     output = _require_suffix(args.output, (".npz",), "-o")
-    graph = flockkit.MotionGraph.load(args.graph)
+    layered = kind_of(args.graph) == "layers"
+    graph = (flockkit.GraphLayers if layered else flockkit.MotionGraph).load(args.graph)
     params = _parameters(args.param, "walk")
     if args.region is not None:
         params["region"] = _region(args.region)
     path = flockkit.walk(graph, strategy=args.strategy, duration=args.duration, seed=args.seed, **params)
     motion = flockkit.synthesize(graph, path)
+    if layered and graph.faces is not None:  # a mesh in, a mesh out: render draws its faces
+        motion = flockkit.AnimatedMesh(motion=motion, faces=graph.faces, name=Path(args.graph).stem)
     motion.save(output)
-    print(f"wrote {output}: {motion!r}")
+    print(f"wrote {output}: {motion.motion if layered and graph.faces is not None else motion!r}")
     return 0
 
 
+MESH_SUFFIXES = (".glb", ".gltf", ".usda", ".usdc", ".usdz", ".usd", ".obj")
+
+
+def _source(path: str, clip=None, fps=None):
+    """A Motion or an AnimatedMesh: a flockkit .npz of either, or an animated-mesh file (glTF,
+    USD, an OBJ folder or glob) read at `fps` (default 30) for `clip`."""
+    from ._npzfile import kind_of
+
+    if Path(path).suffix.lower() in MESH_SUFFIXES or Path(path).is_dir() or any(c in path for c in "*?["):
+        return flockkit.io.read_mesh_animation(path, clip=clip, fps=fps or 30.0)
+    if kind_of(path) == "mesh":
+        return flockkit.AnimatedMesh.load(path)
+    return flockkit.Motion.load(path)
+
+
+def _cmd_segment(args) -> int:
+    output = _require_suffix(args.output, (".npz",), "-o")
+    source = _source(args.source, args.clip, args.fps)
+    params = _parameters(args.param, "segmenter")
+    if args.parts is not None:
+        params["n_parts"] = args.parts
+    found = flockkit.segment(source, segmenter=args.segmenter, seed=args.seed, **params)
+    found.save(output)
+    sizes = ", ".join(str(len(p)) for p in found.parts())
+    print(f"wrote {output}: {found.n_parts} parts of {sizes} points")
+    return 0
+
+
+def _motion_document(motion) -> dict:
+    return {
+        "frames": motion.n_frames,
+        "agents": motion.n_agents,
+        "dims": motion.dims,
+        "dt": motion.dt,
+        "seconds": motion.duration,
+        "channels": sorted(motion.channels),
+    }
+
+
 def _cmd_info(args) -> int:
+    from ._npzfile import kind_of
     from .errors import FileFormatError
 
-    try:
+    kind = kind_of(args.file)
+    if kind == "motion":
+        document = {"kind": "motion", **_motion_document(flockkit.Motion.load(args.file))}
+    elif kind == "graph":
         graph = flockkit.MotionGraph.load(args.file)
-    except FileFormatError as not_graph:
-        try:
-            motion = flockkit.Motion.load(args.file)
-        except FileFormatError:
-            raise not_graph from None
-        print(
-            json.dumps(
-                {
-                    "kind": "motion",
-                    "frames": motion.n_frames,
-                    "agents": motion.n_agents,
-                    "dims": motion.dims,
-                    "dt": motion.dt,
-                    "seconds": motion.duration,
-                    "channels": sorted(motion.channels),
-                },
-                indent=2,
-            )
-        )
-        return 0
-    # params and provenance are read-only mappings: JSON objects, like every other field
-    document = {"kind": "graph", **graph.stats(), "params": graph.params, "provenance": graph.provenance}
+        # params and provenance are read-only mappings: JSON objects, like every other field
+        document = {"kind": "graph", **graph.stats(), "params": graph.params, "provenance": graph.provenance}
+    elif kind == "layers":
+        layers = flockkit.GraphLayers.load(args.file)
+        document = {"kind": "layers", **layers.stats(), "faces": 0 if layers.faces is None else len(layers.faces)}
+    elif kind == "mesh":
+        mesh = flockkit.AnimatedMesh.load(args.file)
+        document = {"kind": "mesh", "name": mesh.name, "faces": len(mesh.faces), **_motion_document(mesh.motion)}
+    elif kind == "segmentation":
+        found = flockkit.Segmentation.load(args.file)
+        document = {"kind": "segmentation", "parts": found.n_parts, "points": found.n_points,
+                    "points_per_part": [len(p) for p in found.parts()]}  # fmt: skip
+    else:
+        raise FileFormatError(f"{args.file}: a flockkit {kind!r} file, which info does not describe")
     print(json.dumps(document, indent=2, default=dict))
     return 0
 
@@ -317,9 +369,22 @@ def _cmd_demo(args) -> int:
 
 
 def _cmd_render(args) -> int:
+    from ._npzfile import kind_of
     from .viz import ANIMATION_SUFFIXES, PICTURE_SUFFIXES
 
     output = _require_suffix(args.output, PICTURE_SUFFIXES + ANIMATION_SUFFIXES, "-o")
+    if Path(args.motion).suffix.lower() in MESH_SUFFIXES or kind_of(args.motion) == "mesh":
+        from . import viz
+
+        mesh = _source(args.motion, args.clip)
+        parts = flockkit.Segmentation.load(args.parts) if args.parts else None
+        size = None if args.size is None else _size(args.size)
+        if output.suffix.lower() in ANIMATION_SUFFIXES:
+            viz.animate_mesh(mesh, output, segmentation=parts, fps=args.fps, size=size, progress=_progress(args))
+        else:
+            viz.plot_mesh(mesh, output, segmentation=parts, size=size)
+        print(f"wrote {output}")
+        return 0
     motion = flockkit.Motion.load(args.motion)
     problem = None
     if args.scenario:
@@ -410,19 +475,40 @@ def _simulate_arguments(parser) -> None:
     _quiet(parser)
 
 
+def _mesh_options(parser) -> None:
+    parser.add_argument("--clip", help="the clip of an animated-mesh file (default: its first)")
+    parser.add_argument("--fps", type=float, help="frames per second to sample an animated-mesh file at (default 30)")
+
+
 def _build_arguments(parser) -> None:
-    parser.add_argument("motion", help="motion file (.npz, from simulate or import)")
+    parser.add_argument(
+        "motion", help="motion or animated-mesh file (.npz from simulate, import or walk; .glb, .gltf, .usd*, OBJ)"
+    )
     _output(parser, "graph file to write (.npz)")
     parser.add_argument("--metric", default="icp-hungarian", help="configuration metric (default icp-hungarian)")
-    parser.add_argument("--builder", default="kovar", help="graph builder (default kovar)")
+    parser.add_argument("--builder", help="graph builder (default kovar; windowed for --layers)")
+    parser.add_argument("--layers", action="store_true", help="split into parts and build one graph per part")
+    parser.add_argument("--parts", help="the segmentation to use for --layers (.npz, from segment)")
+    parser.add_argument("--seed", type=int, default=None, help="random seed (of the segmentation for --layers)")
+    _mesh_options(parser)
     parser.add_argument("--threshold", type=float, help="absolute transition threshold (default: adaptive)")
     _scale_out(parser)
     _param(parser, "builder")
     _quiet(parser)
 
 
+def _segment_arguments(parser) -> None:
+    parser.add_argument("source", help="animated mesh (.glb, .gltf, .usd*, OBJ folder or glob) or motion (.npz)")
+    _output(parser, "segmentation file to write (.npz)")
+    parser.add_argument("--parts", type=int, help="number of parts (default: chosen by the segmenter)")
+    parser.add_argument("--segmenter", default="ica-kmeans", help="segmenter (default ica-kmeans)")
+    parser.add_argument("--seed", type=int, default=None, help="random seed")
+    _mesh_options(parser)
+    _param(parser, "segmenter")
+
+
 def _walk_arguments(parser) -> None:
-    parser.add_argument("graph", help="graph file (.npz, from build)")
+    parser.add_argument("graph", help="graph or layers file (.npz, from build)")
     parser.add_argument("--duration", type=float, required=True, help="seconds of motion to synthesize")
     parser.add_argument("--strategy", default="random", help="walk strategy (default random; region needs --region)")
     parser.add_argument(
@@ -462,7 +548,9 @@ def _size(text: str) -> tuple[int, int]:
 
 
 def _render_arguments(parser) -> None:
-    parser.add_argument("motion", help="motion file (.npz)")
+    parser.add_argument("motion", help="motion or animated-mesh file (.npz; or .glb, .gltf, .usd*)")
+    parser.add_argument("--parts", help="colour an animated mesh's parts from this segmentation (.npz)")
+    parser.add_argument("--clip", help="the clip of an animated-mesh file (default: its first), read at 30 fps")
     parser.add_argument("--fps", type=float, help="animation frames per second (default: real time, at most 25)")
     parser.add_argument(
         "--size", help="animation size WIDTHxHEIGHT in pixels (default: 600 on the scene's longer side, in proportion)"
@@ -522,8 +610,13 @@ COMMANDS = {
     "plugins": ("list installed plugin components", _plugins_arguments, _cmd_plugins),
     "simulate": ("simulate a flock and write its motion (.npz)", _simulate_arguments, _cmd_simulate),
     "build": ("build a motion graph from a motion (.npz)", _build_arguments, _cmd_build),
-    "walk": ("walk a motion graph and write the synthesized motion (.npz)", _walk_arguments, _cmd_walk),
-    "info": ("describe a graph or motion file", _info_arguments, _cmd_info),
+    "segment": (
+        "split an animated mesh's vertices into parts that move independently",
+        _segment_arguments,
+        _cmd_segment,
+    ),
+    "walk": ("walk a motion graph (or layers) and write the synthesized motion (.npz)", _walk_arguments, _cmd_walk),
+    "info": ("describe a flockkit file: motion, graph, layers, mesh or segmentation", _info_arguments, _cmd_info),
     "solve": ("solve a constrained-animation scenario (.toml) and write the motion", _solve_arguments, _cmd_solve),
     "demo": (
         "the tour: graph, synthesis, constrained flock, real fish; pictures and a summary",
