@@ -85,6 +85,7 @@ class Windowed:
                 f"windowed: a motion of {frames} frames has no transition to find; it needs 3 or more"
             )
         total, pre, post = self.costs(motion)
+        blends = self.blends(motion, pre, post)
         gap = max(1, math.ceil(self.min_gap / motion.dt - 1e-9))
         index = np.arange(frames)
         far = np.abs(index[:, None] - index[None, :]) >= gap
@@ -93,8 +94,8 @@ class Windowed:
             chosen = [pq for pq in minima if total[pq] <= self.threshold]
         else:
             wanted = max(self.min_transitions, math.ceil(self.transitions_per_minute * motion.duration / 60))
-            chosen = self._adaptive(motion, minima, total, pre, post, wanted)
-        transitions = self._transitions(motion, chosen, total, pre, post)
+            chosen = self._adaptive(motion, minima, total, blends, wanted)
+        transitions = self._transitions(motion, chosen, total, blends)
         if not transitions:
             smallest = f"{total[minima[0]]:.4g}" if minima else "none"
             raise ValidationError(
@@ -134,57 +135,57 @@ class Windowed:
         total = (sums["pre"] + sums["post"] - terms) * (2 * n + 1) / np.maximum(count, 1)
         return total, pre, post
 
-    def _adaptive(self, motion, minima, total, pre, post, wanted):
+    def _adaptive(self, motion, minima, total, blends, wanted):
         """The lowest minima a blend can hide (module docstring) until `wanted` transitions survive
         the trimming of dead ends; else the lowest until one does. Minima are looked at in order,
         only as far as needed (a part that never moves has a local minimum almost everywhere)."""
         x = motion.positions
         step = np.linalg.norm(np.diff(x, axis=0), axis=2).max()
-        hidden = (pq for pq in minima if self._separation(x, *pq, pre, post, motion) <= step * (1 + 1e-9))
+        hidden = (pq for pq in minima if self._separation(x, *pq, blends) <= step * (1 + 1e-9))
         chosen, kept = [], 0
         while kept < wanted:
             more = list(itertools.islice(hidden, wanted - kept))
             if not more:
                 break
             chosen += more
-            kept = self._kept(motion, chosen, pre, post)
+            kept = self._kept(motion, chosen, blends)
         if kept:
             return chosen
         for count in range(1, len(minima) + 1):
-            if self._kept(motion, minima[:count], pre, post):
+            if self._kept(motion, minima[:count], blends):
                 return minima[:count]
         return minima
 
-    def _kept(self, motion, chosen, pre, post) -> int:
+    def _kept(self, motion, chosen, blends) -> int:
         """How many of the chosen transitions survive assembly (dead-end trimming)."""
         identity = flockkit.Alignment(distance=0.0, assignment=np.arange(motion.n_agents), rotation=np.eye(motion.dims),
                                       translation=np.zeros(motion.dims))  # fmt: skip
-        transitions = [(p, q, identity, self._blend(motion, p, q, pre, post)) for p, q in chosen]
+        transitions = [(p, q, identity, int(blends[p, q])) for p, q in chosen]
         try:
             return len(flockkit.MotionGraph.assemble(motion, transitions).transitions)
         except ValidationError:
             return 0
 
-    def _separation(self, x, p, q, pre, post, motion) -> float:
+    def _separation(self, x, p, q, blends) -> float:
         """The largest distance between a point's places in the two motions over the blend of
         p -> q, times 3 / (blend + 1): at most the largest step for a blend to hide it."""
-        blend = self._blend(motion, p, q, pre, post)
+        blend = int(blends[p, q])
         span = min(max(blend, 1), len(x) - p, len(x) - q)  # the new motion may end first: then a jump
         apart = np.linalg.norm(x[p : p + span] - x[q : q + span], axis=2).max()
         return float(apart * 3 / (blend + 1))
 
-    def _blend(self, motion, p, q, pre, post) -> int:
-        """Blend frames of the transition p -> q (module docstring)."""
+    def blends(self, motion, pre, post) -> np.ndarray:
+        """Blend frames of every transition p -> q, (T, T) (module docstring)."""
         longest = round(self.blend_time / motion.dt)
-        ratio = min(1.0, (pre[p, q] + 1e-300) / (post[p, q] + 1e-300))
-        return int(
-            min(max(self.min_blend, round(longest * ratio)), max(longest, self.min_blend), motion.n_frames - 1 - p)
-        )
+        ratio = np.minimum(1.0, (pre + 1e-300) / (post + 1e-300))
+        blend = np.minimum(np.maximum(self.min_blend, np.round(longest * ratio)), max(longest, self.min_blend))
+        left = motion.n_frames - 1 - np.arange(motion.n_frames)  # frames after p: the old motion must exist
+        return np.minimum(blend, left[:, None]).astype(np.int64)
 
-    def _transitions(self, motion, chosen, total, pre, post):
+    def _transitions(self, motion, chosen, total, blends):
         found = []
         for p, q in sorted(chosen):
-            blend = self._blend(motion, p, q, pre, post)
+            blend = int(blends[p, q])
             identity = flockkit.Alignment(distance=float(total[p, q]), assignment=np.arange(motion.n_agents),
                                           rotation=np.eye(motion.dims), translation=np.zeros(motion.dims))  # fmt: skip
             found.append((p, q, identity, int(blend)))

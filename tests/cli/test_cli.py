@@ -345,3 +345,37 @@ def test_simulate_in_an_arena_and_around_obstacles(capsys, tmp_path):
     code, _, err = run(capsys, "simulate", "--agents", "3", "--steps", "3", "--behavior", "vicsek", "--arena", "5",
                        "-o", str(tmp_path / "v.npz"))  # fmt: skip
     assert code == 1 and "obstacles" in err and not (tmp_path / "v.npz").exists()
+
+
+def test_meshes_from_the_command_line(capsys, tmp_path, shared_data):
+    """segment, build --layers, walk on layers, info and render of an animated mesh."""
+    fox = str(shared_data / "fox-gltf" / "Fox.glb")
+    parts, layers, walked = tmp_path / "parts.npz", tmp_path / "layers.npz", tmp_path / "walked.npz"
+    code, out, err = run(capsys, "segment", fox, "--clip", "Survey", "--seed", "0", "-o", str(parts))
+    assert code == 0 and "parts of" in out, err
+    found = flockkit.Segmentation.load(parts)
+    assert found == flockkit.segment(flockkit.io.read_mesh_animation(fox, clip="Survey"), seed=0)
+    code, _, err = run(capsys, "build", fox, "--clip", "Survey", "--parts", str(parts), "-o", str(layers))
+    assert code == 0, err
+    code, out, _ = run(capsys, "info", str(layers))
+    document = json.loads(out)
+    assert (
+        code == 0 and document["kind"] == "layers" and document["parts"] == found.n_parts and document["faces"] == 576
+    )
+    code, _, err = run(capsys, "walk", str(layers), "--duration", "5", "--seed", "2", "-o", str(walked))
+    assert code == 0, err
+    mesh = flockkit.AnimatedMesh.load(walked)
+    assert mesh.motion.duration >= 5 and mesh.motion.n_agents == 1728 and len(mesh.faces) == 576
+    code, out, _ = run(capsys, "info", str(walked))
+    assert json.loads(out)["kind"] == "mesh"
+    code, out, _ = run(capsys, "info", str(parts))
+    assert json.loads(out) == {"kind": "segmentation", "parts": found.n_parts, "points": 1728,
+                               "points_per_part": [len(p) for p in found.parts()]}  # fmt: skip
+    for name in ("fox.png", "fox.gif"):
+        code, _, err = run(capsys, "render", str(walked), "--parts", str(parts), "-o", str(tmp_path / name))
+        assert code == 0 and (tmp_path / name).stat().st_size > 1000, err
+    code, _, err = run(capsys, "render", fox, "--clip", "Walk", "-o", str(tmp_path / "walk.gif"))
+    assert code == 0, err
+    code, _, err = run(capsys, "segment", fox, "--clip", "Trot", "-o", str(tmp_path / "x.npz"))
+    assert code == 1 and "no clip 'Trot'" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x.npz").exists()
