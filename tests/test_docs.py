@@ -19,7 +19,15 @@ def python_blocks(path):
 
 @pytest.mark.parametrize("page", [p for p in PAGES if python_blocks(p)], ids=lambda p: str(p.relative_to(ROOT)))
 def test_examples_run(page, tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)
+    """Each page's examples, run in a fresh folder that has the shared data beside it, as a
+    checkout does (examples that read ../shared/data need it)."""
+    from .conftest import SHARED_DATA, require_folder
+
+    work = tmp_path / "work"
+    work.mkdir()
+    if "../shared/data" in page.read_text():
+        (tmp_path / "shared").symlink_to(require_folder(SHARED_DATA).parent, target_is_directory=True)
+    monkeypatch.chdir(work)
     namespace = {"__name__": "docs_example"}
     try:
         for block in python_blocks(page):  # blocks of one page share a namespace, as a reader's session would
