@@ -14,8 +14,8 @@ The paper sets the number of parts by hand and names choosing it as future work.
 None it is chosen: `n_components` (if None) is the number of principal components that explain
 99% of the energy's variance (at most `max_components`); with one component the moving points are
 one part; otherwise k runs over 2..n_components + 2 and the k with the largest silhouette score of
-the rows (on a sample of at most 2 000 points) wins (the smallest k within 0.001 of it). On MorphStressTest this finds the eight morph
-targets exactly (plus the unmoved vertices: 9 parts).
+the rows (on a sample of at most 2 000 points) wins (the smallest k within 0.001 of it). On
+MorphStressTest this finds the eight morph targets exactly (plus the unmoved vertices: 9 parts).
 """
 
 from __future__ import annotations

@@ -13,7 +13,9 @@ transition from its last frame to its first. Means over points keep D independen
 size; with alpha >= 1, D is at least the mean squared jump at the transition itself. All the
 d_x and d_v are one matrix product each.
 
-Transitions are the local minima of D at least `min_gap` seconds apart. The threshold adapts as
+Transitions are the local minima of D at least `min_gap` seconds apart (pairs nearer than that are
+neither candidates nor neighbors, so a motion that never comes back, such as a flock crossing the
+scene, still has minima, at the edge of the gap; no blend hides those, see below). The threshold adapts as
 kovar's does: the lowest local minima, until max(`min_transitions`, `transitions_per_minute` per
 minute of recording) of them survive the trimming of dead ends (or all of them); `threshold`
 makes it absolute instead. The adaptive rule takes only transitions that a blend can hide: the
@@ -89,7 +91,9 @@ class Windowed:
         gap = max(1, math.ceil(self.min_gap / motion.dt - 1e-9))
         index = np.arange(frames)
         far = np.abs(index[:, None] - index[None, :]) >= gap
-        minima = sorted(flockkit.graph.local_minima(total, far), key=lambda pq: (total[pq], pq))
+        # pairs nearer than min_gap are not candidates, nor neighbors that could hide one: a motion that
+        # never returns (a flock crossing the scene) still has minima, along the edge of the gap
+        minima = sorted(flockkit.graph.local_minima(np.where(far, total, np.inf), far), key=lambda pq: (total[pq], pq))
         if self.threshold is not None:
             chosen = [pq for pq in minima if total[pq] <= self.threshold]
         else:

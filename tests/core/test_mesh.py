@@ -184,6 +184,19 @@ def test_a_small_gltf_with_a_data_uri_of_either_type(tmp_path, mime):
     np.testing.assert_allclose(mesh.motion.positions[:, 0, 0], [0, 0.5, 1, 1.5, 2])
 
 
+def test_a_gltf_with_an_external_buffer(tmp_path):
+    path = _gltf_document(tmp_path)
+    document = json.loads(path.read_text())
+    (tmp_path / "triangle data.bin").write_bytes(base64.b64decode(document["buffers"][0]["uri"].split(",", 1)[1]))
+    document["buffers"][0]["uri"] = "triangle%20data.bin"  # a URI: spaces escaped
+    path.write_text(json.dumps(document))
+    mesh = flockkit.io.read_mesh_animation(path, fps=2)
+    np.testing.assert_allclose(mesh.motion.positions[:, 1, 0], [1, 2, 3])
+    (tmp_path / "triangle data.bin").write_bytes(b"\0" * 10)
+    with pytest.raises(FileFormatError, match="holds 10 bytes"):
+        flockkit.io.read_mesh_animation(path)
+
+
 def test_bad_mesh_files_are_refused_naming_the_file(tmp_path, shared_data):
     junk = tmp_path / "junk.glb"
     junk.write_bytes(b"glTF" + b"\x02\x00\x00\x00" + b"\xff\x00\x00\x00" + b"nonsense")

@@ -95,3 +95,16 @@ def test_layers_refuse_what_does_not_fit(shared_data):
         flockkit.synthesize(layers, flockkit.walk(layers.graphs[0], duration=5, seed=0))
     with pytest.raises(ValidationError, match="one a part"):
         flockkit.GraphLayers(source=layers.source, segmentation=layers.segmentation, graphs=layers.graphs[:1])
+
+
+def test_windowed_passes_the_builder_kit_on_a_boids_motion(monkeypatch):
+    """The kit's builder checks, with a boids recording in place of the kit's own."""
+    import flockkit.testing.builder as kit
+    from flockkit.testing import checks_for
+
+    boids = flockkit.simulate(n_agents=8, steps=150, seed=3)
+    monkeypatch.setattr(kit, "_recording", lambda builder: flockkit.Motion(positions=boids.positions, dt=boids.dt))
+    checks = checks_for("builder", WINDOWED)
+    assert len(checks) >= 6
+    for check in checks:
+        check("windowed", WINDOWED)
