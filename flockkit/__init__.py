@@ -18,11 +18,11 @@ from .constraints import (
     ShapeConstraint,
     fence,
 )
-from .convenience import build_graph, random_flock, simulate, walk
+from .convenience import build_graph, build_layers, random_flock, segment, simulate, walk
 from .graph import Clip, MotionGraph, Transition, Walk
 from .hookspecs import hookimpl
 from .interfaces import Capabilities, capabilities
-from .layers import GraphLayers, LayeredWalk, Segmentation, build_layers, segment
+from .layers import GraphLayers, LayeredWalk, Segmentation
 from .mesh import AnimatedMesh
 from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State, heading_axes
 from .registry import available, get, resolve

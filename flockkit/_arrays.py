@@ -23,6 +23,19 @@ def readonly_float(value, *, field: str) -> np.ndarray:
     return array
 
 
+def readonly_int(value, *, field: str, dtype=np.int64) -> np.ndarray:
+    """Return `value` as a new read-only integer array, or raise ValidationError naming `field`."""
+    try:
+        array = np.array(value, copy=True)
+    except (TypeError, ValueError) as exc:
+        raise ValidationError(f"{field} must be an array of integers; got {type(value).__name__}: {exc}") from None
+    if array.dtype.kind not in "iu" and array.size:
+        raise ValidationError(f"{field} must be an array of integers; got dtype {array.dtype}")
+    array = array.astype(dtype)
+    array.setflags(write=False)
+    return array
+
+
 def check_finite(array: np.ndarray, *, field: str) -> None:
     """Raise ValidationError naming `field` and the first bad index if `array` holds NaN or inf."""
     bad = ~np.isfinite(array)

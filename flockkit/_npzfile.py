@@ -43,11 +43,7 @@ def read(path, *, kind: str, versions: tuple[int, ...]) -> tuple[dict[str, np.nd
     a corrupt or truncated archive, an array whose header claims more data than the archive holds
     (refused before anything is allocated), or metadata that is not a JSON object.
     """
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no such file")
-    if not path.is_file():
-        raise FileFormatError(f"{path}: not a regular file ({'a folder' if path.is_dir() else 'a device or socket'})")
+    path = _existing_file(path)
     try:
         arrays = _arrays(path)
     except FileFormatError:
@@ -74,14 +70,19 @@ def read(path, *, kind: str, versions: tuple[int, ...]) -> tuple[dict[str, np.nd
     return arrays, header
 
 
+def _existing_file(path) -> Path:
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"{path}: no such file")
+    if not path.is_file():
+        raise FileFormatError(f"{path}: not a regular file ({'a folder' if path.is_dir() else 'a device or socket'})")
+    return path
+
+
 def kind_of(path) -> str:
     """The kind of flockkit file at `path` ("motion", "graph", ...), from its metadata alone;
     FileNotFoundError or FileFormatError, naming the file, as for :func:`read`."""
-    path = Path(path)
-    if not path.is_file():
-        raise (
-            FileNotFoundError(f"{path}: no such file") if not path.exists() else FileFormatError(f"{path}: not a file")
-        )
+    path = _existing_file(path)
     try:
         with zipfile.ZipFile(path) as archive, archive.open(METADATA_KEY + ".npy") as handle:
             from numpy.lib import format as npy

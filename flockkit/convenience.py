@@ -11,13 +11,15 @@ from ._progress import progress_bar
 from .errors import ValidationError
 from .graph import MotionGraph, Walk
 from .interfaces import capabilities
+from .layers import GraphLayers, Segmentation, motion_of, part_motion
+from .mesh import AnimatedMesh
 from .motion import Motion, State
 from .registry import get, label, require_dims, resolve
 from .validate import allocation, integer, number
 from .validate import dims as validate_dims
 from .validate import seed as validate_seed
 
-__all__ = ["simulate", "random_flock", "build_graph", "walk"]
+__all__ = ["simulate", "random_flock", "build_graph", "walk", "segment", "build_layers"]
 
 
 def random_flock(
@@ -172,7 +174,7 @@ def walk(
     ``region`` with ``region=``; or an instance) covering `duration` seconds (default: the length
     of the graph's source motion). On ``flockkit.GraphLayers`` every part is walked on its own,
     each with its own stream of random numbers from `seed`, giving a ``flockkit.LayeredWalk``."""
-    from .layers import GraphLayers, walk_layers
+    from .layers import walk_layers
 
     if isinstance(graph, GraphLayers):
         duration = graph.source.duration if duration is None else duration
@@ -188,3 +190,41 @@ def walk(
         4 * frames * graph.motion.n_agents * graph.motion.dims, f"walk: {duration:g} s ({frames:.3g} frames) of motion"
     )
     return made.walk(graph, np.random.default_rng(validate_seed(seed)), duration)
+
+
+def segment(source, *, segmenter="ica-kmeans", seed: int | None = None, **params) -> Segmentation:
+    """Split the points of `source` (a Motion, or an AnimatedMesh's vertices) into parts that move
+    independently, with `segmenter` (a registered name made with `params`, or an instance)."""
+    motion = motion_of(source)
+    made = resolve("segmenter", segmenter, **params)
+    require_dims("segmenter", made, motion.dims, f"a {motion.dims}D motion", spec=segmenter)
+    result = made.segment(motion, np.random.default_rng(validate_seed(seed)))
+    if not isinstance(result, Segmentation):
+        raise ValidationError(f"segmenter returned {type(result).__name__}, not a flockkit.Segmentation")
+    result.check_fits(motion)
+    return result
+
+
+def build_layers(
+    source,
+    *,
+    segmentation: Segmentation | None = None,
+    segmenter="ica-kmeans",
+    segmenter_params: dict | None = None,
+    builder="windowed",
+    seed: int | None = None,
+    **params,
+) -> GraphLayers:
+    """Graph layers of `source` (a Motion, or an AnimatedMesh whose faces are kept for seams): its
+    points split by `segmentation` (default: `segmenter` with `segmenter_params`), then one graph
+    per part built by `builder` with `params` (as for :func:`flockkit.build_graph`)."""
+    motion = motion_of(source)
+    if segmentation is None:
+        segmentation = segment(motion, segmenter=segmenter, seed=seed, **dict(segmenter_params or {}))
+    elif not isinstance(segmentation, Segmentation):
+        raise ValidationError(f"segmentation must be a flockkit.Segmentation; got {type(segmentation).__name__}")
+    segmentation.check_fits(motion)
+    graphs = [build_graph(part_motion(motion, points), builder=builder, seed=seed, **params)
+              for points in segmentation.parts()]  # fmt: skip
+    faces = source.faces if isinstance(source, AnimatedMesh) else None
+    return GraphLayers(source=motion, segmentation=segmentation, graphs=graphs, faces=faces)

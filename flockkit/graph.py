@@ -19,6 +19,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from . import _npzfile, rigid
+from ._arrays import readonly_int
 from .errors import FileFormatError, ValidationError
 from .motion import DEFAULT_UP, Alignment, Motion, heading_axes
 from .validate import integer
@@ -215,7 +216,7 @@ class MotionGraph:
     """
 
     motion: Motion
-    nodes: np.ndarray = attrs.field(converter=lambda v: _int_array(v, "MotionGraph.nodes"))
+    nodes: np.ndarray = attrs.field(converter=lambda v: readonly_int(v, field="MotionGraph.nodes"))
     clips: tuple = attrs.field(converter=tuple)
     transitions: tuple = attrs.field(converter=tuple)
     params: Mapping = attrs.field(factory=dict, converter=lambda v: _frozen_json(v, "MotionGraph.params"))
@@ -516,12 +517,3 @@ def _strongly_connected_frames(transitions) -> np.ndarray:
     if len(nodes) < 2 and not any(s == e for s, e, _, _ in transitions):
         return np.array([], dtype=np.int64)
     return nodes
-
-
-def _int_array(value, field: str) -> np.ndarray:
-    array = np.array(value)
-    if array.dtype.kind not in "iu":
-        raise ValidationError(f"{field} must hold integers; got dtype {array.dtype}")
-    array = array.astype(np.int64)
-    array.setflags(write=False)
-    return array

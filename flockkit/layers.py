@@ -13,11 +13,12 @@ import attrs
 import numpy as np
 
 from . import _npzfile
+from ._arrays import readonly_int
 from .errors import FileFormatError, ValidationError
 from .mesh import AnimatedMesh
 from .motion import Motion
 
-__all__ = ["Segmentation", "segment", "GraphLayers", "LayeredWalk", "build_layers", "seam_stretch"]
+__all__ = ["Segmentation", "GraphLayers", "LayeredWalk", "seam_stretch"]
 
 SEGMENTATION_FORMAT_VERSION = 1
 LAYERS_FORMAT_VERSION = 1
@@ -28,13 +29,9 @@ SEAM_PASSES = 8
 
 
 def _labels(value) -> np.ndarray:
-    array = np.array(value)
-    if array.ndim != 1 or array.dtype.kind not in "iu" or len(array) == 0:
-        raise ValidationError(
-            f"Segmentation.labels must be a non-empty 1D array of integers; got {array.dtype} {array.shape}"
-        )
-    array = array.astype(np.int64)
-    array.setflags(write=False)
+    array = readonly_int(value, field="Segmentation.labels")
+    if array.ndim != 1 or len(array) == 0:
+        raise ValidationError(f"Segmentation.labels must be a non-empty 1D array; got shape {array.shape}")
     return array
 
 
@@ -98,22 +95,6 @@ def motion_of(source, what: str = "source") -> Motion:
     if isinstance(source, Motion):
         return source
     raise ValidationError(f"{what} must be a flockkit.Motion or flockkit.AnimatedMesh; got {type(source).__name__}")
-
-
-def segment(source, *, segmenter="ica-kmeans", seed: int | None = None, **params) -> Segmentation:
-    """Split the points of `source` (a Motion, or an AnimatedMesh's vertices) into parts that move
-    independently, with `segmenter` (a registered name made with `params`, or an instance)."""
-    from .registry import require_dims, resolve
-    from .validate import seed as validate_seed
-
-    motion = motion_of(source)
-    made = resolve("segmenter", segmenter, **params)
-    require_dims("segmenter", made, motion.dims, f"a {motion.dims}D motion", spec=segmenter)
-    result = made.segment(motion, np.random.default_rng(validate_seed(seed)))
-    if not isinstance(result, Segmentation):
-        raise ValidationError(f"segmenter returned {type(result).__name__}, not a flockkit.Segmentation")
-    result.check_fits(motion)
-    return result
 
 
 def _canonical(labels: np.ndarray) -> np.ndarray:
@@ -225,7 +206,7 @@ class GraphLayers:
             graphs = []
             for k, points in enumerate(segmentation.parts()):
                 own = {name.split(".", 1)[1]: a for name, a in arrays.items() if name.startswith(f"part{k}.")}
-                graphs.append(MotionGraph._from_arrays(own, _part_motion(source, points), header["params"][k],
+                graphs.append(MotionGraph._from_arrays(own, part_motion(source, points), header["params"][k],
                                                        header["provenance"][k], path))  # fmt: skip
             return cls(source=source, segmentation=segmentation, graphs=graphs, faces=arrays.get("faces"))
         except (KeyError, IndexError, TypeError, ValidationError) as exc:
@@ -246,35 +227,9 @@ class LayeredWalk:
     __hash__ = None
 
 
-def _part_motion(source: Motion, points: np.ndarray) -> Motion:
+def part_motion(source: Motion, points: np.ndarray) -> Motion:
+    """The motion of `points` of `source`, in that order."""
     return Motion(positions=source.positions[:, points], dt=source.dt)
-
-
-def build_layers(
-    source,
-    *,
-    segmentation: Segmentation | None = None,
-    segmenter="ica-kmeans",
-    segmenter_params: dict | None = None,
-    builder="windowed",
-    seed: int | None = None,
-    **params,
-) -> GraphLayers:
-    """Graph layers of `source` (a Motion, or an AnimatedMesh whose faces are kept for seams): its
-    points split by `segmentation` (default: `segmenter` with `segmenter_params`), then one graph
-    per part built by `builder` with `params` (as for :func:`flockkit.build_graph`)."""
-    from .convenience import build_graph
-
-    motion = motion_of(source)
-    if segmentation is None:
-        segmentation = segment(motion, segmenter=segmenter, seed=seed, **dict(segmenter_params or {}))
-    elif not isinstance(segmentation, Segmentation):
-        raise ValidationError(f"segmentation must be a flockkit.Segmentation; got {type(segmentation).__name__}")
-    segmentation.check_fits(motion)
-    graphs = [build_graph(_part_motion(motion, points), builder=builder, seed=seed, **params)
-              for points in segmentation.parts()]  # fmt: skip
-    faces = source.faces if isinstance(source, AnimatedMesh) else None
-    return GraphLayers(source=motion, segmentation=segmentation, graphs=graphs, faces=faces)
 
 
 def walk_layers(layers: GraphLayers, *, strategy, duration, seed, params) -> LayeredWalk:
@@ -308,7 +263,7 @@ def synthesize_layers(layers: GraphLayers, walk: LayeredWalk) -> Motion:
         positions[:, points] = part[:frames]
     if layers.faces is not None and layers.n_parts > 1:
         positions = _smooth_seams(positions, layers)
-    return Motion(positions=positions, dt=layers.source.dt)
+    return Motion._adopt(positions, layers.source.dt)
 
 
 def _adjacency(n_points: int, faces: np.ndarray):

@@ -14,6 +14,7 @@ import attrs
 import numpy as np
 
 from . import _gltf, _npzfile
+from ._arrays import readonly_int
 from .errors import FileFormatError, MissingDependencyError, ValidationError
 from .motion import Motion
 from .validate import number
@@ -25,15 +26,11 @@ GLTF_SUFFIXES, USD_SUFFIXES = (".glb", ".gltf"), (".usda", ".usdc", ".usdz", ".u
 
 
 def _faces(value) -> np.ndarray:
-    array = np.array(value)
+    array = readonly_int(value, field="AnimatedMesh.faces")
     if array.size == 0:
         array = array.reshape(0, 3)
-    if array.ndim != 2 or array.shape[1] not in (3, 4) or array.dtype.kind not in "iu":
-        raise ValidationError(
-            f"AnimatedMesh.faces must be integers of shape (F, 3) or (F, 4); got {array.dtype} {array.shape}"
-        )
-    array = array.astype(np.int64)
-    array.setflags(write=False)
+    if array.ndim != 2 or array.shape[1] not in (3, 4):
+        raise ValidationError(f"AnimatedMesh.faces must have shape (F, 3) or (F, 4); got {array.shape}")
     return array
 
 

@@ -17,7 +17,7 @@ import attrs
 import numpy as np
 
 from . import _npzfile, rigid
-from ._arrays import check_agent_array, check_finite, readonly_float, readonly_mapping
+from ._arrays import check_agent_array, check_finite, readonly_float, readonly_int, readonly_mapping
 from .errors import FileFormatError, ValidationError
 from .validate import number
 
@@ -106,7 +106,9 @@ class Alignment:
     """
 
     distance: float = attrs.field(converter=lambda v: number(v, "Alignment.distance", minimum=0))
-    assignment: np.ndarray = attrs.field(converter=lambda value: _readonly_int(value, "Alignment.assignment"))
+    assignment: np.ndarray = attrs.field(
+        converter=lambda value: readonly_int(value, field="Alignment.assignment", dtype=np.intp)
+    )
     rotation: np.ndarray = _field("Alignment.rotation")
     translation: np.ndarray = _field("Alignment.translation")
 
@@ -150,18 +152,6 @@ class Alignment:
         """Mean squared distance between `a`'s positions and `b`'s, aligned and reassigned."""
         moved = self.transform(b.positions[self.assignment])
         return float(np.mean(np.sum((a.positions - moved) ** 2, axis=1)))
-
-
-def _readonly_int(value, field: str) -> np.ndarray:
-    try:
-        array = np.array(value, copy=True)
-    except (TypeError, ValueError) as exc:
-        raise ValidationError(f"{field} must be an array of integers; got {type(value).__name__}: {exc}") from None
-    if array.dtype.kind not in "iu":
-        raise ValidationError(f"{field} must be an array of integers; got dtype {array.dtype}")
-    array = array.astype(np.intp)
-    array.setflags(write=False)
-    return array
 
 
 def heading_axes(velocities, *, up=DEFAULT_UP) -> np.ndarray:
@@ -327,6 +317,21 @@ class Motion:
             if array.shape != shape:
                 raise ValidationError(f"{field} must have the shape of positions {shape}; got {array.shape}")
             check_finite(array, field=field)
+
+    @classmethod
+    def _adopt(cls, positions: np.ndarray, dt: float) -> Motion:
+        """A Motion that takes `positions` (a float64 array flockkit just made and holds nowhere
+        else) without copying it: made read-only and checked as the constructor checks. Synthesis
+        writes hundreds of megabytes, and a copy of that costs more than computing it."""
+        if not isinstance(positions, np.ndarray) or positions.dtype != np.float64:
+            return cls(positions=positions, dt=dt)
+        motion = object.__new__(cls)
+        positions.setflags(write=False)
+        object.__setattr__(motion, "positions", positions)
+        object.__setattr__(motion, "dt", number(dt, "Motion.dt", minimum=0, strict=True))
+        object.__setattr__(motion, "channels", readonly_mapping({}, field="Motion.channels"))
+        motion.__attrs_post_init__()
+        return motion
 
     def __eq__(self, other):
         if not isinstance(other, Motion):

@@ -150,7 +150,7 @@ def synthesize(graph: MotionGraph, walk: Walk) -> Motion:
         return synthesize_layers(graph, walk)
     if not isinstance(graph, MotionGraph):
         raise ValidationError(f"synthesize needs a flockkit.MotionGraph; got {type(graph).__name__}")
-    return Motion(positions=_positions(graph, walk), dt=graph.motion.dt)
+    return Motion._adopt(_positions(graph, walk), graph.motion.dt)
 
 
 def synthesize_many(graph: MotionGraph, walks, *, n_frames: int | None = None) -> Motion:

@@ -26,7 +26,7 @@ from ..testing.fakes import (
 )
 
 ROOT = Path(__file__).resolve().parents[2]
-BUILTIN_PLUGINS = "boids,icp,kovar,walks,objectives,proposals"
+BUILTIN_PLUGINS = "boids,icp,kovar,walks,objectives,proposals,ica,windowed"
 
 
 pytestmark = pytest.mark.usefixtures("fresh_registry")
@@ -370,7 +370,8 @@ def _string_constants(path):
 
 def test_the_core_names_no_builtin_outside_convenience_defaults_and_sniffs_no_signature():
     # the built-in names that are not also ordinary words of the core (com, shape, random, ...)
-    builtins = {*flockkit.available("behavior"), *flockkit.available("metric"), *flockkit.available("builder"), "bump"}
+    builtins = {*flockkit.available("behavior"), *flockkit.available("metric"), *flockkit.available("builder"),
+                *flockkit.available("segmenter"), "bump"}  # fmt: skip
     builtins -= {"vicsek"}
     defaults = {"convenience.py", "sampler.py", "_expect.py", "cli.py", "demo.py"}  # where defaults are set
     named = {
