@@ -6,7 +6,7 @@ convenience layer (``simulate``, ``build_graph``, ``walk``, ``solve``), rigid mo
 (``flockkit.rigid``) and the checks plugins share (``flockkit.validate``).
 """
 
-from . import errors, graph, io, layers, parallel, rigid, validate
+from . import errors, graph, io, layers, parallel, rigid, scene, validate
 from .constraints import (
     Ball,
     Box,
@@ -19,6 +19,7 @@ from .constraints import (
     fence,
 )
 from .convenience import build_graph, build_layers, random_flock, segment, simulate, walk
+from .features import Features
 from .graph import Clip, MotionGraph, Transition, Walk
 from .hookspecs import hookimpl
 from .interfaces import Capabilities, capabilities
@@ -34,6 +35,7 @@ __version__ = "0.1.0"
 __all__ = [
     "Motion",
     "AnimatedMesh",
+    "Features",
     "Configuration",
     "ConfigurationFrame",
     "heading_axes",
@@ -77,6 +79,7 @@ __all__ = [
     "graph",
     "io",
     "layers",
+    "scene",
     "parallel",
     "rigid",
     "validate",

@@ -212,12 +212,15 @@ def build_layers(
     segmenter="ica-kmeans",
     segmenter_params: dict | None = None,
     builder="windowed",
+    features=None,
     seed: int | None = None,
     **params,
 ) -> GraphLayers:
     """Graph layers of `source` (a Motion, or an AnimatedMesh whose faces are kept for seams): its
     points split by `segmentation` (default: `segmenter` with `segmenter_params`), then one graph
-    per part built by `builder` with `params` (as for :func:`flockkit.build_graph`)."""
+    per part built by `builder` with `params` (as for :func:`flockkit.build_graph`). `features`
+    (a ``flockkit.Features`` of the source's frames, e.g. ``Features.from_keyframes`` for a flag
+    in the wind or ``Features.from_motion`` for a walking animal) travel with the layers."""
     motion = motion_of(source)
     if segmentation is None:
         segmentation = segment(motion, segmenter=segmenter, seed=seed, **dict(segmenter_params or {}))
@@ -227,4 +230,4 @@ def build_layers(
     graphs = [build_graph(part_motion(motion, points), builder=builder, seed=seed, **params)
               for points in segmentation.parts()]  # fmt: skip
     faces = source.faces if isinstance(source, AnimatedMesh) else None
-    return GraphLayers(source=motion, segmentation=segmentation, graphs=graphs, faces=faces)
+    return GraphLayers(source=motion, segmentation=segmentation, graphs=graphs, faces=faces, features=features)

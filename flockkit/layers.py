@@ -15,6 +15,7 @@ import numpy as np
 from . import _npzfile
 from ._arrays import readonly_int
 from .errors import FileFormatError, ValidationError
+from .features import Features
 from .mesh import AnimatedMesh
 from .motion import Motion
 
@@ -129,16 +130,28 @@ class GraphLayers:
         Graph k over the motion of part k's points (``segmentation.parts()[k]``, in that order).
     faces : ndarray (F, 3 or 4), optional
         The mesh's faces, when the source is a mesh: synthesis smooths the seams between parts.
+    features : flockkit.Features, optional
+        The source's feature arrows, one per source frame (paper 002, section 4.2).
     """
 
     source: Motion
     segmentation: Segmentation
     graphs: tuple = attrs.field(converter=tuple)
     faces: np.ndarray | None = attrs.field(default=None, converter=_faces_or_none)
+    features: Features | None = attrs.field(default=None)
 
     def __attrs_post_init__(self):
         from .graph import MotionGraph
 
+        if self.features is not None and (
+            not isinstance(self.features, Features)
+            or self.features.n_frames != self.source.n_frames
+            or self.features.vectors.shape[1] not in (2, 3)
+        ):
+            raise ValidationError(
+                f"GraphLayers.features must be flockkit.Features with one arrow per source frame "
+                f"({self.source.n_frames})"
+            )
         self.segmentation.check_fits(self.source, "the layers' source")
         if len(self.graphs) != self.segmentation.n_parts:
             raise ValidationError(
@@ -172,7 +185,7 @@ class GraphLayers:
         )
         return (
             self.source == other.source and self.segmentation == other.segmentation and self.graphs == other.graphs
-            and faces_equal
+            and faces_equal and self.features == other.features
         )  # fmt: skip
 
     __hash__ = None
@@ -184,6 +197,8 @@ class GraphLayers:
         arrays = {**self.source._to_arrays(), "labels": self.segmentation.labels}
         if self.faces is not None:
             arrays["faces"] = self.faces
+        if self.features is not None:
+            arrays["features"] = self.features.vectors
         for k, graph in enumerate(self.graphs):
             arrays.update({f"part{k}.{name}": array for name, array in graph._to_arrays().items()})
         metadata = {
@@ -208,7 +223,9 @@ class GraphLayers:
                 own = {name.split(".", 1)[1]: a for name, a in arrays.items() if name.startswith(f"part{k}.")}
                 graphs.append(MotionGraph._from_arrays(own, part_motion(source, points), header["params"][k],
                                                        header["provenance"][k], path))  # fmt: skip
-            return cls(source=source, segmentation=segmentation, graphs=graphs, faces=arrays.get("faces"))
+            features = Features(vectors=arrays["features"], dt=source.dt) if "features" in arrays else None
+            return cls(source=source, segmentation=segmentation, graphs=graphs, faces=arrays.get("faces"),
+                       features=features)  # fmt: skip
         except (KeyError, IndexError, TypeError, ValidationError) as exc:
             raise FileFormatError(f"{path}: invalid motion graph layers: {type(exc).__name__}: {exc}") from None
 
