@@ -275,9 +275,15 @@ def synthesize_layers(layers: GraphLayers, walk: LayeredWalk) -> Motion:
         raise ValidationError(f"synthesizing {layers.n_parts} layers needs a LayeredWalk of {layers.n_parts} walks")
     played = [_positions(graph, w) for graph, w in zip(layers.graphs, walk.walks)]  # no Motion each: no copies
     frames = min(len(p) for p in played)
-    positions = np.empty((frames, layers.source.n_agents, layers.source.dims))
-    for points, part in zip(layers.segmentation.parts(), played):
-        positions[:, points] = part[:frames]
+    # parts side by side (slices copy fast), then one gather back to the source's order: faster
+    # than scattering each part into its points
+    side_by_side = np.empty((frames, layers.source.n_agents, layers.source.dims))
+    start = 0
+    for part in played:
+        side_by_side[:, start : start + part.shape[1]] = part[:frames]
+        start += part.shape[1]
+    order = np.concatenate(layers.segmentation.parts())
+    positions = np.take(side_by_side, np.argsort(order), axis=1)
     if layers.faces is not None and layers.n_parts > 1:
         positions = _smooth_seams(positions, layers)
     return Motion._adopt(positions, layers.source.dt)
