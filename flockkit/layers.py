@@ -24,9 +24,10 @@ __all__ = ["Segmentation", "GraphLayers", "LayeredWalk", "seam_stretch"]
 SEGMENTATION_FORMAT_VERSION = 1
 LAYERS_FORMAT_VERSION = 1
 # Rings of mesh neighbors around a seam whose displacements are smoothed, and the smoothing
-# passes (our choice: enough to spread a tear over a few edges, measured on the Fox).
-SEAM_RINGS = 2
-SEAM_PASSES = 8
+# passes (our choice, measured on the Fox's minute: seams stretch 0.042 at most, against 0.48
+# unsmoothed and 0.039 with 2 rings and 8 passes, which cost 30% more time).
+SEAM_RINGS = 1
+SEAM_PASSES = 4
 
 
 def _labels(value) -> np.ndarray:
