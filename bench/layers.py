@@ -15,11 +15,11 @@ synthesis at most 1 ms per second of output per 1 000 vertices.
 from __future__ import annotations
 
 import argparse
-import time
 import tracemalloc
 from pathlib import Path
 
 import numpy as np
+from timing import timed  # bench/timing.py: the scripts run from bench/
 
 import flockkit
 
@@ -36,16 +36,6 @@ def flag(vertices: int = 10_000, frames: int = 300) -> flockkit.AnimatedMesh:
     index = np.arange(side * side).reshape(side, side)
     quads = np.stack([index[:-1, :-1], index[:-1, 1:], index[1:, 1:], index[1:, :-1]], axis=2).reshape(-1, 4)
     return flockkit.AnimatedMesh(motion=flockkit.Motion(positions=positions, dt=1 / 30), faces=quads, name="flag")
-
-
-def timed(function, repeat: int = 1):
-    """The result and the best wall time of `repeat` calls."""
-    best = float("inf")
-    for _ in range(repeat):
-        begin = time.perf_counter()
-        result = function()
-        best = min(best, time.perf_counter() - begin)
-    return result, best
 
 
 def main():

@@ -12,19 +12,10 @@ times (a) one 20-agent flock for 60 s by boids simulation and by synthesizing a 
 from __future__ import annotations
 
 import argparse
-import time
+
+from timing import timed  # bench/timing.py: the scripts run from bench/
 
 import flockkit
-
-
-def timed(function, repeat: int = 1):
-    """The result and the best wall time of `repeat` calls."""
-    best = float("inf")
-    for _ in range(repeat):
-        begin = time.perf_counter()
-        result = function()
-        best = min(best, time.perf_counter() - begin)
-    return result, best
 
 
 def main():

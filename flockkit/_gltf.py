@@ -22,6 +22,23 @@ from .errors import FileFormatError, ValidationError
 _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _GLB_MAGIC, _JSON_CHUNK, _BIN_CHUNK = b"glTF", 0x4E4F534A, 0x004E4942
+FLOAT, UNSIGNED_SHORT = 5126, 5123  # componentType codes, for writers
+
+
+def glb_bytes(document: dict, buffer: bytes) -> bytes:
+    """A .glb file: the header, `document` as the JSON chunk and `buffer` as the binary chunk,
+    each padded to 4 bytes (spec 4.4)."""
+    text = json.dumps(document, separators=(",", ":")).encode("utf-8")
+    text += b" " * (-len(text) % 4)
+    buffer = bytes(buffer) + b"\0" * (-len(buffer) % 4)
+    header = struct.pack("<4sII", _GLB_MAGIC, 2, 12 + 8 + len(text) + 8 + len(buffer))
+    return (
+        header
+        + struct.pack("<II", len(text), _JSON_CHUNK)
+        + text
+        + struct.pack("<II", len(buffer), _BIN_CHUNK)
+        + buffer
+    )
 
 
 class Document:

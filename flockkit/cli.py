@@ -208,9 +208,10 @@ def _cmd_walk(args) -> int:
     path = flockkit.walk(graph, strategy=args.strategy, duration=args.duration, seed=args.seed, **params)
     motion = flockkit.synthesize(graph, path)
     if layered and graph.faces is not None:  # a mesh in, a mesh out: render draws its faces
-        motion = flockkit.AnimatedMesh(motion=motion, faces=graph.faces, name=Path(args.graph).stem)
-    motion.save(output)
-    print(f"wrote {output}: {motion.motion if layered and graph.faces is not None else motion!r}")
+        flockkit.AnimatedMesh(motion=motion, faces=graph.faces, name=Path(args.graph).stem).save(output)
+    else:
+        motion.save(output)
+    print(f"wrote {output}: {motion!r}")
     return 0
 
 

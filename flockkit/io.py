@@ -23,6 +23,7 @@ import numpy as np
 
 from . import validate
 from ._atomic import atomic_path
+from ._gltf import FLOAT, UNSIGNED_SHORT, glb_bytes
 from .errors import FileFormatError, ValidationError
 from .mesh import list_clips, read_mesh_animation
 from .motion import Motion
@@ -473,7 +474,6 @@ _Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
 # the shared agent mesh: an arrow head 0.5 long and 0.3 wide pointing along +x (as the USD cone)
 _ARROW = np.array([[0.25, 0, 0], [-0.25, 0.15, 0], [-0.25, -0.075, 0.13], [-0.25, -0.075, -0.13]], dtype=np.float32)
 _ARROW_FACES = np.array([0, 1, 2, 0, 2, 3, 0, 3, 1, 1, 3, 2], dtype=np.uint16)
-_GLTF_FLOAT, _GLTF_UNSIGNED_SHORT = 5126, 5123  # glTF componentType codes
 
 
 def write_gltf(motion: Motion, path) -> None:
@@ -484,7 +484,6 @@ def write_gltf(motion: Motion, path) -> None:
     t = frame * dt seconds, the rotation facing the velocity). glTF is y up in meters: flockkit's
     (x, y, z) becomes (x, z, -y), so a 2D motion lies in the ground plane y = 0."""
     import base64
-    import struct
 
     path = Path(path)
     positions = np.zeros((motion.n_frames, motion.n_agents, 3))
@@ -497,7 +496,7 @@ def write_gltf(motion: Motion, path) -> None:
     times = (np.arange(motion.n_frames) * motion.dt).astype(np.float32)
     buffer, views, accessors = bytearray(), [], []
 
-    def accessor(array, kind, component=_GLTF_FLOAT, bounds=False, target=None):
+    def accessor(array, kind, component=FLOAT, bounds=False, target=None):
         array = np.ascontiguousarray(array)
         buffer.extend(b"\0" * (-len(buffer) % 4))
         views.append({"buffer": 0, "byteOffset": len(buffer), "byteLength": array.nbytes})
@@ -514,7 +513,7 @@ def write_gltf(motion: Motion, path) -> None:
     mesh = {
         "name": "agent",
         "primitives": [{"attributes": {"POSITION": accessor(_ARROW, "VEC3", bounds=True, target=34962)},
-                        "indices": accessor(_ARROW_FACES, "SCALAR", _GLTF_UNSIGNED_SHORT, target=34963)}],
+                        "indices": accessor(_ARROW_FACES, "SCALAR", UNSIGNED_SHORT, target=34963)}],
     }  # fmt: skip
     clock = accessor(times, "SCALAR", bounds=True)  # every sampler shares the key times
     nodes = [{"name": "Flock", "children": list(range(1, motion.n_agents + 1))}]
@@ -540,11 +539,7 @@ def write_gltf(motion: Motion, path) -> None:
             document["buffers"][0]["uri"] = f"data:application/octet-stream;base64,{data}"
             handle.write(json.dumps(document).encode("utf-8"))
             return
-        text = json.dumps(document, separators=(",", ":")).encode("utf-8")
-        text += b" " * (-len(text) % 4)
-        handle.write(struct.pack("<4sII", b"glTF", 2, 12 + 8 + len(text) + 8 + len(buffer)))
-        handle.write(struct.pack("<I4s", len(text), b"JSON") + text)
-        handle.write(struct.pack("<I4s", len(buffer), b"BIN\0") + bytes(buffer))
+        handle.write(glb_bytes(document, buffer))
 
 
 def _version() -> str:

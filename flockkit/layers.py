@@ -16,7 +16,7 @@ from . import _npzfile
 from ._arrays import readonly_int
 from .errors import FileFormatError, ValidationError
 from .features import Features
-from .mesh import AnimatedMesh
+from .mesh import AnimatedMesh, face_edges, faces_array
 from .motion import Motion
 
 __all__ = ["Segmentation", "GraphLayers", "LayeredWalk", "seam_stretch"]
@@ -99,22 +99,20 @@ def motion_of(source, what: str = "source") -> Motion:
     raise ValidationError(f"{what} must be a flockkit.Motion or flockkit.AnimatedMesh; got {type(source).__name__}")
 
 
-def _canonical(labels: np.ndarray) -> np.ndarray:
-    """Labels renamed in order of first appearance: equal partitions give equal arrays."""
-    _, first, inverse = np.unique(labels, return_index=True, return_inverse=True)
-    rank = np.argsort(np.argsort(first))
-    return rank[inverse]
+def canonical_labels(labels) -> np.ndarray:
+    """Part labels renamed 0, 1, ... in order of each part's first point: equal partitions give
+    equal arrays, whatever the names a segmenter chose."""
+    _, first, inverse = np.unique(np.asarray(labels), return_index=True, return_inverse=True)
+    return np.argsort(np.argsort(first))[inverse]
 
 
 def same_partition(a, b) -> bool:
     """Whether two labelings split the points the same way, whatever the part names."""
-    return np.array_equal(_canonical(np.asarray(a)), _canonical(np.asarray(b)))
+    return np.array_equal(canonical_labels(a), canonical_labels(b))
 
 
 def _faces_or_none(value):
-    if value is None:
-        return None
-    return AnimatedMesh(motion=Motion(positions=np.zeros((1, int(np.max(value)) + 1, 3)), dt=1.0), faces=value).faces
+    return None if value is None else faces_array(value, "GraphLayers.faces")
 
 
 @attrs.frozen(kw_only=True, eq=False)
@@ -140,6 +138,7 @@ class GraphLayers:
     graphs: tuple = attrs.field(converter=tuple)
     faces: np.ndarray | None = attrs.field(default=None, converter=_faces_or_none)
     features: Features | None = attrs.field(default=None)
+    _seams: tuple | None = attrs.field(init=False, default=None, repr=False, eq=False)  # made by synthesis
 
     def __attrs_post_init__(self):
         from .graph import MotionGraph
@@ -293,11 +292,9 @@ def synthesize_layers(layers: GraphLayers, walk: LayeredWalk) -> Motion:
 def _adjacency(n_points: int, faces: np.ndarray):
     from scipy.sparse import coo_matrix
 
-    ring = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
-    rows, cols = np.concatenate([ring[:, 0], ring[:, 1]]), np.concatenate([ring[:, 1], ring[:, 0]])
-    adjacency = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_points, n_points)).tocsr()
-    adjacency.data[:] = 1.0
-    return adjacency
+    edges = face_edges(faces)
+    rows, cols = np.concatenate([edges[:, 0], edges[:, 1]]), np.concatenate([edges[:, 1], edges[:, 0]])
+    return coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_points, n_points)).tocsr()
 
 
 def seam_points(layers: GraphLayers) -> np.ndarray:
@@ -307,7 +304,9 @@ def seam_points(layers: GraphLayers) -> np.ndarray:
     return np.unique(layers.faces[spanning])
 
 
-def _smooth_seams(positions: np.ndarray, layers: GraphLayers) -> np.ndarray:
+def _seam_operator(layers: GraphLayers):
+    """(involved points, rows of them smoothed, the mean-of-neighbors operator on those rows, the
+    involved points' mean positions): what seam smoothing needs, made once per layers."""
     adjacency = _adjacency(layers.source.n_agents, layers.faces)
     zone = np.zeros(layers.source.n_agents, dtype=bool)
     zone[seam_points(layers)] = True
@@ -316,10 +315,16 @@ def _smooth_seams(positions: np.ndarray, layers: GraphLayers) -> np.ndarray:
     # the passes read the zone and its neighbors only: work on that block of points
     involved = np.flatnonzero(zone | ((adjacency @ zone.astype(float)) > 0))
     inner = np.flatnonzero(zone[involved])
-    local = adjacency[involved][:, involved]
     degree = np.asarray(adjacency.sum(axis=1)).ravel()[involved]
+    local = adjacency[involved][:, involved]
     mean_of_neighbors = local[inner].multiply(1.0 / np.maximum(degree[inner], 1)[:, None]).tocsr()
-    rest = layers.source.positions.mean(axis=0)[involved]
+    return involved, inner, mean_of_neighbors, layers.source.positions.mean(axis=0)[involved]
+
+
+def _smooth_seams(positions: np.ndarray, layers: GraphLayers) -> np.ndarray:
+    if layers._seams is None:
+        object.__setattr__(layers, "_seams", _seam_operator(layers))
+    involved, inner, mean_of_neighbors, rest = layers._seams
     frames, _, d = positions.shape
     displacement = (positions[:, involved] - rest).transpose(1, 0, 2).reshape(len(involved), frames * d)
     for _ in range(SEAM_PASSES):
@@ -338,7 +343,7 @@ def seam_stretch(motion: Motion, faces, labels=None, *, reference: Motion | None
         faces = faces[np.any(labels != labels[:, :1], axis=1)]
     if not len(faces):
         return 0.0
-    edges = np.unique(np.sort(np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2), axis=1), axis=0)
+    edges = face_edges(faces)
 
     def length(positions):
         return np.linalg.norm(positions[:, edges[:, 0]] - positions[:, edges[:, 1]], axis=2)

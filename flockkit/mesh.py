@@ -19,18 +19,19 @@ from .errors import FileFormatError, MissingDependencyError, ValidationError
 from .motion import Motion
 from .validate import number
 
-__all__ = ["AnimatedMesh", "read_mesh_animation", "list_clips"]
+__all__ = ["AnimatedMesh", "read_mesh_animation", "list_clips", "face_edges"]
 
 MESH_FORMAT_VERSION = 1
 GLTF_SUFFIXES, USD_SUFFIXES = (".glb", ".gltf"), (".usda", ".usdc", ".usdz", ".usd")
 
 
-def _faces(value) -> np.ndarray:
-    array = readonly_int(value, field="AnimatedMesh.faces")
+def faces_array(value, field: str = "AnimatedMesh.faces") -> np.ndarray:
+    """`value` as read-only faces (F, 3 or 4) of vertex indices, or ValidationError naming `field`."""
+    array = readonly_int(value, field=field)
     if array.size == 0:
         array = array.reshape(0, 3)
     if array.ndim != 2 or array.shape[1] not in (3, 4):
-        raise ValidationError(f"AnimatedMesh.faces must have shape (F, 3) or (F, 4); got {array.shape}")
+        raise ValidationError(f"{field} must have shape (F, 3) or (F, 4); got {array.shape}")
     return array
 
 
@@ -40,7 +41,7 @@ class AnimatedMesh:
     and a `name`."""
 
     motion: Motion
-    faces: np.ndarray = attrs.field(converter=_faces)
+    faces: np.ndarray = attrs.field(converter=faces_array)
     name: str = attrs.field(default="mesh", converter=str)
 
     def __attrs_post_init__(self):
@@ -54,10 +55,7 @@ class AnimatedMesh:
 
     def edges(self) -> np.ndarray:
         """Unique undirected edges (E, 2) of the faces, smaller index first."""
-        if not len(self.faces):
-            return np.zeros((0, 2), dtype=np.int64)
-        ring = np.stack([self.faces, np.roll(self.faces, -1, axis=1)], axis=2).reshape(-1, 2)
-        return np.unique(np.sort(ring, axis=1), axis=0)
+        return face_edges(self.faces)
 
     def __eq__(self, other):
         if not isinstance(other, AnimatedMesh):
@@ -67,7 +65,7 @@ class AnimatedMesh:
     __hash__ = None
 
     def save(self, path) -> None:
-        """Write to one .npz with JSON metadata (atomic; no pickle)."""
+        """Write to one .npz of plain arrays with JSON metadata (atomic)."""
         arrays = {**self.motion._to_arrays(), "faces": self.faces}
         _npzfile.write(path, kind="mesh", version=MESH_FORMAT_VERSION, arrays=arrays,
                        metadata={"dt": self.motion.dt, "name": self.name})  # fmt: skip
@@ -81,6 +79,15 @@ class AnimatedMesh:
                        name=header.get("name", "mesh"))  # fmt: skip
         except (KeyError, ValidationError) as exc:
             raise FileFormatError(f"{path}: invalid animated mesh: {type(exc).__name__}: {exc}") from None
+
+
+def face_edges(faces) -> np.ndarray:
+    """Unique undirected edges (E, 2) of `faces` (F, 3 or 4), smaller index first."""
+    faces = np.asarray(faces)
+    if not len(faces):
+        return np.zeros((0, 2), dtype=np.int64)
+    ring = np.stack([faces, np.roll(faces, -1, axis=1)], axis=2).reshape(-1, 2)
+    return np.unique(np.sort(ring, axis=1), axis=0)
 
 
 def list_clips(path) -> dict[str, float]:

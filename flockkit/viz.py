@@ -392,11 +392,11 @@ def plot_mesh(mesh, path=None, *, frame: int = 0, segmentation=None, axes=None, 
     if path is not None:
         path = _check_picture_path(path)
     frame = integer(frame, "plot_mesh: frame", minimum=0)
-    figure, _, draw = _mesh_drawing(
-        mesh, segmentation, axes, size, title=f"{mesh.name}, t = {frame * mesh.motion.dt:.2f} s"
-    )
+    figure, ax, draw = _mesh_drawing(mesh, segmentation, axes, size, title="")
     if frame >= mesh.motion.n_frames:
+        _pyplot().close(figure)
         raise ValidationError(f"plot_mesh: frame {frame} is past the mesh's {mesh.motion.n_frames} frames")
+    ax.set_title(f"{mesh.name}, t = {frame * mesh.motion.dt:.2f} s")
     draw(frame)
     if path is not None:
         _save(figure, path)

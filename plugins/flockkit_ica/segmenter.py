@@ -83,7 +83,7 @@ class IcaKmeans:
         seed = int(rng.integers(2**31 - 1))
         found = self._moving_parts(energy[:, moving], wanted, seed)
         labels[moving] = found + still
-        return flockkit.Segmentation(labels=_by_first_point(labels), n_parts=int(labels.max()) + 1)
+        return flockkit.Segmentation(labels=flockkit.layers.canonical_labels(labels), n_parts=int(labels.max()) + 1)
 
     def _moving_parts(self, energy: np.ndarray, wanted: int | None, seed: int) -> np.ndarray:
         """Labels 0.. of the moving points (columns of `energy`)."""
@@ -139,9 +139,3 @@ def _kmeans(rows: np.ndarray, k: int, seed: int) -> np.ndarray:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # rigid groups give identical rows: fewer distinct clusters than k
         return KMeans(n_clusters=k, n_init=10, random_state=seed).fit_predict(rows).astype(np.int64)
-
-
-def _by_first_point(labels: np.ndarray) -> np.ndarray:
-    """Parts renamed in order of their first point, so names do not depend on k-means' order."""
-    _, first, inverse = np.unique(labels, return_index=True, return_inverse=True)
-    return np.argsort(np.argsort(first))[inverse]
