@@ -27,6 +27,7 @@ from .layers import GraphLayers, LayeredWalk, Segmentation
 from .mesh import AnimatedMesh
 from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State, heading_axes
 from .registry import available, get, resolve
+from .scene import Scene, SceneAnimation
 from .solve import Proposal, Solution, solve
 from .synthesis import synthesize, synthesize_many
 
@@ -68,6 +69,8 @@ __all__ = [
     "segment",
     "Segmentation",
     "build_layers",
+    "Scene",
+    "SceneAnimation",
     "GraphLayers",
     "LayeredWalk",
     "walk",

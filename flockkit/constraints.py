@@ -270,6 +270,10 @@ class Polygon(Region):
     def outline(self):
         return np.array(self.vertices)
 
+    def area(self) -> float:
+        """The enclosed area."""
+        return abs(self._signed_area())
+
     def interior_point(self):
         """The point farthest inside among the vertex centroid and the centroids of the triangles
         of the fan from vertex 0 (the area centroid of a non-convex polygon may lie outside)."""

@@ -22,7 +22,7 @@ from .errors import ValidationError
 from .graph import MotionGraph, Walk
 from .motion import Motion
 
-__all__ = ["synthesize", "synthesize_many"]
+__all__ = ["synthesize", "synthesize_many", "played_frames"]
 
 
 def _smoothstep(u: np.ndarray) -> np.ndarray:
@@ -134,6 +134,15 @@ def _positions(graph: MotionGraph, walk: Walk) -> np.ndarray:
         rows = _runs(out, count)
         positions[rows] = (1 - weight) * old + weight * positions[rows]
     return positions
+
+
+def played_frames(graph: MotionGraph, walk: Walk) -> tuple[np.ndarray, np.ndarray]:
+    """What each output frame of `walk` plays: (source frame (F,), the rotation placing it in the
+    world (F, D, D)). Over a blend, the motion blended into (the new one). Raises ValidationError
+    as synthesize does."""
+    (_, source_start, length), rotations, _, _, _ = _plan(graph, walk)
+    segment = np.repeat(np.arange(len(length)), length)
+    return _runs(source_start, length), rotations[segment]
 
 
 def synthesize(graph: MotionGraph, walk: Walk) -> Motion:

@@ -116,3 +116,31 @@ def parts(*, dims: int = 3, seconds: float = 6.0, dt: float = 0.1) -> tuple[Moti
         positions[:, columns] = turned + center
     truth = np.repeat([0, 1, 2], [12, 16, 16])
     return Motion(positions=positions, dt=dt), truth
+
+
+def plants(*, dt: float = 0.1, seconds: float = 24.0, points: int = 8):
+    """Two stalks of `points` points each that lean with a wind turning a quarter turn every 6 s
+    (+x, +y, -x, -y: held 4 s, turning 2 s), each fluttering at its own rate: (Motion (T, 2 *
+    points, 3), the stalk of each point (0 or 1), Features: the wind, length 0.8). A source whose
+    arrows point every way, for scenes and annotated walks."""
+    from ..features import Features
+
+    keyframes = []
+    for quarter in range(4):
+        direction = [math.cos(quarter * math.pi / 2), math.sin(quarter * math.pi / 2)]
+        keyframes += [(6.0 * quarter, direction), (6.0 * quarter + 4.0, direction)]
+    keyframes.append((seconds, [1.0, 0.0]))
+    n_frames = round(seconds / dt) + 1
+    wind = Features.from_keyframes([(t, 0.8 * np.array(v)) for t, v in keyframes], n_frames=n_frames, dt=dt)
+    t = np.arange(n_frames) * dt
+    height = np.linspace(0.0, 1.0, points)
+    positions = np.empty((n_frames, 2 * points, 3))
+    for stalk, (x, rate) in enumerate(((-0.3, 1.7), (0.3, 2.9))):
+        lean = wind.vectors[:, :, None] * (0.5 + 0.1 * np.sin(2 * np.pi * rate * t))[:, None, None]  # (T, 2, 1)
+        bend = height**2  # the tip bends most
+        rows = slice(stalk * points, (stalk + 1) * points)
+        positions[:, rows, 0] = x + lean[:, 0] * bend
+        positions[:, rows, 1] = lean[:, 1] * bend
+        positions[:, rows, 2] = height
+    labels = np.repeat([0, 1], points)
+    return Motion(positions=positions, dt=dt), labels, wind

@@ -1,0 +1,457 @@
+"""Scenes of many duplicates (paper 002, sections 5.1 and 6).
+
+Templates (graph layers or plain motion graphs, with feature arrows) are placed in a polygon,
+uniformly, each with a random heading and scale, so that no two footprints (the axis-aligned
+boxes of their placed outlines) overlap. Each object's parts then walk their graphs with a walk
+strategy that follows the object's target arrows (by default ``annotated``: the paper's E = C_T
++ alpha C_C + beta N_T), and neighbouring duplicates that play the same source frames at the
+same time are walked again, avoiding each other's frames, until they differ (section 6.2).
+
+Objects stand on the ground plane: a template's center (its mean center of mass) is placed at
+the object's position, turned by its heading about the up axis (+z) and scaled; a 2D template
+lies in the plane. Arrows and targets are in the world's coordinates; each object follows its
+target turned into its own (the template's) coordinates.
+"""
+
+from __future__ import annotations
+
+import math
+
+import attrs
+import numpy as np
+
+from ..constraints import Polygon
+from ..errors import ValidationError
+from ..features import Features
+from ..graph import MotionGraph
+from ..layers import GraphLayers, LayeredWalk
+from ..motion import Motion
+from ..validate import integer, number
+from .constraints import Arrow, FlowField, SelfMovement
+
+__all__ = ["Scene", "SceneAnimation"]
+
+SCENE_FORMAT_VERSION = 1
+# Neighbouring duplicates may play the same source frame at the same time on at most this share
+# of frames (the issue's bar); beyond it, section 6.2 walks one of them again.
+MAX_IN_STEP = 0.05
+# Same-template objects whose positions are closer than this many footprint diagonals are
+# neighbours (they are seen together).
+NEIGHBOUR_DIAGONALS = 3.0
+# Tries per object when placing before the region is declared too small.
+PLACEMENT_TRIES = 200
+
+
+def _parts(template) -> tuple[list, list]:
+    """(graphs, point indices of each) of a template."""
+    if isinstance(template, GraphLayers):
+        return list(template.graphs), template.segmentation.parts()
+    if isinstance(template, MotionGraph):
+        return [template], [np.arange(template.motion.n_agents)]
+    raise ValidationError(
+        f"Scene.templates entries must be flockkit.GraphLayers or MotionGraph; got {type(template).__name__}"
+    )
+
+
+def _source(template) -> Motion:
+    return template.source if isinstance(template, GraphLayers) else template.motion
+
+
+def _template_features(template, k: int, needed: bool) -> Features | None:
+    """The template's arrows: GraphLayers' features, a plain graph's from its motion."""
+    if isinstance(template, GraphLayers):
+        if template.features is None and needed:
+            raise ValidationError(
+                f"Scene.templates[{k}] has no features but the scene has constraints: build its layers with "
+                f"features= (flockkit.Features, e.g. Features.from_keyframes or Features.from_motion)"
+            )
+        return template.features
+    return Features.from_motion(template.motion)
+
+
+def _footprint(template) -> tuple[np.ndarray, np.ndarray]:
+    """(center (D,), half extents (2,)): the template's mean center of mass, and the half size in
+    x and y of the box around every frame's shape about its own center of mass (what it covers
+    where it stands, wherever its recording travels)."""
+    source = _source(template)
+    com = source.center_of_mass()
+    relative = source.positions[..., :2] - com[:, None, :2]
+    half = np.maximum(np.abs(relative.min(axis=(0, 1))), np.abs(relative.max(axis=(0, 1))))
+    center = com.mean(axis=0)
+    if source.dims == 3:
+        center = np.array([center[0], center[1], 0.0])  # objects stand on the ground
+    return center, half
+
+
+def _constraints(value) -> tuple:
+    items = tuple(value or ())
+    for k, item in enumerate(items):
+        if not isinstance(item, FlowField | SelfMovement):
+            raise ValidationError(
+                f"Scene.constraints[{k}] must be flockkit.scene.FlowField or SelfMovement; got {type(item).__name__}"
+            )
+    return items
+
+
+def _counts(value) -> tuple:
+    counts = tuple(value) if not isinstance(value, int) else (value,)
+    for k, count in enumerate(counts):
+        integer(count, f"Scene.counts[{k}]", minimum=1)
+    return tuple(int(c) for c in counts)
+
+
+def _scale(value) -> tuple:
+    low, high = (value, value) if isinstance(value, int | float) else tuple(value)
+    low, high = (
+        number(low, "Scene.scale (low)", minimum=0, strict=True),
+        number(high, "Scene.scale (high)", minimum=0, strict=True),
+    )
+    if high < low:
+        raise ValidationError(f"Scene.scale must be (low, high) with low <= high; got {value!r}")
+    return low, high
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class Scene:
+    """A background scene: `counts[k]` duplicates of `templates[k]` placed in `region` (a
+    flockkit.Polygon on the ground), animated for `duration` seconds at the templates' frame
+    time (`dt`, if given, must be it), each following the target arrows of `constraints`
+    (FlowField, SelfMovement; none: one arrow at the region's center, the first template's
+    median feature, held). `scale` is a (low, high) range of uniform scales. `walk` names the
+    walk strategy (a registered name or an instance factory's name) and `walk_params` its
+    parameters beyond target, features and avoid. `n_jobs` walks objects in parallel through
+    joblib; the result is the same whatever it is."""
+
+    templates: tuple = attrs.field(converter=tuple)
+    region: Polygon = attrs.field()
+    counts: tuple = attrs.field(converter=_counts)
+    duration: float = attrs.field(converter=lambda v: number(v, "Scene.duration", minimum=0, strict=True))
+    dt: float | None = attrs.field(default=None)
+    constraints: tuple = attrs.field(default=(), converter=_constraints)
+    seed: int = attrs.field(default=0, converter=lambda v: integer(v, "Scene.seed", minimum=0))
+    scale: tuple = attrs.field(default=(1.0, 1.0), converter=_scale)
+    walk: str = attrs.field(default="annotated")
+    walk_params: dict = attrs.field(factory=dict, converter=dict)
+    n_jobs: int | None = attrs.field(default=None)
+
+    def __attrs_post_init__(self):
+        if not isinstance(self.region, Polygon):
+            raise ValidationError(f"Scene.region must be a flockkit.Polygon; got {type(self.region).__name__}")
+        if not self.templates:
+            raise ValidationError("Scene.templates needs at least one template")
+        if len(self.counts) != len(self.templates):
+            raise ValidationError(f"Scene.counts has {len(self.counts)} entries for {len(self.templates)} templates")
+        dts = {_parts(t)[0][0].motion.dt for t in self.templates}
+        if len(dts) != 1 or (self.dt is not None and abs(self.dt - next(iter(dts))) > 1e-12):
+            raise ValidationError(
+                f"Scene: every template must share one frame time (and dt, if given, must be it); got "
+                f"{sorted(dts)}{'' if self.dt is None else f' and dt={self.dt}'}"
+            )
+        for k, template in enumerate(self.templates):
+            _template_features(template, k, needed=True)
+        moving = {c.object for c in self.constraints if isinstance(c, SelfMovement)}
+        if moving and max(moving) >= self.n_objects:
+            raise ValidationError(
+                f"SelfMovement.object {max(moving)} is not an object of this scene (0..{self.n_objects - 1})"
+            )
+
+    @property
+    def n_objects(self) -> int:
+        return sum(self.counts)
+
+    @property
+    def frame_time(self) -> float:
+        return _parts(self.templates[0])[0][0].motion.dt
+
+    @property
+    def n_frames(self) -> int:
+        return math.ceil(self.duration / self.frame_time)
+
+    def place(self) -> Placement:
+        """Positions uniform in the region, random headings and scales, no two footprints
+        overlapping (deterministic under the seed). ValidationError when the region cannot hold
+        them, with the areas in numbers."""
+        rng = np.random.default_rng(np.random.SeedSequence(self.seed).spawn(2)[0])
+        feet = [_footprint(t)[1] for t in self.templates]
+        kinds = np.repeat(np.arange(len(self.templates)), self.counts)
+        rng.shuffle(kinds)
+        low, high = self.region.bounds()
+        area = self.region.area()
+        needed = sum(count * 4 * foot[0] * foot[1] * self.scale[0] ** 2 for count, foot in zip(self.counts, feet))
+        if needed > area:
+            raise ValidationError(
+                f"Scene: {self.n_objects} objects cover at least {needed:.4g} square units but the region has "
+                f"{area:.4g}: use a larger region, fewer objects or a smaller scale"
+            )
+        n = len(kinds)
+        positions, headings, scales = np.empty((n, 2)), np.empty(n), np.empty(n)
+        boxes = np.empty((n, 2, 2))
+        for i, kind in enumerate(kinds):
+            for _ in range(PLACEMENT_TRIES):
+                heading, scale = rng.uniform(0, 2 * np.pi), rng.uniform(*self.scale)
+                half = _turned_half(feet[kind] * scale, heading)
+                point = rng.uniform(low + half, high - half) if np.all(high - low > 2 * half) else None
+                if point is None:
+                    break
+                corners = point + half * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]])
+                if not np.all(self.region.contains(corners)):
+                    continue
+                box = np.array([point - half, point + half])
+                if i and np.any(np.all((boxes[:i, 0] < box[1]) & (box[0] < boxes[:i, 1]), axis=1)):
+                    continue
+                positions[i], headings[i], scales[i], boxes[i] = point, heading, scale, box
+                break
+            else:
+                point = None
+            if point is None:
+                raise ValidationError(
+                    f"Scene: the region cannot hold {self.n_objects} objects without overlap: placed {i}, then "
+                    f"{PLACEMENT_TRIES} tries found no free spot (region {area:.4g} square units, objects cover "
+                    f"{needed:.4g}); use a larger region, fewer objects or a smaller scale"
+                )
+        return Placement(positions=positions, headings=headings, scales=scales, templates=kinds)
+
+    def targets(self, placement: Placement) -> np.ndarray:
+        """(objects, frames, 3): each object's target arrow per output frame, in the world."""
+        times = np.arange(self.n_frames) * self.frame_time
+        flows = [c for c in self.constraints if isinstance(c, FlowField)]
+        if not self.constraints:
+            median = np.median(_template_features(self.templates[0], 0, needed=False).vectors, axis=0)
+            flows = [FlowField(arrows=[Arrow(position=self.region.interior_point(), keyframes=[(0.0, median[:2])])])]
+        world = np.zeros((len(placement.positions), len(times), 3))
+        for flow in flows:
+            arrows = flow.targets(placement.positions, times)  # (F, M, D)
+            world[..., : arrows.shape[2]] += arrows.transpose(1, 0, 2)
+        for constraint in self.constraints:
+            if isinstance(constraint, SelfMovement):
+                own = constraint.targets(times)
+                world[constraint.object] = 0.0
+                world[constraint.object, :, : own.shape[1]] = own
+        lengths = np.linalg.norm(world, axis=2, keepdims=True)
+        return np.where(lengths > 1, world / np.maximum(lengths, 1e-300), world)  # several flows: at most 1
+
+    def synthesize(self, progress: bool = False) -> SceneAnimation:
+        """Place, walk every object's parts after its targets, then de-synchronise neighbours."""
+        from .._progress import progress_bar
+        from ..parallel import imap
+
+        placement = self.place()
+        targets = self.targets(placement)
+        seeds = np.random.SeedSequence(self.seed).spawn(2)[1].spawn(placement.n_objects)
+        calls = [
+            (self, i, placement, targets[i], int(seeds[i].generate_state(1)[0]), None)
+            for i in range(placement.n_objects)
+        ]
+        walks = []
+        with progress_bar(progress, unit="object") as report:
+            for walk in imap(_walk_object, calls, n_jobs=self.n_jobs):
+                walks.append(walk)
+                if report:
+                    report(len(walks), len(calls), "walks")
+        animation = SceneAnimation(templates=self.templates, placement=placement, walks=walks, dt=self.frame_time,
+                                   n_frames=self.n_frames, constraints=self.constraints)  # fmt: skip
+        before = animation.in_step_share()
+        walks = self._desynchronise(animation, targets, seeds)
+        animation = attrs.evolve(animation, walks=walks)
+        object.__setattr__(animation, "report", {"in_step_before": before, "in_step_after": animation.in_step_share()})
+        return animation
+
+    def _desynchronise(self, animation, targets, seeds) -> list:
+        """Section 6.2: each object in step with a neighbour on more than MAX_IN_STEP of its frames
+        is walked again avoiding its neighbours' frames (in object order, so each sees the
+        others' latest walks)."""
+        walks = list(animation.walks)
+        frames = animation.source_frames()
+        for i, neighbours in enumerate(animation.neighbours()):
+            if not len(neighbours) or _in_step(frames[i], frames[neighbours]).max() <= MAX_IN_STEP:
+                continue
+            walks[i] = _walk_object(
+                self, i, animation.placement, targets[i], int(seeds[i].generate_state(2)[1]), frames[neighbours]
+            )
+            frames[i] = SceneAnimation._frames_of(
+                self.templates[animation.placement.templates[i]], walks[i], self.n_frames
+            )
+        return walks
+
+
+def _walk_object(scene: Scene, i: int, placement: Placement, target: np.ndarray, seed: int, avoid):
+    """Object i's walk (a Walk, or a LayeredWalk of one walk per part), each part with its own
+    random stream from `seed`; `avoid` (neighbours, parts, frames) of source frames to fall out
+    of step with."""
+    from ..convenience import walk as walk_graph
+
+    kind = int(placement.templates[i])
+    template = scene.templates[kind]
+    graphs, _ = _parts(template)
+    features = _template_features(template, kind, needed=False)
+    local = target @ _turn(placement.headings[i])  # the world's arrows in the template's coordinates (R^T w)
+    track = Features(vectors=local[:, : _source(template).dims], dt=scene.frame_time)
+    streams = np.random.SeedSequence(seed).spawn(len(graphs))
+    walks = []
+    for k, (graph, stream) in enumerate(zip(graphs, streams)):
+        params = {**scene.walk_params, "target": track, "features": features}
+        if avoid is not None:
+            params["avoid"] = avoid[:, k]
+        walks.append(
+            walk_graph(
+                graph, strategy=scene.walk, duration=scene.duration, seed=int(stream.generate_state(1)[0]), **params
+            )
+        )
+    return LayeredWalk(walks=walks) if isinstance(template, GraphLayers) else walks[0]
+
+
+def _turn(heading: float) -> np.ndarray:
+    """The 3D rotation by `heading` about +z."""
+    c, s = math.cos(heading), math.sin(heading)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _turned_half(half: np.ndarray, heading: float) -> np.ndarray:
+    """Half extents of the axis-aligned box around a box of half extents `half` turned by `heading`."""
+    c, s = abs(math.cos(heading)), abs(math.sin(heading))
+    return np.array([c * half[0] + s * half[1], s * half[0] + c * half[1]])
+
+
+def _in_step(frames: np.ndarray, others: np.ndarray) -> np.ndarray:
+    """Share of frames on which `frames` (parts, F) and each of `others` (K, parts, F) play the
+    same source frame in some part: (K,)."""
+    same = (frames[None] == others) & (frames[None] >= 0)
+    return same.any(axis=1).mean(axis=1)
+
+
+def _floats(value, field):
+    from .._arrays import readonly_float
+
+    return readonly_float(value, field=field)
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class Placement:
+    """Where each object of a scene stands: `positions` (M, 2) on the ground, `headings` (M,)
+    radians about +z, `scales` (M,), `templates` (M,) the template each duplicates."""
+
+    positions: np.ndarray = attrs.field(converter=lambda v: _floats(v, "Placement.positions"))
+    headings: np.ndarray = attrs.field(converter=lambda v: _floats(v, "Placement.headings"))
+    scales: np.ndarray = attrs.field(converter=lambda v: _floats(v, "Placement.scales"))
+    templates: np.ndarray = attrs.field(converter=lambda v: np.asarray(v, dtype=np.int64))
+
+    @property
+    def n_objects(self) -> int:
+        return len(self.positions)
+
+    def __eq__(self, other):
+        if not isinstance(other, Placement):
+            return NotImplemented
+        return all(
+            np.array_equal(getattr(self, f), getattr(other, f))
+            for f in ("positions", "headings", "scales", "templates")
+        )
+
+    __hash__ = None
+
+
+class _Motions:
+    """The objects' world-space motions, synthesized when asked for (a scene of a thousand
+    meshes does not fit in memory at once)."""
+
+    def __init__(self, animation):
+        self.animation = animation
+
+    def __len__(self):
+        return self.animation.placement.n_objects
+
+    def __getitem__(self, i):
+        if not -len(self) <= i < len(self):
+            raise IndexError(f"object {i} of {len(self)}")
+        return self.animation.motion(i % len(self))
+
+    def __iter__(self):
+        return (self.animation.motion(i) for i in range(len(self)))
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class SceneAnimation:
+    """A synthesized scene: the templates, where each object stands (`placement`), each object's
+    walk (a Walk, or a LayeredWalk for layered templates), `n_frames` output frames `dt` apart,
+    and the constraints it followed. `report` holds the neighbours' in-step share before and
+    after de-synchronisation when it comes from Scene.synthesize."""
+
+    templates: tuple = attrs.field(converter=tuple)
+    placement: Placement
+    walks: tuple = attrs.field(converter=tuple)
+    dt: float
+    n_frames: int
+    constraints: tuple = attrs.field(default=(), converter=_constraints)
+    report: dict = attrs.field(factory=dict)
+
+    @property
+    def motions(self) -> _Motions:
+        """One world-space Motion per object, each synthesized when indexed."""
+        return _Motions(self)
+
+    def motion(self, i: int) -> Motion:
+        """Object i's motion in the world: its walk played, cut to n_frames, scaled, turned by its
+        heading about +z and moved to its position."""
+        from ..synthesis import synthesize
+
+        template = self.templates[self.placement.templates[i]]
+        played = synthesize(template, self.walks[i])
+        center, _ = _footprint(template)
+        dims = played.dims
+        scale, turn = self.placement.scales[i], _turn(self.placement.headings[i])[:dims, :dims]
+        where = np.zeros(dims)
+        where[:2] = self.placement.positions[i]
+        positions = (played.positions[: self.n_frames] - center) @ (scale * turn).T + where
+        return Motion._adopt(positions, self.dt)
+
+    @staticmethod
+    def _frames_of(template, walk, n_frames: int) -> np.ndarray:
+        from ..synthesis import played_frames
+
+        graphs, _ = _parts(template)
+        walks = walk.walks if isinstance(walk, LayeredWalk) else (walk,)
+        return np.stack([played_frames(g, w)[0][:n_frames] for g, w in zip(graphs, walks)])
+
+    def source_frames(self) -> np.ndarray:
+        """(objects, parts, frames): the source frame each object's part plays at each output
+        frame (-1 for parts an object's template does not have)."""
+        parts = max(len(_parts(t)[0]) for t in self.templates)
+        frames = np.full((self.placement.n_objects, parts, self.n_frames), -1, dtype=np.int64)
+        for i, walk in enumerate(self.walks):
+            own = self._frames_of(self.templates[self.placement.templates[i]], walk, self.n_frames)
+            frames[i, : len(own)] = own
+        return frames
+
+    def bounding_boxes(self) -> np.ndarray:
+        """(objects, 2, 2): the (low, high) corners in x, y of each object's placed footprint."""
+        boxes = np.empty((self.placement.n_objects, 2, 2))
+        for i in range(self.placement.n_objects):
+            half = _footprint(self.templates[self.placement.templates[i]])[1] * self.placement.scales[i]
+            half = _turned_half(half, self.placement.headings[i])
+            boxes[i] = [self.placement.positions[i] - half, self.placement.positions[i] + half]
+        return boxes
+
+    def neighbours(self) -> list[np.ndarray]:
+        """For each object, the other objects of its template within NEIGHBOUR_DIAGONALS
+        footprint diagonals."""
+        from scipy.spatial import cKDTree
+
+        result = [np.zeros(0, dtype=np.int64)] * self.placement.n_objects
+        for kind, template in enumerate(self.templates):
+            members = np.flatnonzero(self.placement.templates == kind)
+            if len(members) < 2:
+                continue
+            reach = (
+                NEIGHBOUR_DIAGONALS * 2 * np.linalg.norm(_footprint(template)[1]) * self.placement.scales[members].max()
+            )
+            tree = cKDTree(self.placement.positions[members])
+            for row, near in zip(members, tree.query_ball_point(self.placement.positions[members], reach)):
+                result[row] = members[[j for j in near if members[j] != row]]
+        return result
+
+    def in_step_share(self) -> float:
+        """The largest share of frames on which two neighbours play the same source frame at the
+        same time (in some part)."""
+        frames = self.source_frames()
+        shares = [_in_step(frames[i], frames[near]).max() for i, near in enumerate(self.neighbours()) if len(near)]
+        return float(max(shares, default=0.0))

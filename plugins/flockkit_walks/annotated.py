@@ -1,0 +1,443 @@
+"""Walks that follow a target feature track (paper 002, section 6.1).
+
+The walk minimizes E = C_T + alpha C_C + beta N_T over the output frames it must cover:
+
+- C_T, the transition cost: the distances of the transitions taken, each divided by the median
+  distance of the graph's transitions (so one ordinary transition costs about 1 on any graph);
+- C_C, the constraint cost: the distance between the played feature arrow (the source frame's
+  arrow, turned with the walk) and the target arrow, summed over output frames times dt (so a
+  mismatch of 0.1 for one second costs 0.1, whatever the frame rate);
+- N_T, the number of transitions.
+
+An initial pass starts where the source's arrows meet the first target (a random node among
+those that do), then takes, at each node, the edge whose next two seconds best follow the target
+(ties broken at random). Then repeated subsequence replacement (Schoedl and Essa 2002): pick a
+stretch of `segment` seconds whose share of E per second exceeds `threshold`, search the
+alternative paths between its ends (up to two transitions, as long give or take half a segment)
+and keep the best if it lowers E, until no stretch is above the threshold, no replacement
+helps, or `budget` attempts are spent.
+"""
+
+from __future__ import annotations
+
+import math
+
+import attrs
+import numpy as np
+from scipy.spatial import cKDTree
+
+import flockkit
+from flockkit import validate
+from flockkit.errors import ValidationError
+from flockkit.features import Features, interpolate_arrows
+
+
+def _target(value):
+    return value if isinstance(value, (Features, _Keyframes)) else _Keyframes(value)
+
+
+@attrs.frozen(eq=False)
+class _Keyframes:
+    """Keyframed target arrows, checked as Features.from_keyframes checks them."""
+
+    keyframes: tuple = attrs.field(converter=lambda v: _checked_keyframes(v))
+
+    def at(self, times) -> np.ndarray:
+        return interpolate_arrows(*self.keyframes, times)
+
+
+def _checked_keyframes(value):
+    from flockkit.features import _keyframes
+
+    return _keyframes(value, "walk parameter target")
+
+
+def _track(target, times) -> np.ndarray:
+    """Target arrows (len(times), D) at `times`: keyframes interpolated, Features per frame at
+    its own dt (held after its last frame)."""
+    if isinstance(target, Features):
+        index = np.minimum(np.round(np.asarray(times) / target.dt).astype(np.int64), target.n_frames - 1)
+        return np.asarray(target.vectors)[index]
+    return target.at(times)
+
+
+def _avoid(value):
+    if value is None:
+        return None
+    array = np.asarray(value)
+    if array.ndim != 2 or not np.issubdtype(array.dtype, np.integer):
+        raise ValidationError(
+            f"walk parameter avoid must be an integer array (walks, frames); got {array.dtype} {array.shape}"
+        )
+    return array
+
+
+def _pad(vectors: np.ndarray, dims: int, name: str) -> np.ndarray:
+    """Arrows in `dims` coordinates: 2D arrows of a 3D graph lie in the ground plane (z = 0)."""
+    if vectors.shape[1] == dims:
+        return vectors
+    if vectors.shape[1] == 2 and dims == 3:
+        return np.column_stack([vectors, np.zeros(len(vectors))])
+    raise ValidationError(f"walk parameter {name} has {vectors.shape[1]}D arrows; the graph is {dims}D")
+
+
+def _same_array(a, b) -> bool:
+    return (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
+
+
+def _features(value):
+    if value is not None and not isinstance(value, Features):
+        raise ValidationError(
+            f"walk parameter features must be flockkit.Features of the graph's source, or None; got {type(value).__name__}"
+        )
+    return value
+
+
+@attrs.frozen(kw_only=True)
+class AnnotatedWalk:
+    """A walk whose played feature arrows follow `target` (paper 002, section 6.1).
+
+    Parameters
+    ----------
+    target : flockkit.Features or [(time, vector), ...]
+        The target arrow over the walk's time: Features with one arrow per output frame (its dt
+        the graph's), or keyframes interpolated as Features.from_keyframes does.
+    features : flockkit.Features, optional
+        The arrows of the graph's source frames (GraphLayers.features for a part of a layered
+        object); None derives them from the motion (Features.from_motion: speed and heading).
+    alpha : float
+        Weight of the constraint cost C_C against the transition cost C_T (default 10: a
+        mismatch of 0.1 held for one second weighs as much as one ordinary transition).
+    beta : float
+        Cost of each transition (N_T); larger means fewer transitions (default 1).
+    segment : float
+        Seconds of the stretches that subsequence replacement picks (default 2).
+    threshold : float
+        A stretch whose share of E per second exceeds this is worth replacing (default 0.5: one
+        ordinary transition every 4 s, or a mismatch of 0.05 held).
+    budget : int
+        Replacement attempts at most (default 20; 0: the initial pass alone).
+    reach : float
+        A target farther than this from every arrow the source has (length units of arrows) is
+        refused before walking, with how close the source gets (default 0.5).
+    start : int, optional
+        Start node (None: a random node among those that meet the first target).
+    avoid : int array (K, F), optional
+        Source frames other walks of the same graph play at each output frame (-1: none). Each
+        output frame that plays within one frame of one of them adds `in_step` to its feature
+        error, so the walk falls out of step with them (the neighbour optimization of paper
+        002, section 6.2).
+    in_step : float
+        The error of a frame in step with an avoided walk (default 1).
+    """
+
+    target: object = attrs.field(converter=_target)
+    features: Features | None = attrs.field(default=None, converter=_features)
+    alpha: float = validate.parameter("annotated", default=10.0, minimum=0)
+    beta: float = validate.parameter("annotated", default=1.0, minimum=0)
+    segment: float = validate.parameter("annotated", default=2.0, minimum=0, strict=True)
+    threshold: float = validate.parameter("annotated", default=0.5, minimum=0)
+    budget: int = validate.parameter("annotated", default=20, kind="integer", minimum=0)
+    reach: float = validate.parameter("annotated", default=0.5, minimum=0, strict=True)
+    start: int | None = validate.parameter("annotated", default=None, kind="integer", minimum=0, optional=True)
+    avoid: np.ndarray | None = attrs.field(default=None, converter=_avoid, eq=attrs.cmp_using(eq=_same_array))
+    in_step: float = validate.parameter("annotated", default=1.0, minimum=0)
+
+    def walk(self, graph: flockkit.MotionGraph, rng: np.random.Generator, duration: float) -> flockkit.Walk:
+        problem = _Problem(self, graph, duration)
+        path = problem.initial(rng)
+        attempts, tried = 0, set()
+        while attempts < self.budget:
+            choice = problem.pick(path, rng, tried)
+            if choice is None:
+                break
+            attempts += 1
+            better = problem.replace(path, *choice)
+            if better is None:
+                tried.add(choice)
+            else:
+                path, tried = better, set()
+        return flockkit.Walk(start=path.start, edges=path.edges)
+
+    def energy(self, graph: flockkit.MotionGraph, walk: flockkit.Walk, duration: float | None = None) -> dict:
+        """{"E", "C_T", "C_C", "N_T"} of `walk` over `duration` seconds (default: all it plays)."""
+        if duration is None:
+            duration = len(flockkit.synthesis.played_frames(graph, walk)[0]) * graph.motion.dt
+        problem = _Problem(self, graph, duration)
+        return problem.path(walk.start, list(walk.edges)).report()
+
+
+class _Path:
+    """A walk being improved, laid out per edge and per output frame."""
+
+    def __init__(self, problem, start, edges):
+        self.problem, self.start, self.edges = problem, start, edges
+        graph = problem.graph
+        self.frames, rotations = flockkit.synthesis.played_frames(graph, flockkit.Walk(start=start, edges=edges))
+        self.played = problem.features[self.frames]
+        if problem.rotating:
+            self.played = np.einsum("fij,fj->fi", rotations, self.played)
+        n = min(len(self.frames), problem.needed)
+        self.error = np.zeros(problem.needed)
+        self.error[:n] = problem.frame_error(self.played[:n], self.frames[:n], 0)
+        # per edge: the node it leaves, its first output frame, clip frames since the last transition, rotation
+        self.node, self.at, self.since, self.rotation = [], [], [], []
+        node, t, since, rotation = start, 0, math.inf, np.eye(problem.dims)
+        for kind, index in edges:
+            self.node.append(node), self.at.append(t), self.since.append(since), self.rotation.append(rotation)
+            if kind == "clip":
+                t += problem.clip_frames[index]
+                since += problem.clip_frames[index]
+            else:
+                since = 0
+                rotation = rotation @ problem.trans_rotation[index] if problem.rotating else rotation
+            node = graph.edge_target((kind, index))
+        self.node.append(node), self.at.append(t), self.since.append(since), self.rotation.append(rotation)
+        taken = [index for kind, index in edges if kind == "transition"]
+        self.c_t = float(problem.trans_cost[taken].sum())
+        self.n_t = len(taken)
+
+    def report(self) -> dict:
+        """E and its terms; C_C counts feature error only, in_step frames are reported apart."""
+        p = self.problem
+        n = min(len(self.frames), p.needed)
+        c_c = float(np.linalg.norm(self.played[:n] - p.track[:n], axis=1).sum() * p.dt)
+        in_step = int(np.count_nonzero(p.in_step_frames(self.frames[:n], 0))) if p.avoid is not None else 0
+        energy = self.c_t + p.alpha * (c_c + p.in_step * in_step * p.dt) + p.beta * self.n_t
+        return {"E": energy, "C_T": self.c_t, "C_C": c_c, "N_T": self.n_t, "in_step_frames": in_step}
+
+
+class _Problem:
+    """One graph, one source feature track and one target track: what both passes need."""
+
+    SEARCH_NODES = 200  # nodes a replacement search expands at most
+    MAX_TRANSITIONS = 2  # transitions in a replacement at most
+
+    def __init__(self, strategy: AnnotatedWalk, graph, duration):
+        if not isinstance(graph, flockkit.MotionGraph):
+            raise ValidationError(f"a walk needs a flockkit.MotionGraph; got {type(graph).__name__}")
+        duration = validate.number(duration, "walk duration (seconds)", minimum=0, strict=True)
+        motion = graph.motion
+        self.graph, self.alpha, self.beta = graph, strategy.alpha, strategy.beta
+        self.dt, self.dims = motion.dt, motion.dims
+        self.needed = math.ceil(duration / self.dt)
+        validate.allocation(4 * self.needed * motion.dims * 3, f"an annotated walk of {duration:g} s")
+        features = strategy.features if strategy.features is not None else Features.from_motion(motion)
+        if features.n_frames != motion.n_frames:
+            raise ValidationError(
+                f"walk parameter features has {features.n_frames} arrows; the graph's source has {motion.n_frames} frames"
+            )
+        self.features = _pad(np.asarray(features.vectors), self.dims, "features")
+        self.track = _pad(_track(strategy.target, np.arange(self.needed) * self.dt), self.dims, "target")
+        tables = graph.tables
+        self.nodes = np.asarray(graph.nodes)
+        self.clip_frames = tables.clip_stop - tables.clip_start
+        self.trans_rotation = tables.rotation
+        self.trans_target = tables.transition_target
+        self.rotating = len(graph.transitions) > 0 and not np.allclose(tables.rotation, np.eye(self.dims))
+        distance = np.array([t.alignment.distance for t in graph.transitions])
+        ordinary = [t.alignment.distance for t in graph.transitions if not t.is_turn]
+        scale = float(np.median(ordinary)) if ordinary else 0.0
+        self.trans_cost = distance / scale if scale > 0 else np.zeros(len(distance))
+        self.longest = int(tables.transition_blend.max()) if len(graph.transitions) else 0
+        self.out = [[] for _ in self.nodes]
+        for index, t in enumerate(graph.transitions):
+            self.out[t.source].append(index)
+        self.segment_frames = max(2, round(strategy.segment / self.dt))
+        self.threshold = strategy.threshold
+        # frames played straight on from each node over the next two seconds or the longest clip
+        # (held at the last kept frame): the initial pass sees a wrong turn before it is committed
+        self.ahead = max(2, round(2.0 / self.dt), int(self.clip_frames.max()) if len(self.clip_frames) else 0)
+        self.straight = np.minimum(self.nodes[:, None] + np.arange(self.ahead), self.nodes[-1])
+        self._check_reach(strategy.reach)
+        self.start = strategy.start
+        self.avoid, self.in_step = strategy.avoid, strategy.in_step
+        if self.avoid is not None and self.avoid.shape[1] < self.needed:
+            raise ValidationError(
+                f"walk parameter avoid covers {self.avoid.shape[1]} frames; the walk needs {self.needed}"
+            )
+
+    def in_step_frames(self, frames, t) -> np.ndarray:
+        """Whether each of `frames` (played from output frame t) is within one source frame of an
+        avoided walk's."""
+        others = self.avoid[:, t : t + len(frames)]
+        return np.any((others >= 0) & (np.abs(others - frames) <= 1), axis=0)
+
+    def frame_error(self, played, frames, t) -> np.ndarray:
+        """Per output frame from t: the feature error, plus in_step where in step with an avoided walk."""
+        error = np.linalg.norm(played - self.track[t : t + len(played)], axis=1)
+        if self.avoid is not None:
+            error += self.in_step * self.in_step_frames(frames, t)
+        return error
+
+    def _check_reach(self, reach):
+        def shape(vectors):  # with turns only the length (and the vertical part) is fixed
+            if not self.rotating:
+                return vectors
+            if self.dims == 2:
+                return np.linalg.norm(vectors, axis=1, keepdims=True)
+            return np.column_stack([np.linalg.norm(vectors[:, :2], axis=1), vectors[:, 2]])
+
+        closest, index = cKDTree(shape(self.features)).query(shape(self.track))
+        worst = int(np.argmax(closest))
+        if closest[worst] > reach:
+            raise ValidationError(
+                f"walk parameter target: at t={worst * self.dt:g} s the target arrow "
+                f"{np.round(self.track[worst], 3).tolist()} is {closest[worst]:.3g} from the closest arrow the source "
+                f"has ({np.round(self.features[index[worst]], 3).tolist()} at source frame {int(index[worst])}); "
+                f"the walk can come no closer than that (reach is {reach:g})"
+            )
+
+    def path(self, start, edges) -> _Path:
+        return _Path(self, start, edges)
+
+    def _lookahead(self, targets, rotations, t) -> np.ndarray:
+        """Error of going straight on from each of `targets` (nodes), turned by `rotations`, from
+        output frame t (frame_error summed over the look-ahead, times dt)."""
+        track = self.track[t : t + self.ahead]
+        frames = self.straight[targets][:, : len(track)]
+        played = self.features[frames]
+        if rotations is not None:
+            played = np.einsum("kij,khj->khi", rotations, played)
+        error = np.linalg.norm(played - track, axis=2)
+        if self.avoid is not None:
+            others = self.avoid[:, t : t + len(track)]
+            error += self.in_step * np.any((others[None] >= 0) & (np.abs(others[None] - frames[:, None]) <= 1), axis=1)
+        return error.sum(axis=1) * self.dt
+
+    def initial(self, rng) -> _Path:
+        if self.start is not None:
+            if self.start >= len(self.nodes):
+                raise ValidationError(f"walk start must be a node index in 0..{len(self.nodes) - 1}; got {self.start}")
+            node = self.start
+        else:
+            # nodes whose next two seconds stay within 0.1 (mean arrow error) of the best start
+            cost = self._lookahead(np.arange(len(self.nodes)), None, 0) / (self.ahead * self.dt)
+            good = np.flatnonzero(cost <= cost.min() + 0.1)
+            node = int(rng.choice(good))
+        start, since, t, rotation, edges = node, math.inf, 0, np.eye(self.dims), []
+        while t < self.needed:
+            options = ([("clip", node)] if node < len(self.nodes) - 1 else []) + (
+                [("transition", i) for i in self.out[node]] if since >= self.longest else []
+            )
+            targets = np.array([node + 1 if kind == "clip" else self.trans_target[i] for kind, i in options])
+            targets = np.where(
+                [kind == "clip" for kind, _ in options], node, targets
+            )  # a clip goes straight on from here
+            rotations = None
+            if self.rotating:
+                rotations = np.stack(
+                    [rotation if kind == "clip" else rotation @ self.trans_rotation[i] for kind, i in options]
+                )
+            cost = self.alpha * self._lookahead(targets, rotations, t)
+            cost += np.array([0.0 if kind == "clip" else self.trans_cost[i] + self.beta for kind, i in options])
+            cost += 1e-3 * rng.random(len(cost))  # ties broken at random, so duplicates differ
+            kind, index = options[int(np.argmin(cost))]
+            edges.append((kind, index))
+            if kind == "clip":
+                t += self.clip_frames[index]
+                since += self.clip_frames[index]
+            else:
+                since = 0
+                if self.rotating:
+                    rotation = rotation @ self.trans_rotation[index]
+            node = self.graph.edge_target((kind, index))
+        return self.path(start, edges)
+
+    def pick(self, path: _Path, rng, tried):
+        """A stretch (first edge, edge after it) whose share of E per second exceeds the
+        threshold, chosen with odds in proportion to the excess; None when there is none."""
+        at = np.asarray(path.at[:-1])
+        starts = np.flatnonzero(at < self.needed)
+        stops = np.searchsorted(at, at[starts] + self.segment_frames)
+        window = np.concatenate([[0.0], np.cumsum(path.error)])
+        ends = np.minimum(at[starts] + self.segment_frames, self.needed)
+        cost = self.alpha * self.dt * (window[ends] - window[at[starts]])
+        edge_cost = np.array(
+            [self.trans_cost[i] + self.beta if kind == "transition" else 0.0 for kind, i in path.edges]
+        )
+        running = np.concatenate([[0.0], np.cumsum(edge_cost)])
+        cost += running[np.minimum(stops, len(path.edges))] - running[starts]
+        rate = cost / (self.segment_frames * self.dt)
+        excess = np.where(rate > self.threshold, rate - self.threshold, 0.0)
+        for k, (i, j) in enumerate(zip(starts, stops)):
+            if (int(i), int(min(j, len(path.edges)))) in tried:
+                excess[k] = 0.0
+        if not excess.any():
+            return None
+        k = int(rng.choice(len(starts), p=excess / excess.sum()))
+        return int(starts[k]), int(min(stops[k], len(path.edges)))
+
+    def replace(self, path: _Path, i: int, j: int) -> _Path | None:
+        """The path with edges i..j-1 replaced by the best alternative between their ends, if it
+        lowers E; None otherwise."""
+        t0, old_frames = path.at[i], path.at[j] - path.at[i]
+        tail = j == len(path.edges)
+        goal = None if tail else path.node[j]
+        slack = self.segment_frames // 2
+        # frames after the join before the path's next transition: the join must leave room for its blend
+        lead = next(
+            (path.at[k] - path.at[j] for k in range(j, len(path.edges)) if path.edges[k][0] == "transition"), None
+        )
+        old_cost = self.alpha * self.dt * path.error[t0:].sum() + sum(
+            self.trans_cost[index] + self.beta for kind, index in path.edges[i:j] if kind == "transition"
+        )
+        suffix = (path.played[path.at[j] :], path.frames[path.at[j] :]) if not tail else None
+        best, best_cost = None, old_cost - 1e-9
+        expanded = 0
+        stack = [(path.node[i], path.since[i], path.rotation[i], 0, [], 0.0)]
+        while stack and expanded < self.SEARCH_NODES:
+            node, since, rotation, frames, edges, cost = stack.pop()
+            expanded += 1
+            done = (frames >= self.needed - t0) if tail else (node == goal and abs(frames - old_frames) <= slack)
+            if done and edges != path.edges[i:j] and (tail or lead is None or since + lead >= self.longest):
+                total = cost + self._rest_cost(
+                    path, t0 + frames, suffix, rotation @ path.rotation[j].T if not tail and self.rotating else None
+                )
+                if total < best_cost:
+                    best, best_cost = edges, total
+                if tail:
+                    continue
+            if frames > old_frames + slack:
+                continue
+            n_trans = sum(kind == "transition" for kind, _ in edges)
+            if since >= self.longest and n_trans < self.MAX_TRANSITIONS:
+                for index in self.out[node]:
+                    turned = rotation @ self.trans_rotation[index] if self.rotating else rotation
+                    extra = self.trans_cost[index] + self.beta
+                    stack.append(
+                        (self.trans_target[index], 0, turned, frames, [*edges, ("transition", index)], cost + extra)
+                    )
+            if node < len(self.nodes) - 1:
+                n = self.clip_frames[node]
+                played = self.features[self.nodes[node] : self.nodes[node] + n]
+                if self.rotating:
+                    played = played @ rotation.T
+                lo, hi = t0 + frames, min(t0 + frames + n, self.needed)
+                source = np.arange(self.nodes[node], self.nodes[node] + max(hi - lo, 0))
+                error = self.frame_error(played[: len(source)], source, lo).sum()
+                stack.append(
+                    (
+                        node + 1,
+                        since + n,
+                        rotation,
+                        frames + n,
+                        [*edges, ("clip", node)],
+                        cost + self.alpha * self.dt * error,
+                    )
+                )
+        if best is None:
+            return None
+        return self.path(path.start, [*path.edges[:i], *best, *path.edges[j:]])
+
+    def _rest_cost(self, path, t, suffix, turn) -> float:
+        """Constraint cost of the unchanged rest of the path played from output frame t (turned by
+        `turn`); infinite if the path would then end before the duration."""
+        if suffix is None:
+            return 0.0
+        played, frames = suffix
+        if t + len(played) - 1 < self.needed:
+            return math.inf
+        n = max(self.needed - t, 0)
+        played = played[:n] if turn is None else played[:n] @ turn.T
+        return self.alpha * self.dt * float(self.frame_error(played, frames[:n], t).sum())
