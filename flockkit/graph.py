@@ -436,21 +436,30 @@ class MotionGraph:
         except (KeyError, IndexError, TypeError, ValueError, OverflowError) as exc:
             raise FileFormatError(f"{source}: invalid motion graph: {type(exc).__name__}: {exc}") from None
 
+    def _payload(self) -> tuple[dict, dict]:
+        """(arrays, metadata) of the graph and its source motion, as save writes them."""
+        arrays = {**self.motion._to_arrays(), **self._to_arrays()}
+        return arrays, {"dt": self.motion.dt, "params": _thaw(self.params), "provenance": _thaw(self.provenance)}
+
+    @classmethod
+    def _from_payload(cls, arrays, header, source) -> MotionGraph:
+        """The inverse of :meth:`_payload`; FileFormatError naming `source`."""
+        try:
+            motion = Motion._from_arrays(arrays, header["dt"])
+        except (KeyError, ValidationError) as exc:
+            raise FileFormatError(f"{source}: invalid motion graph: {type(exc).__name__}: {exc}") from None
+        return cls._from_arrays(arrays, motion, header.get("params"), header.get("provenance"), source)
+
     def save(self, path) -> None:
         """Write the graph and its source motion to one .npz with JSON metadata (atomic)."""
-        arrays = {**self.motion._to_arrays(), **self._to_arrays()}
-        metadata = {"dt": self.motion.dt, "params": _thaw(self.params), "provenance": _thaw(self.provenance)}
+        arrays, metadata = self._payload()
         _npzfile.write(path, kind="graph", version=GRAPH_FORMAT_VERSION, arrays=arrays, metadata=metadata)
 
     @classmethod
     def load(cls, path) -> MotionGraph:
         """Read a graph written by :meth:`save`; FileFormatError naming the file if it is not one."""
         arrays, header = _npzfile.read(path, kind="graph", versions=(GRAPH_FORMAT_VERSION,))
-        try:
-            motion = Motion._from_arrays(arrays, header["dt"])
-        except (KeyError, ValidationError) as exc:
-            raise FileFormatError(f"{path}: invalid motion graph: {type(exc).__name__}: {exc}") from None
-        return cls._from_arrays(arrays, motion, header.get("params"), header.get("provenance"), path)
+        return cls._from_payload(arrays, header, path)
 
 
 def turns(motion: Motion, frames, *, angle: float, blend: int) -> list[tuple[int, int, Alignment, int]]:

@@ -190,8 +190,9 @@ class GraphLayers:
 
     __hash__ = None
 
-    def save(self, path) -> None:
-        """Write the source, the segmentation, the faces and every part's graph to one .npz (atomic)."""
+    def _payload(self) -> tuple[dict, dict]:
+        """(arrays, metadata) of the source, the segmentation, the faces, the features and every
+        part's graph, as save writes them."""
         from .graph import _thaw
 
         arrays = {**self.source._to_arrays(), "labels": self.segmentation.labels}
@@ -207,27 +208,37 @@ class GraphLayers:
             "params": [_thaw(g.params) for g in self.graphs],
             "provenance": [_thaw(g.provenance) for g in self.graphs],
         }
+        return arrays, metadata
+
+    @classmethod
+    def _from_payload(cls, arrays, header, source) -> GraphLayers:
+        """The inverse of :meth:`_payload`; FileFormatError naming `source`."""
+        from .graph import MotionGraph
+
+        try:
+            motion = Motion._from_arrays(arrays, header["dt"])
+            segmentation = Segmentation(labels=arrays["labels"], n_parts=header["n_parts"])
+            graphs = []
+            for k, points in enumerate(segmentation.parts()):
+                own = {name.split(".", 1)[1]: a for name, a in arrays.items() if name.startswith(f"part{k}.")}
+                graphs.append(MotionGraph._from_arrays(own, part_motion(motion, points), header["params"][k],
+                                                       header["provenance"][k], source))  # fmt: skip
+            features = Features(vectors=arrays["features"], dt=motion.dt) if "features" in arrays else None
+            return cls(source=motion, segmentation=segmentation, graphs=graphs, faces=arrays.get("faces"),
+                       features=features)  # fmt: skip
+        except (KeyError, IndexError, TypeError, ValidationError) as exc:
+            raise FileFormatError(f"{source}: invalid motion graph layers: {type(exc).__name__}: {exc}") from None
+
+    def save(self, path) -> None:
+        """Write the source, the segmentation, the faces and every part's graph to one .npz (atomic)."""
+        arrays, metadata = self._payload()
         _npzfile.write(path, kind="layers", version=LAYERS_FORMAT_VERSION, arrays=arrays, metadata=metadata)
 
     @classmethod
     def load(cls, path) -> GraphLayers:
         """Read a file written by :meth:`save`; FileFormatError naming the file if it is not one."""
-        from .graph import MotionGraph
-
         arrays, header = _npzfile.read(path, kind="layers", versions=(LAYERS_FORMAT_VERSION,))
-        try:
-            source = Motion._from_arrays(arrays, header["dt"])
-            segmentation = Segmentation(labels=arrays["labels"], n_parts=header["n_parts"])
-            graphs = []
-            for k, points in enumerate(segmentation.parts()):
-                own = {name.split(".", 1)[1]: a for name, a in arrays.items() if name.startswith(f"part{k}.")}
-                graphs.append(MotionGraph._from_arrays(own, part_motion(source, points), header["params"][k],
-                                                       header["provenance"][k], path))  # fmt: skip
-            features = Features(vectors=arrays["features"], dt=source.dt) if "features" in arrays else None
-            return cls(source=source, segmentation=segmentation, graphs=graphs, faces=arrays.get("faces"),
-                       features=features)  # fmt: skip
-        except (KeyError, IndexError, TypeError, ValidationError) as exc:
-            raise FileFormatError(f"{path}: invalid motion graph layers: {type(exc).__name__}: {exc}") from None
+        return cls._from_payload(arrays, header, path)
 
 
 @attrs.frozen(kw_only=True, eq=False)

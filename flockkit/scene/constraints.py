@@ -31,6 +31,8 @@ class Arrow:
     keyframes: tuple = attrs.field(converter=lambda v: _frozen_keyframes(v, "Arrow.keyframes"))
 
     def __attrs_post_init__(self):
+        if not np.any(np.linalg.norm(self.keyframes[1], axis=1) > 1e-12):
+            raise ValidationError("Arrow.keyframes: every vector has zero length, so the arrow has no direction")
         if self.position.shape != self.keyframes[1].shape[1:] or not np.all(np.isfinite(self.position)):
             raise ValidationError(
                 f"Arrow.position must be a finite point with as many coordinates as its vectors "

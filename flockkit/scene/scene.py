@@ -20,16 +20,17 @@ import math
 import attrs
 import numpy as np
 
+from .. import _npzfile
 from ..constraints import Polygon
-from ..errors import ValidationError
+from ..errors import FileFormatError, ValidationError
 from ..features import Features
-from ..graph import MotionGraph
+from ..graph import MotionGraph, Walk
 from ..layers import GraphLayers, LayeredWalk
 from ..motion import Motion
 from ..validate import integer, number
 from .constraints import Arrow, FlowField, SelfMovement
 
-__all__ = ["Scene", "SceneAnimation"]
+__all__ = ["Placement", "Scene", "SceneAnimation"]
 
 SCENE_FORMAT_VERSION = 1
 # Neighbouring duplicates may play the same source frame at the same time on at most this share
@@ -117,10 +118,16 @@ class Scene:
     flockkit.Polygon on the ground), animated for `duration` seconds at the templates' frame
     time (`dt`, if given, must be it), each following the target arrows of `constraints`
     (FlowField, SelfMovement; none: one arrow at the region's center, the first template's
-    median feature, held). `scale` is a (low, high) range of uniform scales. `walk` names the
+    first feature arrow, held). `scale` is a (low, high) range of uniform scales. `walk` names the
     walk strategy (a registered name or an instance factory's name) and `walk_params` its
     parameters beyond target, features and avoid. `n_jobs` walks objects in parallel through
-    joblib; the result is the same whatever it is."""
+    joblib; the result is the same whatever it is.
+
+    `headings` "random" turns each object uniformly about +z; "aligned" turns it so that its
+    first target, in its own coordinates, points like an arrow its source holds, of about the
+    same length (chosen at random among them): for templates whose arrows point only a few ways
+    (a flag recorded in wind from one side), which a random heading would ask to lean where
+    their source never does."""
 
     templates: tuple = attrs.field(converter=tuple)
     region: Polygon = attrs.field()
@@ -133,8 +140,11 @@ class Scene:
     walk: str = attrs.field(default="annotated")
     walk_params: dict = attrs.field(factory=dict, converter=dict)
     n_jobs: int | None = attrs.field(default=None)
+    headings: str = attrs.field(default="random")
 
     def __attrs_post_init__(self):
+        if self.headings not in ("random", "aligned"):
+            raise ValidationError(f"Scene.headings must be 'random' or 'aligned'; got {self.headings!r}")
         if not isinstance(self.region, Polygon):
             raise ValidationError(f"Scene.region must be a flockkit.Polygon; got {type(self.region).__name__}")
         if not self.templates:
@@ -149,6 +159,14 @@ class Scene:
             )
         for k, template in enumerate(self.templates):
             _template_features(template, k, needed=True)
+        for k, constraint in enumerate(self.constraints):
+            keyed = [a.keyframes for a in constraint.arrows] if isinstance(constraint, FlowField) else [constraint.keyframes]
+            last = max(float(times[-1]) for times, _ in keyed)
+            if min(float(times[0]) for times, _ in keyed) < 0 or last > self.duration + 1e-9:
+                raise ValidationError(
+                    f"Scene.constraints[{k}]: keyframe times must lie in 0..{self.duration:g} s (the duration); "
+                    f"one is at {last:g} s"
+                )
         moving = {c.object for c in self.constraints if isinstance(c, SelfMovement)}
         if moving and max(moving) >= self.n_objects:
             raise ValidationError(
@@ -188,11 +206,14 @@ class Scene:
         boxes = np.empty((n, 2, 2))
         for i, kind in enumerate(kinds):
             for _ in range(PLACEMENT_TRIES):
-                heading, scale = rng.uniform(0, 2 * np.pi), rng.uniform(*self.scale)
-                half = _turned_half(feet[kind] * scale, heading)
-                point = rng.uniform(low + half, high - half) if np.all(high - low > 2 * half) else None
-                if point is None:
+                scale = rng.uniform(*self.scale)
+                diagonal = np.linalg.norm(feet[kind]) * scale  # the box's half size under any heading
+                if np.any(high - low <= 2 * diagonal):
+                    point = None
                     break
+                point = rng.uniform(low + diagonal, high - diagonal)
+                heading = self._heading(kind, i, point, rng)
+                half = _turned_half(feet[kind] * scale, heading)
                 corners = point + half * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]])
                 if not np.all(self.region.contains(corners)):
                     continue
@@ -211,22 +232,49 @@ class Scene:
                 )
         return Placement(positions=positions, headings=headings, scales=scales, templates=kinds)
 
+    def _heading(self, kind: int, i: int, point, rng) -> float:
+        heading = rng.uniform(0, 2 * np.pi)
+        if self.headings == "random":
+            return heading
+        first = self._world(point[None], np.zeros(1), [i])[0, 0]
+        arrows = _template_features(self.templates[kind], kind, needed=False).vectors
+        flat = np.linalg.norm(arrows[:, :2], axis=1)
+        near = np.flatnonzero(np.abs(flat - np.linalg.norm(first[:2])) <= 0.05 + np.abs(flat - np.linalg.norm(first[:2])).min())
+        # prefer arrows the source holds for a while over ones it passes through
+        held = (np.linalg.norm(arrows[near, None] - arrows[None], axis=2) < 0.1).sum(axis=1)
+        near = near[held >= 0.5 * held.max()]
+        pick = arrows[near[int(rng.integers(len(near)))]]
+        if np.linalg.norm(first[:2]) < 1e-12 or np.linalg.norm(pick[:2]) < 1e-12:
+            return heading
+        return float(np.arctan2(first[1], first[0]) - np.arctan2(pick[1], pick[0])) % (2 * np.pi)
+
     def targets(self, placement: Placement) -> np.ndarray:
         """(objects, frames, 3): each object's target arrow per output frame, in the world."""
         times = np.arange(self.n_frames) * self.frame_time
+        return self._world(placement.positions, times, range(placement.n_objects))
+
+    def _world(self, positions, times, objects) -> np.ndarray:
+        """(len(objects), len(times), 3): the target arrows of `objects` standing at `positions`."""
+        objects = list(objects)
         flows = [c for c in self.constraints if isinstance(c, FlowField)]
         if not self.constraints:
-            median = np.median(_template_features(self.templates[0], 0, needed=False).vectors, axis=0)
-            flows = [FlowField(arrows=[Arrow(position=self.region.interior_point(), keyframes=[(0.0, median[:2])])])]
-        world = np.zeros((len(placement.positions), len(times), 3))
+            # the made arrow: the first template's first arrow (its longest, if that one is zero)
+            arrows = _template_features(self.templates[0], 0, needed=False).vectors
+            first = arrows[0] if np.linalg.norm(arrows[0]) > 1e-9 else arrows[np.argmax(np.linalg.norm(arrows, axis=1))]
+            if np.linalg.norm(first) <= 1e-9:
+                return np.zeros((len(positions), len(times), 3))  # a template that never moves: nothing to follow
+            flows = [FlowField(arrows=[Arrow(position=self.region.interior_point(), keyframes=[(0.0, first[:2])])])]
+        world = np.zeros((len(positions), len(times), 3))
         for flow in flows:
-            arrows = flow.targets(placement.positions, times)  # (F, M, D)
+            arrows = flow.targets(np.asarray(positions)[:, : flow.dims] if flow.dims == 2 else
+                                  np.column_stack([positions, np.zeros(len(positions))]), times)  # (F, M, D)  # fmt: skip
             world[..., : arrows.shape[2]] += arrows.transpose(1, 0, 2)
         for constraint in self.constraints:
-            if isinstance(constraint, SelfMovement):
+            if isinstance(constraint, SelfMovement) and constraint.object in objects:
+                row = objects.index(constraint.object)
                 own = constraint.targets(times)
-                world[constraint.object] = 0.0
-                world[constraint.object, :, : own.shape[1]] = own
+                world[row] = 0.0
+                world[row, :, : own.shape[1]] = own
         lengths = np.linalg.norm(world, axis=2, keepdims=True)
         return np.where(lengths > 1, world / np.maximum(lengths, 1e-300), world)  # several flows: at most 1
 
@@ -449,9 +497,167 @@ class SceneAnimation:
                 result[row] = members[[j for j in near if members[j] != row]]
         return result
 
+    def save(self, path) -> None:
+        """Write the templates, placement, walks and constraints to one .npz with JSON metadata
+        (atomic; the motions are synthesized again on load, not stored)."""
+        _save(self, path)
+
+    @classmethod
+    def load(cls, path) -> SceneAnimation:
+        """Read a file written by :meth:`save`; FileFormatError naming the file if it is not one."""
+        return _load(path)
+
+    def export(self, path, *, fps: float | None = None, meters_per_unit: float = 1.0) -> None:
+        """A USD stage (.usda/.usdc): each object under /Scene an animated UsdGeom.Mesh (a template
+        with faces) or UsdGeom.Points, its points time-sampled every frame on a time line at `fps`
+        (default flockkit.io.USD_FPS); up axis z, metersPerUnit `meters_per_unit`. Needs usd-core."""
+        from pathlib import Path
+
+        if Path(path).suffix.lower() not in (".usda", ".usdc", ".usd"):
+            raise ValidationError(f"SceneAnimation.export writes .usda, .usdc or .usd; got {path}")
+        _export_usd(self, path, fps=fps, meters_per_unit=meters_per_unit)
+
+    def __eq__(self, other):
+        if not isinstance(other, SceneAnimation):
+            return NotImplemented
+        return (self.templates == other.templates and self.placement == other.placement and self.walks == other.walks
+                and self.dt == other.dt and self.n_frames == other.n_frames)  # fmt: skip
+
+    __hash__ = None
+
     def in_step_share(self) -> float:
         """The largest share of frames on which two neighbours play the same source frame at the
         same time (in some part)."""
         frames = self.source_frames()
         shares = [_in_step(frames[i], frames[near]).max() for i, near in enumerate(self.neighbours()) if len(near)]
         return float(max(shares, default=0.0))
+
+
+def _constraint_json(constraint) -> dict:
+    def keyframes(pair):
+        times, vectors = pair
+        return [[float(t), [float(x) for x in v]] for t, v in zip(times, vectors)]
+
+    if isinstance(constraint, FlowField):
+        return {
+            "flow": [{"position": a.position.tolist(), "keyframes": keyframes(a.keyframes)} for a in constraint.arrows]
+        }
+    return {"object": constraint.object, "keyframes": keyframes(constraint.keyframes)}
+
+
+def _constraint_from_json(value):
+    if "flow" in value:
+        return FlowField(arrows=value["flow"])
+    return SelfMovement(object=value["object"], keyframes=value["keyframes"])
+
+
+def _save(animation: SceneAnimation, path) -> None:
+    arrays = {
+        "positions": animation.placement.positions,
+        "headings": animation.placement.headings,
+        "scales": animation.placement.scales,
+        "templates": animation.placement.templates,
+    }
+    walks = [w for walk in animation.walks for w in (walk.walks if isinstance(walk, LayeredWalk) else (walk,))]
+    arrays["walk_start"] = np.array([w.start for w in walks], dtype=np.int64)
+    arrays["walk_edges"] = np.array([len(w.edges) for w in walks], dtype=np.int64)
+    edges = [e for w in walks for e in w.edges]
+    arrays["edge_transition"] = np.array([kind == "transition" for kind, _ in edges], dtype=bool)
+    arrays["edge_index"] = np.array([index for _, index in edges], dtype=np.int64)
+    kinds, headers = [], []
+    for k, template in enumerate(animation.templates):
+        own, header = template._payload()
+        arrays.update({f"template{k}.{name}": array for name, array in own.items()})
+        kinds.append("layers" if isinstance(template, GraphLayers) else "graph")
+        headers.append(header)
+    metadata = {
+        "dt": animation.dt,
+        "n_frames": animation.n_frames,
+        "template_kinds": kinds,
+        "template_headers": headers,
+        "constraints": [_constraint_json(c) for c in animation.constraints],
+        "report": animation.report,
+    }
+    _npzfile.write(path, kind="scene", version=SCENE_FORMAT_VERSION, arrays=arrays, metadata=metadata)
+
+
+def _load(path) -> SceneAnimation:
+    arrays, header = _npzfile.read(path, kind="scene", versions=(SCENE_FORMAT_VERSION,))
+    try:
+        templates = []
+        for k, (kind, own) in enumerate(zip(header["template_kinds"], header["template_headers"])):
+            prefix = f"template{k}."
+            payload = {name[len(prefix) :]: a for name, a in arrays.items() if name.startswith(prefix)}
+            templates.append((GraphLayers if kind == "layers" else MotionGraph)._from_payload(payload, own, path))
+        placement = Placement(positions=arrays["positions"], headings=arrays["headings"], scales=arrays["scales"],
+                              templates=arrays["templates"])  # fmt: skip
+        ends = np.cumsum(arrays["walk_edges"])
+        kinds = np.where(arrays["edge_transition"], "transition", "clip")
+        flat = [
+            Walk(
+                start=int(start),
+                edges=list(zip(kinds[end - n : end].tolist(), arrays["edge_index"][end - n : end].tolist())),
+            )
+            for start, n, end in zip(arrays["walk_start"], arrays["walk_edges"], ends)
+        ]
+        walks, at = [], 0
+        for kind in placement.templates:
+            parts = len(_parts(templates[kind])[0])
+            own = flat[at : at + parts]
+            walks.append(LayeredWalk(walks=own) if isinstance(templates[kind], GraphLayers) else own[0])
+            at += parts
+        if at != len(flat):
+            raise ValidationError(f"{len(flat)} walks for {at} object parts")
+        return SceneAnimation(templates=templates, placement=placement, walks=walks, dt=header["dt"],
+                              n_frames=header["n_frames"], report=header.get("report", {}),
+                              constraints=[_constraint_from_json(c) for c in header["constraints"]])  # fmt: skip
+    except (KeyError, IndexError, TypeError, ValueError, ValidationError) as exc:
+        raise FileFormatError(f"{path}: invalid scene animation: {type(exc).__name__}: {exc}") from None
+
+
+def _export_usd(animation: SceneAnimation, path, *, fps, meters_per_unit) -> None:
+    """Each object an animated UsdGeom.Mesh (a template with faces) or UsdGeom.Points under
+    /Scene, z up, on a time line at `fps`."""
+    from pathlib import Path
+
+    from .. import validate
+    from .._atomic import atomic_path
+    from ..io import USD_FPS
+
+    try:
+        from pxr import Usd, UsdGeom, Vt
+    except ImportError:
+        from ..errors import MissingDependencyError
+
+        raise MissingDependencyError("USD export needs usd-core: pip install 'flockkit[usd]'") from None
+    fps = USD_FPS if fps is None else validate.number(fps, "USD fps", minimum=0, strict=True)
+    meters_per_unit = validate.number(meters_per_unit, "USD meters_per_unit", minimum=0, strict=True)
+    times = np.arange(animation.n_frames) * animation.dt * fps
+    with atomic_path(Path(path), create=False) as tmp:
+        stage = Usd.Stage.CreateNew(str(tmp))
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+        UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
+        stage.SetTimeCodesPerSecond(fps)
+        stage.SetFramesPerSecond(fps)
+        stage.SetStartTimeCode(0)
+        stage.SetEndTimeCode(float(times[-1]))
+        root = UsdGeom.Xform.Define(stage, "/Scene")
+        stage.SetDefaultPrim(root.GetPrim())
+        for i, motion in enumerate(animation.motions):
+            template = animation.templates[animation.placement.templates[i]]
+            faces = template.faces if isinstance(template, GraphLayers) else None
+            name = f"/Scene/Object{i:0{len(str(animation.placement.n_objects))}d}"
+            prim = UsdGeom.Mesh.Define(stage, name) if faces is not None else UsdGeom.Points.Define(stage, name)
+            if faces is not None:
+                faces = np.asarray(faces)
+                prim.CreateFaceVertexCountsAttr(Vt.IntArray([faces.shape[1]] * len(faces)))
+                prim.CreateFaceVertexIndicesAttr(Vt.IntArray(faces.ravel().tolist()))
+            else:
+                prim.CreateWidthsAttr(Vt.FloatArray([0.05]))
+            points = prim.CreatePointsAttr()
+            positions = np.zeros((motion.n_frames, motion.n_agents, 3), dtype=np.float32)
+            positions[..., : motion.dims] = motion.positions
+            for frame, when in enumerate(times):
+                points.Set(Vt.Vec3fArray.FromNumpy(positions[frame]), Usd.TimeCode(float(when)))
+            prim.GetPrim().SetCustomDataByKey("flockkit:template", int(animation.placement.templates[i]))
+        stage.GetRootLayer().Save()

@@ -88,7 +88,8 @@ def _same_array(a, b) -> bool:
 def _features(value):
     if value is not None and not isinstance(value, Features):
         raise ValidationError(
-            f"walk parameter features must be flockkit.Features of the graph's source, or None; got {type(value).__name__}"
+            "walk parameter features must be flockkit.Features of the graph's source, or None; "
+            f"got {type(value).__name__}"
         )
     return value
 
@@ -225,7 +226,8 @@ class _Problem:
         features = strategy.features if strategy.features is not None else Features.from_motion(motion)
         if features.n_frames != motion.n_frames:
             raise ValidationError(
-                f"walk parameter features has {features.n_frames} arrows; the graph's source has {motion.n_frames} frames"
+                f"walk parameter features has {features.n_frames} arrows; "
+                f"the graph's source has {motion.n_frames} frames"
             )
         self.features = _pad(np.asarray(features.vectors), self.dims, "features")
         self.track = _pad(_track(strategy.target, np.arange(self.needed) * self.dt), self.dims, "target")
