@@ -120,8 +120,7 @@ def test_the_seed_decides_and_n_jobs_does_not():
 
 
 def test_a_scene_animation_saves_loads_and_exports_to_usd(tmp_path):
-    pytest.importorskip("pxr", reason="USD export needs usd-core (pip install 'flockkit[usd]')")
-    from pxr import Usd, UsdGeom
+    from pxr import Usd, UsdGeom  # usd-core is a test dependency
 
     scene = flockkit.Scene(templates=[plants()], region=MEADOW, counts=[3], duration=20, constraints=[TURNING], seed=5, headings="aligned")
     animation = scene.synthesize()

@@ -1,0 +1,42 @@
+"""The annotated walk (paper 002, section 6.1) on plain graphs: it follows the target, reports
+its energy, and refuses targets its source cannot approach."""
+
+import numpy as np
+import pytest
+
+import flockkit
+from flockkit.errors import ValidationError
+from flockkit.testing import inputs
+
+
+def test_the_energy_reported_is_the_papers_sum_over_the_walk():
+    graph = inputs.graph()
+    strategy = flockkit.get("walk", "annotated", target=[(0.0, [1.0, 0.0]), (20.0, [0.0, -1.0])], alpha=3, beta=2)
+    walk = strategy.walk(graph, np.random.default_rng(3), 40.0)
+    energy = strategy.energy(graph, walk, 40.0)
+    taken = [index for kind, index in walk.edges if kind == "transition"]
+    assert energy["N_T"] == len(taken) > 0
+    scale = np.median([t.alignment.distance for t in graph.transitions if not t.is_turn])
+    assert energy["C_T"] == pytest.approx(sum(graph.transitions[i].alignment.distance for i in taken) / scale)
+    frames, rotations = flockkit.synthesis.played_frames(graph, walk)
+    played = np.einsum("fij,fj->fi", rotations, flockkit.Features.from_motion(graph.motion).vectors[frames])[:400]
+    target = flockkit.features.interpolate_arrows(np.array([0.0, 20.0]), np.array([[1.0, 0], [0, -1.0]]), np.arange(400) * 0.1)
+    assert energy["C_C"] == pytest.approx(np.linalg.norm(played - target, axis=1).sum() * 0.1)
+    assert energy["E"] == pytest.approx(energy["C_T"] + 3 * energy["C_C"] + 2 * energy["N_T"])
+
+
+def test_a_target_the_source_cannot_approach_is_refused_in_numbers():
+    motion, labels, wind = inputs.plants()
+    graph = flockkit.build_graph(motion, builder="windowed", seed=0)
+    strategy = flockkit.get("walk", "annotated", target=[(0.0, [0.0, 0.0, 1.0])], features=wind)
+    with pytest.raises(ValidationError, match=r"is 1.\d+ from the closest arrow the source has"):
+        strategy.walk(graph, np.random.default_rng(0), 5.0)
+
+
+def test_bad_parameters_are_named():
+    with pytest.raises(ValidationError, match="target"):
+        flockkit.get("walk", "annotated", target="wind")
+    with pytest.raises(ValidationError, match="must increase"):
+        flockkit.get("walk", "annotated", target=[(1.0, [1.0, 0.0]), (0.0, [0.0, 1.0])])
+    with pytest.raises(ValidationError, match="alpha"):
+        flockkit.get("walk", "annotated", target=[(0.0, [1.0, 0.0])], alpha=-1)
