@@ -230,6 +230,35 @@ def _source(path: str, clip=None, fps=None):
     return flockkit.Motion.load(path)
 
 
+def _cmd_scene(args) -> int:
+    from .scene import read_scene
+
+    folder = Path(args.output)
+    if folder.exists() and not folder.is_dir():
+        raise ValidationError(f"-o must be a folder; {folder} is a file")
+    scene = read_scene(args.scene, n_jobs=args.jobs)
+    with _backend(args):
+        animation = scene.synthesize(progress=not args.quiet)
+    folder.mkdir(parents=True, exist_ok=True)
+    animation.save(folder / "scene.npz")
+    written = [folder / "scene.npz"]
+    if not args.no_usd:
+        animation.export(folder / "scene.usda")
+        written.append(folder / "scene.usda")
+    if not args.no_pictures:
+        from .viz import plot_scene
+
+        plot_scene(animation, folder / "scene.png")
+        written.append(folder / "scene.png")
+    report = animation.report
+    print(
+        f"wrote {', '.join(str(p) for p in written)}: {animation.placement.n_objects} objects, "
+        f"{animation.n_frames} frames; neighbours in step {report['in_step_before']:.1%} of frames before "
+        f"de-synchronisation, {report['in_step_after']:.1%} after"
+    )
+    return 0
+
+
 def _cmd_segment(args) -> int:
     output = _require_suffix(args.output, (".npz",), "-o")
     source = _source(args.source, args.clip, args.fps)
@@ -592,6 +621,15 @@ def _import_arguments(parser) -> None:
     )
 
 
+def _scene_arguments(parser) -> None:
+    parser.add_argument("scene", help="scene file (.toml; see docs/concepts.md, scenes)")
+    parser.add_argument("-o", "--output", required=True, help="folder to write scene.npz, scene.usda, scene.png")
+    parser.add_argument("--no-usd", action="store_true", help="skip the USD export (needs flockkit[usd])")
+    parser.add_argument("--no-pictures", action="store_true", help="skip the top view (needs flockkit[viz])")
+    _scale_out(parser)
+    _quiet(parser)
+
+
 def _check_arguments(parser) -> None:
     parser.add_argument("kind", choices=KINDS)
     parser.add_argument("name")
@@ -633,6 +671,11 @@ COMMANDS = {
         "write a motion as CSV, JSON, glTF (.glb/.gltf) or USD (.usda/.usdc, needs flockkit[usd])",
         _export_arguments,
         _cmd_export,
+    ),
+    "scene": (
+        "fill a region with duplicates of animated objects following arrows (.toml); write npz, USD, picture",
+        _scene_arguments,
+        _cmd_scene,
     ),
     "import": ("read a captured-motion table (CSV/TSV) into a motion (.npz)", _import_arguments, _cmd_import),
     "check": ("run the conformance kit on an installed plugin component", _check_arguments, _cmd_check),

@@ -541,3 +541,52 @@ def plot_trace(solution, path=None):
     if path is not None:
         _save(figure, path)
     return figure
+
+
+def plot_scene(animation, path=None, *, times=None, size=None):
+    """Top view of a SceneAnimation: the region's objects as their footprint boxes (one colour per
+    template) and the flow arrows at a few `times` (default: start, middle and end), darker as
+    time goes on; self-moving objects' arrows are drawn on them. Returns the Figure; writes it to
+    `path` if given."""
+    import matplotlib.patches as patches
+
+    plt = _pyplot()
+    path = None if path is None else _check_picture_path(path)
+    from .scene import FlowField, SelfMovement
+
+    boxes = animation.bounding_boxes()
+    low, high = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
+    flows = [c for c in animation.constraints if isinstance(c, FlowField)]
+    for flow in flows:
+        points = np.stack([a.position[:2] for a in flow.arrows])
+        low, high = np.minimum(low, points.min(axis=0)), np.maximum(high, points.max(axis=0))
+    figure, ax = _scene_figure(plt, low, high, size, keyed=True)
+    duration = (animation.n_frames - 1) * animation.dt
+    times = [0.0, duration / 2, duration] if times is None else list(times)
+    colours = plt.get_cmap("tab10")
+    for i, (box, kind) in enumerate(zip(boxes, animation.placement.templates)):
+        ax.add_patch(patches.Rectangle(box[0], *(box[1] - box[0]), fill=False, lw=0.6, color=colours(int(kind) % 10)))
+    reach = 0.15 * float(np.max(high - low))
+    shades = plt.get_cmap("Reds")(np.linspace(0.4, 1.0, len(times)))
+    for shade, when in zip(shades, times):
+        label = f"flow at t = {when:g} s"
+        for flow in flows:
+            points = np.stack([a.position[:2] for a in flow.arrows])
+            vectors = np.stack([a.at([when])[0][:2] for a in flow.arrows]) * reach
+            ax.quiver(*points.T, *vectors.T, color=shade, angles="xy", scale_units="xy", scale=1, width=0.006,
+                      label=label)  # fmt: skip
+            label = None
+        for mover in (c for c in animation.constraints if isinstance(c, SelfMovement)):
+            where = animation.placement.positions[mover.object]
+            arrow = mover.targets([when])[0][:2] * reach
+            ax.quiver(*where, *arrow, color=shade, angles="xy", scale_units="xy", scale=1, width=0.004)
+    ax.plot([], [], color=colours(0), lw=1, label=f"{animation.placement.n_objects} objects (footprints)")
+    if animation.region is not None:
+        _draw_region(ax, animation.region, fill=False, edgecolor="tab:green", lw=1.2, label="region")
+        low, high = np.minimum(low, animation.region.bounds()[0]), np.maximum(high, animation.region.bounds()[1])
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.06), ncol=3, fontsize=8, frameon=False)
+    ax.set_title(f"scene: {animation.placement.n_objects} objects, {duration:g} s")
+    _fit_view(ax, low, high)
+    if path is not None:
+        _save(figure, path)
+    return figure

@@ -9,6 +9,7 @@ the duplicates and walks each after its targets; ``SceneAnimation`` is the resul
 """
 
 from .constraints import Arrow, FlowField, SelfMovement
+from .file import read_scene
 from .scene import Placement, Scene, SceneAnimation
 
-__all__ = ["Arrow", "FlowField", "Placement", "Scene", "SceneAnimation", "SelfMovement"]
+__all__ = ["Arrow", "FlowField", "Placement", "Scene", "SceneAnimation", "SelfMovement", "read_scene"]

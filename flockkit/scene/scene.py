@@ -160,7 +160,11 @@ class Scene:
         for k, template in enumerate(self.templates):
             _template_features(template, k, needed=True)
         for k, constraint in enumerate(self.constraints):
-            keyed = [a.keyframes for a in constraint.arrows] if isinstance(constraint, FlowField) else [constraint.keyframes]
+            keyed = (
+                [a.keyframes for a in constraint.arrows]
+                if isinstance(constraint, FlowField)
+                else [constraint.keyframes]
+            )
             last = max(float(times[-1]) for times, _ in keyed)
             if min(float(times[0]) for times, _ in keyed) < 0 or last > self.duration + 1e-9:
                 raise ValidationError(
@@ -239,7 +243,9 @@ class Scene:
         first = self._world(point[None], np.zeros(1), [i])[0, 0]
         arrows = _template_features(self.templates[kind], kind, needed=False).vectors
         flat = np.linalg.norm(arrows[:, :2], axis=1)
-        near = np.flatnonzero(np.abs(flat - np.linalg.norm(first[:2])) <= 0.05 + np.abs(flat - np.linalg.norm(first[:2])).min())
+        near = np.flatnonzero(
+            np.abs(flat - np.linalg.norm(first[:2])) <= 0.05 + np.abs(flat - np.linalg.norm(first[:2])).min()
+        )
         # prefer arrows the source holds for a while over ones it passes through
         held = (np.linalg.norm(arrows[near, None] - arrows[None], axis=2) < 0.1).sum(axis=1)
         near = near[held >= 0.5 * held.max()]
@@ -297,7 +303,7 @@ class Scene:
                 if report:
                     report(len(walks), len(calls), "walks")
         animation = SceneAnimation(templates=self.templates, placement=placement, walks=walks, dt=self.frame_time,
-                                   n_frames=self.n_frames, constraints=self.constraints)  # fmt: skip
+                                   n_frames=self.n_frames, constraints=self.constraints, region=self.region)  # fmt: skip
         before = animation.in_step_share()
         walks = self._desynchronise(animation, targets, seeds)
         animation = attrs.evolve(animation, walks=walks)
@@ -430,6 +436,7 @@ class SceneAnimation:
     dt: float
     n_frames: int
     constraints: tuple = attrs.field(default=(), converter=_constraints)
+    region: Polygon | None = attrs.field(default=None)
     report: dict = attrs.field(factory=dict)
 
     @property
@@ -577,6 +584,7 @@ def _save(animation: SceneAnimation, path) -> None:
         "template_headers": headers,
         "constraints": [_constraint_json(c) for c in animation.constraints],
         "report": animation.report,
+        "region": None if animation.region is None else animation.region.vertices.tolist(),
     }
     _npzfile.write(path, kind="scene", version=SCENE_FORMAT_VERSION, arrays=arrays, metadata=metadata)
 
@@ -610,6 +618,7 @@ def _load(path) -> SceneAnimation:
             raise ValidationError(f"{len(flat)} walks for {at} object parts")
         return SceneAnimation(templates=templates, placement=placement, walks=walks, dt=header["dt"],
                               n_frames=header["n_frames"], report=header.get("report", {}),
+                              region=None if header.get("region") is None else Polygon(vertices=header["region"]),
                               constraints=[_constraint_from_json(c) for c in header["constraints"]])  # fmt: skip
     except (KeyError, IndexError, TypeError, ValueError, ValidationError) as exc:
         raise FileFormatError(f"{path}: invalid scene animation: {type(exc).__name__}: {exc}") from None

@@ -27,14 +27,18 @@ TURNING = FlowField(arrows=[Arrow(position=[20, 15], keyframes=[(0, [0.8, 0]), (
 
 @functools.cache
 def turning_scene():
-    scene = flockkit.Scene(templates=[plants()], region=MEADOW, counts=[24], duration=30, constraints=[TURNING], seed=4, headings="aligned")
+    scene = flockkit.Scene(
+        templates=[plants()], region=MEADOW, counts=[24], duration=30, constraints=[TURNING], seed=4, headings="aligned"
+    )
     return scene, scene.synthesize()
 
 
 def test_300_objects_are_placed_without_overlapping_boxes():
     scene = flockkit.Scene(templates=[plants()], region=MEADOW, counts=[300], duration=1, seed=2, scale=(0.8, 1.2))
     placement = scene.place()
-    animation = flockkit.SceneAnimation(templates=scene.templates, placement=placement, walks=[None] * 300, dt=0.1, n_frames=1)
+    animation = flockkit.SceneAnimation(
+        templates=scene.templates, placement=placement, walks=[None] * 300, dt=0.1, n_frames=1
+    )
     boxes = animation.bounding_boxes()
     overlap = np.all((boxes[:, None, 0] < boxes[None, :, 1]) & (boxes[None, :, 0] < boxes[:, None, 1]), axis=2)
     np.fill_diagonal(overlap, False)
@@ -122,7 +126,9 @@ def test_the_seed_decides_and_n_jobs_does_not():
 def test_a_scene_animation_saves_loads_and_exports_to_usd(tmp_path):
     from pxr import Usd, UsdGeom  # usd-core is a test dependency
 
-    scene = flockkit.Scene(templates=[plants()], region=MEADOW, counts=[3], duration=20, constraints=[TURNING], seed=5, headings="aligned")
+    scene = flockkit.Scene(
+        templates=[plants()], region=MEADOW, counts=[3], duration=20, constraints=[TURNING], seed=5, headings="aligned"
+    )
     animation = scene.synthesize()
     animation.save(tmp_path / "scene.npz")
     again = flockkit.SceneAnimation.load(tmp_path / "scene.npz")

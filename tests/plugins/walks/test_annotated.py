@@ -20,7 +20,9 @@ def test_the_energy_reported_is_the_papers_sum_over_the_walk():
     assert energy["C_T"] == pytest.approx(sum(graph.transitions[i].alignment.distance for i in taken) / scale)
     frames, rotations = flockkit.synthesis.played_frames(graph, walk)
     played = np.einsum("fij,fj->fi", rotations, flockkit.Features.from_motion(graph.motion).vectors[frames])[:400]
-    target = flockkit.features.interpolate_arrows(np.array([0.0, 20.0]), np.array([[1.0, 0], [0, -1.0]]), np.arange(400) * 0.1)
+    target = flockkit.features.interpolate_arrows(
+        np.array([0.0, 20.0]), np.array([[1.0, 0], [0, -1.0]]), np.arange(400) * 0.1
+    )
     assert energy["C_C"] == pytest.approx(np.linalg.norm(played - target, axis=1).sum() * 0.1)
     assert energy["E"] == pytest.approx(energy["C_T"] + 3 * energy["C_C"] + 2 * energy["N_T"])
 
