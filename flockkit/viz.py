@@ -564,7 +564,7 @@ def plot_scene(animation, path=None, *, times=None, size=None):
     duration = (animation.n_frames - 1) * animation.dt
     times = [0.0, duration / 2, duration] if times is None else list(times)
     colours = plt.get_cmap("tab10")
-    for i, (box, kind) in enumerate(zip(boxes, animation.placement.templates)):
+    for box, kind in zip(boxes, animation.placement.templates):
         ax.add_patch(patches.Rectangle(box[0], *(box[1] - box[0]), fill=False, lw=0.6, color=colours(int(kind) % 10)))
     reach = 0.15 * float(np.max(high - low))
     shades = plt.get_cmap("Reds")(np.linspace(0.4, 1.0, len(times)))

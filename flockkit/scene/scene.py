@@ -272,8 +272,10 @@ class Scene:
             flows = [FlowField(arrows=[Arrow(position=self.region.interior_point(), keyframes=[(0.0, first[:2])])])]
         world = np.zeros((len(positions), len(times), 3))
         for flow in flows:
-            arrows = flow.targets(np.asarray(positions)[:, : flow.dims] if flow.dims == 2 else
-                                  np.column_stack([positions, np.zeros(len(positions))]), times)  # (F, M, D)  # fmt: skip
+            ground = np.asarray(positions)
+            if flow.dims == 3:  # objects stand on the ground: z = 0
+                ground = np.column_stack([ground, np.zeros(len(ground))])
+            arrows = flow.targets(ground, times)  # (F, M, D)
             world[..., : arrows.shape[2]] += arrows.transpose(1, 0, 2)
         for constraint in self.constraints:
             if isinstance(constraint, SelfMovement) and constraint.object in objects:
@@ -302,8 +304,10 @@ class Scene:
                 walks.append(walk)
                 if report:
                     report(len(walks), len(calls), "walks")
-        animation = SceneAnimation(templates=self.templates, placement=placement, walks=walks, dt=self.frame_time,
-                                   n_frames=self.n_frames, constraints=self.constraints, region=self.region)  # fmt: skip
+        animation = SceneAnimation(
+            templates=self.templates, placement=placement, walks=walks, dt=self.frame_time,
+            n_frames=self.n_frames, constraints=self.constraints, region=self.region,
+        )  # fmt: skip
         before = animation.in_step_share()
         walks = self._desynchronise(animation, targets, seeds)
         animation = attrs.evolve(animation, walks=walks)

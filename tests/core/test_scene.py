@@ -138,7 +138,7 @@ def test_a_scene_animation_saves_loads_and_exports_to_usd(tmp_path):
     stage = Usd.Stage.Open(str(tmp_path / "scene.usda"))
     assert UsdGeom.GetStageUpAxis(stage) == UsdGeom.Tokens.z and UsdGeom.GetStageMetersPerUnit(stage) == 1.0
     assert stage.GetTimeCodesPerSecond() == 10
-    objects = [p for p in stage.GetPseudoRoot().GetChild("Scene").GetChildren()]
+    objects = list(stage.GetPseudoRoot().GetChild("Scene").GetChildren())
     assert len(objects) == 3
     points = UsdGeom.Points(objects[1]).GetPointsAttr().Get(Usd.TimeCode(7))
     np.testing.assert_allclose(np.array(points), animation.motions[1].positions[7], atol=1e-5)
