@@ -14,11 +14,11 @@ import resource
 
 import joblib
 import numpy as np
+from timing import timed
 
 import flockkit
 from flockkit.scene import Arrow, FlowField
 from flockkit.testing import inputs
-from timing import timed
 
 
 def template():
