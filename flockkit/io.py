@@ -14,6 +14,7 @@ of the recording; a longer run raises ValidationError naming the file, the agent
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import json
 import math
@@ -395,32 +396,15 @@ def write_usd(motion: Motion, path, *, fps: float | None = USD_FPS, meters_per_u
     between samples. metersPerUnit is `meters_per_unit` (flockkit's units are meters by default),
     the up axis z; a 2D motion lies in the ground plane z = 0. Blender, Houdini and Maya import it
     at the right size and speed."""
-    try:
-        from pxr import Gf, Usd, UsdGeom, Vt
-    except ImportError:
-        from .errors import MissingDependencyError
-
-        raise MissingDependencyError("USD export needs usd-core: pip install 'flockkit[usd]'") from None
-    fps = 1.0 / motion.dt if fps is None else validate.number(fps, "USD fps", minimum=0, strict=True)
-    meters_per_unit = validate.number(meters_per_unit, "USD meters_per_unit", minimum=0, strict=True)
-    path = Path(path)
+    Gf, Usd, UsdGeom, Vt = _usd_modules()
     positions = np.zeros((motion.n_frames, motion.n_agents, 3))
     positions[..., : motion.dims] = motion.positions
     velocities = np.zeros_like(positions)
     velocities[..., : motion.dims] = motion.velocities()
     quaternions = _facing(velocities.reshape(-1, 3)).reshape(motion.n_frames, motion.n_agents, 4)
     turning = _angular_velocities(velocities, motion.dt)
-    times = np.arange(motion.n_frames) * motion.dt * fps
-    with atomic_path(path, create=False) as tmp:  # USD creates the layer itself
-        stage = Usd.Stage.CreateNew(str(tmp))
-        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
-        UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
-        stage.SetTimeCodesPerSecond(fps)
-        stage.SetFramesPerSecond(fps)
-        stage.SetStartTimeCode(0)
-        stage.SetEndTimeCode(float(times[-1]))
-        root = UsdGeom.Xform.Define(stage, "/Flock")
-        stage.SetDefaultPrim(root.GetPrim())
+    with _usd_stage(path, "/Flock", dt=motion.dt, n_frames=motion.n_frames, fps=fps,
+                   meters_per_unit=meters_per_unit) as (stage, times):  # fmt: skip
         instancer = UsdGeom.PointInstancer.Define(stage, "/Flock/Agents")
         body = UsdGeom.Cone.Define(stage, "/Flock/Agents/Prototypes/Agent")
         body.CreateAxisAttr(UsdGeom.Tokens.x)
@@ -442,6 +426,39 @@ def write_usd(motion: Motion, path, *, fps: float | None = USD_FPS, meters_per_u
                 ),
                 time,
             )
+
+
+def _usd_modules():
+    """pxr's (Gf, Usd, UsdGeom, Vt); MissingDependencyError naming the extra when usd-core is absent."""
+    try:
+        from pxr import Gf, Usd, UsdGeom, Vt
+    except ImportError:
+        from .errors import MissingDependencyError
+
+        raise MissingDependencyError("USD export needs usd-core: pip install 'flockkit[usd]'") from None
+    return Gf, Usd, UsdGeom, Vt
+
+
+@contextlib.contextmanager
+def _usd_stage(path, root: str, *, dt: float, n_frames: int, fps: float | None = USD_FPS, meters_per_unit: float = 1.0):
+    """A new USD stage, saved atomically to `path` on leaving: up axis z, metersPerUnit
+    `meters_per_unit`, a time line at `fps` (timeCodesPerSecond = framesPerSecond; None: 1 / dt)
+    over `n_frames` frames `dt` apart, and an Xform `root` as its default prim. Yields (stage,
+    the time code of each frame)."""
+    _, Usd, UsdGeom, _ = _usd_modules()
+    fps = 1.0 / dt if fps is None else validate.number(fps, "USD fps", minimum=0, strict=True)
+    meters_per_unit = validate.number(meters_per_unit, "USD meters_per_unit", minimum=0, strict=True)
+    times = np.arange(n_frames) * dt * fps
+    with atomic_path(Path(path), create=False) as tmp:  # USD creates the layer itself
+        stage = Usd.Stage.CreateNew(str(tmp))
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+        UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
+        stage.SetTimeCodesPerSecond(fps)
+        stage.SetFramesPerSecond(fps)
+        stage.SetStartTimeCode(0)
+        stage.SetEndTimeCode(float(times[-1]))
+        stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, root).GetPrim())
+        yield stage, times
         stage.GetRootLayer().Save()
 
 

@@ -26,11 +26,11 @@
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
+from .. import _tomlfile
 from ..constraints import Polygon
-from ..errors import FileFormatError, FlockkitError, ValidationError
+from ..errors import FlockkitError, ValidationError
 from ..graph import MotionGraph
 from ..layers import GraphLayers
 from .constraints import Arrow, FlowField, SelfMovement
@@ -44,13 +44,7 @@ _KEYS = {"duration", "seed", "region", "scale", "headings", "templates", "arrows
 def read_scene(path, *, n_jobs: int | None = None) -> Scene:
     """The Scene a TOML scene file describes; errors name the file and the entry."""
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
-    try:
-        with open(path, "rb") as handle:
-            data = tomllib.load(handle)
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise FileFormatError(f"{path}: not a TOML scene: {exc}") from None
+    data = _tomlfile.read(path, "scene")
     unknown = sorted(set(data) - _KEYS)
     if unknown:
         raise ValidationError(f"{path}: unknown entry {unknown[0]!r}; expected {', '.join(sorted(_KEYS))}")

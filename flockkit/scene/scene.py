@@ -20,13 +20,15 @@ import math
 import attrs
 import numpy as np
 
-from .. import _npzfile
+from .. import _npzfile, rigid
+from .._arrays import readonly_float
 from ..constraints import Polygon
 from ..errors import FileFormatError, ValidationError
 from ..features import Features
 from ..graph import MotionGraph, Walk
+from ..io import USD_FPS
 from ..layers import GraphLayers, LayeredWalk
-from ..motion import Motion
+from ..motion import DEFAULT_UP, Motion
 from ..validate import integer, number
 from .constraints import Arrow, FlowField, SelfMovement
 
@@ -308,19 +310,18 @@ class Scene:
             templates=self.templates, placement=placement, walks=walks, dt=self.frame_time,
             n_frames=self.n_frames, constraints=self.constraints, region=self.region,
         )  # fmt: skip
-        before = animation.in_step_share()
-        walks = self._desynchronise(animation, targets, seeds)
-        animation = attrs.evolve(animation, walks=walks)
-        object.__setattr__(animation, "report", {"in_step_before": before, "in_step_after": animation.in_step_share()})
-        return animation
+        frames, neighbours = animation.source_frames(), animation.neighbours()
+        before = _largest_in_step(frames, neighbours)
+        walks = self._desynchronise(animation, targets, seeds, frames, neighbours)
+        report = {"in_step_before": before, "in_step_after": _largest_in_step(frames, neighbours)}
+        return attrs.evolve(animation, walks=walks, report=report)
 
-    def _desynchronise(self, animation, targets, seeds) -> list:
+    def _desynchronise(self, animation, targets, seeds, frames, near) -> list:
         """Section 6.2: each object in step with a neighbour on more than MAX_IN_STEP of its frames
         is walked again avoiding its neighbours' frames (in object order, so each sees the
-        others' latest walks)."""
+        others' latest walks); `frames` (animation.source_frames()) is kept up to date."""
         walks = list(animation.walks)
-        frames = animation.source_frames()
-        for i, neighbours in enumerate(animation.neighbours()):
+        for i, neighbours in enumerate(near):
             if not len(neighbours) or _in_step(frames[i], frames[neighbours]).max() <= MAX_IN_STEP:
                 continue
             walks[i] = _walk_object(
@@ -342,7 +343,7 @@ def _walk_object(scene: Scene, i: int, placement: Placement, target: np.ndarray,
     template = scene.templates[kind]
     graphs, _ = _parts(template)
     features = _template_features(template, kind, needed=False)
-    local = target @ _turn(placement.headings[i])  # the world's arrows in the template's coordinates (R^T w)
+    local = target @ _turn(placement.headings[i], 3)  # the world's arrows in the template's coordinates (R^T w)
     track = Features(vectors=local[:, : _source(template).dims], dt=scene.frame_time)
     streams = np.random.SeedSequence(seed).spawn(len(graphs))
     walks = []
@@ -358,16 +359,21 @@ def _walk_object(scene: Scene, i: int, placement: Placement, target: np.ndarray,
     return LayeredWalk(walks=walks) if isinstance(template, GraphLayers) else walks[0]
 
 
-def _turn(heading: float) -> np.ndarray:
-    """The 3D rotation by `heading` about +z."""
-    c, s = math.cos(heading), math.sin(heading)
-    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+def _turn(heading: float, dims: int) -> np.ndarray:
+    """The rotation by `heading` about the up axis (in 2D, in the plane)."""
+    return rigid.rotation(heading) if dims == 2 else rigid.rotation(heading, DEFAULT_UP)
 
 
 def _turned_half(half: np.ndarray, heading: float) -> np.ndarray:
     """Half extents of the axis-aligned box around a box of half extents `half` turned by `heading`."""
     c, s = abs(math.cos(heading)), abs(math.sin(heading))
     return np.array([c * half[0] + s * half[1], s * half[0] + c * half[1]])
+
+
+def _largest_in_step(frames: np.ndarray, neighbours) -> float:
+    """The largest in-step share (see _in_step) between an object and one of its neighbours."""
+    shares = [_in_step(frames[i], frames[near]).max() for i, near in enumerate(neighbours) if len(near)]
+    return float(max(shares, default=0.0))
 
 
 def _in_step(frames: np.ndarray, others: np.ndarray) -> np.ndarray:
@@ -377,20 +383,14 @@ def _in_step(frames: np.ndarray, others: np.ndarray) -> np.ndarray:
     return same.any(axis=1).mean(axis=1)
 
 
-def _floats(value, field):
-    from .._arrays import readonly_float
-
-    return readonly_float(value, field=field)
-
-
 @attrs.frozen(kw_only=True, eq=False)
 class Placement:
     """Where each object of a scene stands: `positions` (M, 2) on the ground, `headings` (M,)
     radians about +z, `scales` (M,), `templates` (M,) the template each duplicates."""
 
-    positions: np.ndarray = attrs.field(converter=lambda v: _floats(v, "Placement.positions"))
-    headings: np.ndarray = attrs.field(converter=lambda v: _floats(v, "Placement.headings"))
-    scales: np.ndarray = attrs.field(converter=lambda v: _floats(v, "Placement.scales"))
+    positions: np.ndarray = attrs.field(converter=lambda v: readonly_float(v, field="Placement.positions"))
+    headings: np.ndarray = attrs.field(converter=lambda v: readonly_float(v, field="Placement.headings"))
+    scales: np.ndarray = attrs.field(converter=lambda v: readonly_float(v, field="Placement.scales"))
     templates: np.ndarray = attrs.field(converter=lambda v: np.asarray(v, dtype=np.int64))
 
     @property
@@ -442,6 +442,10 @@ class SceneAnimation:
     constraints: tuple = attrs.field(default=(), converter=_constraints)
     region: Polygon | None = attrs.field(default=None)
     report: dict = attrs.field(factory=dict)
+    _footprints: list = attrs.field(init=False, repr=False, eq=False)  # (center, half extents) per template
+
+    def __attrs_post_init__(self):
+        object.__setattr__(self, "_footprints", [_footprint(t) for t in self.templates])
 
     @property
     def motions(self) -> _Motions:
@@ -455,9 +459,9 @@ class SceneAnimation:
 
         template = self.templates[self.placement.templates[i]]
         played = synthesize(template, self.walks[i])
-        center, _ = _footprint(template)
+        center, _ = self._footprints[self.placement.templates[i]]
         dims = played.dims
-        scale, turn = self.placement.scales[i], _turn(self.placement.headings[i])[:dims, :dims]
+        scale, turn = self.placement.scales[i], _turn(self.placement.headings[i], dims)
         where = np.zeros(dims)
         where[:2] = self.placement.positions[i]
         positions = (played.positions[: self.n_frames] - center) @ (scale * turn).T + where
@@ -485,7 +489,7 @@ class SceneAnimation:
         """(objects, 2, 2): the (low, high) corners in x, y of each object's placed footprint."""
         boxes = np.empty((self.placement.n_objects, 2, 2))
         for i in range(self.placement.n_objects):
-            half = _footprint(self.templates[self.placement.templates[i]])[1] * self.placement.scales[i]
+            half = self._footprints[self.placement.templates[i]][1] * self.placement.scales[i]
             half = _turned_half(half, self.placement.headings[i])
             boxes[i] = [self.placement.positions[i] - half, self.placement.positions[i] + half]
         return boxes
@@ -496,13 +500,11 @@ class SceneAnimation:
         from scipy.spatial import cKDTree
 
         result = [np.zeros(0, dtype=np.int64)] * self.placement.n_objects
-        for kind, template in enumerate(self.templates):
+        for kind, (_, half) in enumerate(self._footprints):
             members = np.flatnonzero(self.placement.templates == kind)
             if len(members) < 2:
                 continue
-            reach = (
-                NEIGHBOUR_DIAGONALS * 2 * np.linalg.norm(_footprint(template)[1]) * self.placement.scales[members].max()
-            )
+            reach = NEIGHBOUR_DIAGONALS * 2 * np.linalg.norm(half) * self.placement.scales[members].max()
             tree = cKDTree(self.placement.positions[members])
             for row, near in zip(members, tree.query_ball_point(self.placement.positions[members], reach)):
                 result[row] = members[[j for j in near if members[j] != row]]
@@ -518,10 +520,11 @@ class SceneAnimation:
         """Read a file written by :meth:`save`; FileFormatError naming the file if it is not one."""
         return _load(path)
 
-    def export(self, path, *, fps: float | None = None, meters_per_unit: float = 1.0) -> None:
+    def export(self, path, *, fps: float | None = USD_FPS, meters_per_unit: float = 1.0) -> None:
         """A USD stage (.usda/.usdc): each object under /Scene an animated UsdGeom.Mesh (a template
         with faces) or UsdGeom.Points, its points time-sampled every frame on a time line at `fps`
-        (default flockkit.io.USD_FPS); up axis z, metersPerUnit `meters_per_unit`. Needs usd-core."""
+        (None: 1 / dt), up axis z, metersPerUnit `meters_per_unit`, as flockkit.io.write_usd
+        writes motions. Needs usd-core."""
         from pathlib import Path
 
         if Path(path).suffix.lower() not in (".usda", ".usdc", ".usd"):
@@ -539,9 +542,7 @@ class SceneAnimation:
     def in_step_share(self) -> float:
         """The largest share of frames on which two neighbours play the same source frame at the
         same time (in some part)."""
-        frames = self.source_frames()
-        shares = [_in_step(frames[i], frames[near]).max() for i, near in enumerate(self.neighbours()) if len(near)]
-        return float(max(shares, default=0.0))
+        return _largest_in_step(self.source_frames(), self.neighbours())
 
 
 def _constraint_json(constraint) -> dict:
@@ -630,32 +631,12 @@ def _load(path) -> SceneAnimation:
 
 def _export_usd(animation: SceneAnimation, path, *, fps, meters_per_unit) -> None:
     """Each object an animated UsdGeom.Mesh (a template with faces) or UsdGeom.Points under
-    /Scene, z up, on a time line at `fps`."""
-    from pathlib import Path
+    /Scene, on the stage flockkit.io writes motions on."""
+    from ..io import _usd_modules, _usd_stage
 
-    from .. import validate
-    from .._atomic import atomic_path
-    from ..io import USD_FPS
-
-    try:
-        from pxr import Usd, UsdGeom, Vt
-    except ImportError:
-        from ..errors import MissingDependencyError
-
-        raise MissingDependencyError("USD export needs usd-core: pip install 'flockkit[usd]'") from None
-    fps = USD_FPS if fps is None else validate.number(fps, "USD fps", minimum=0, strict=True)
-    meters_per_unit = validate.number(meters_per_unit, "USD meters_per_unit", minimum=0, strict=True)
-    times = np.arange(animation.n_frames) * animation.dt * fps
-    with atomic_path(Path(path), create=False) as tmp:
-        stage = Usd.Stage.CreateNew(str(tmp))
-        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
-        UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
-        stage.SetTimeCodesPerSecond(fps)
-        stage.SetFramesPerSecond(fps)
-        stage.SetStartTimeCode(0)
-        stage.SetEndTimeCode(float(times[-1]))
-        root = UsdGeom.Xform.Define(stage, "/Scene")
-        stage.SetDefaultPrim(root.GetPrim())
+    _, Usd, UsdGeom, Vt = _usd_modules()
+    with _usd_stage(path, "/Scene", dt=animation.dt, n_frames=animation.n_frames, fps=fps,
+                    meters_per_unit=meters_per_unit) as (stage, times):  # fmt: skip
         for i, motion in enumerate(animation.motions):
             template = animation.templates[animation.placement.templates[i]]
             faces = template.faces if isinstance(template, GraphLayers) else None
@@ -673,4 +654,3 @@ def _export_usd(animation: SceneAnimation, path, *, fps, meters_per_unit) -> Non
             for frame, when in enumerate(times):
                 points.Set(Vt.Vec3fArray.FromNumpy(positions[frame]), Usd.TimeCode(float(when)))
             prim.GetPrim().SetCustomDataByKey("flockkit:template", int(animation.placement.templates[i]))
-        stage.GetRootLayer().Save()

@@ -24,12 +24,11 @@
 
 from __future__ import annotations
 
-import tomllib
 from pathlib import Path
 
-from .. import validate
+from .. import _tomlfile, validate
 from ..constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
-from ..errors import FileFormatError, FlockkitError, ValidationError
+from ..errors import FlockkitError, ValidationError
 
 _PROBLEM_KEYS = {
     "agents": "n_agents",
@@ -54,13 +53,7 @@ _CONSTRAINT_KEYS = {
 def load_scenario(path) -> tuple[Problem, dict]:
     """(Problem, solve settings) from a scenario file; errors name the file and the entry."""
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
-    try:
-        with open(path, "rb") as handle:
-            data = tomllib.load(handle)
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise FileFormatError(f"{path}: not a TOML scenario: {exc}") from None
+    data = _tomlfile.read(path, "scenario")
     unknown = set(data) - {"problem", "solve", "point", "com", "shape", "obstacle"}
     if unknown:
         raise ValidationError(

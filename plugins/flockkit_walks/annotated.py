@@ -183,17 +183,18 @@ class _Path:
         self.error[:n] = problem.frame_error(self.played[:n], self.frames[:n], 0)
         # per edge: the node it leaves, its first output frame, clip frames since the last transition, rotation
         self.node, self.at, self.since, self.rotation = [], [], [], []
-        node, t, since, rotation = start, 0, math.inf, np.eye(problem.dims)
-        for kind, index in edges:
-            self.node.append(node), self.at.append(t), self.since.append(since), self.rotation.append(rotation)
-            if kind == "clip":
-                t += problem.clip_frames[index]
-                since += problem.clip_frames[index]
-            else:
-                since = 0
-                rotation = rotation @ problem.trans_rotation[index] if problem.rotating else rotation
-            node = graph.edge_target((kind, index))
-        self.node.append(node), self.at.append(t), self.since.append(since), self.rotation.append(rotation)
+        state = (start, 0, math.inf, np.eye(problem.dims))
+        for edge in edges:
+            for column, value in zip((self.node, self.at, self.since, self.rotation), state):
+                column.append(value)
+            state = problem.step(state, edge)
+        for column, value in zip((self.node, self.at, self.since, self.rotation), state):
+            column.append(value)
+        # each edge's share of C_T + beta N_T, and its running sum (what pick weighs stretches by)
+        self.edge_cost = np.array(
+            [problem.trans_cost[i] + problem.beta if k == "transition" else 0.0 for k, i in edges]
+        )
+        self.running_cost = np.concatenate([[0.0], np.cumsum(self.edge_cost)])
         taken = [index for kind, index in edges if kind == "transition"]
         self.c_t = float(problem.trans_cost[taken].sum())
         self.n_t = len(taken)
@@ -293,6 +294,15 @@ class _Problem:
     def path(self, start, edges) -> _Path:
         return _Path(self, start, edges)
 
+    def step(self, state, edge):
+        """(node, output frame, clip frames since the last transition, rotation) after `edge`."""
+        node, t, since, rotation = state
+        kind, index = edge
+        if kind == "clip":
+            return node + 1, t + self.clip_frames[index], since + self.clip_frames[index], rotation
+        turned = rotation @ self.trans_rotation[index] if self.rotating else rotation
+        return self.trans_target[index], t, 0, turned
+
     def _lookahead(self, targets, rotations, t) -> np.ndarray:
         """Error of going straight on from each of `targets` (nodes), turned by `rotations`, from
         output frame t (frame_error summed over the look-ahead, times dt)."""
@@ -317,8 +327,10 @@ class _Problem:
             cost = self._lookahead(np.arange(len(self.nodes)), None, 0) / (self.ahead * self.dt)
             good = np.flatnonzero(cost <= cost.min() + 0.1)
             node = int(rng.choice(good))
-        start, since, t, rotation, edges = node, math.inf, 0, np.eye(self.dims), []
-        while t < self.needed:
+        start, edges = node, []
+        state = (node, 0, math.inf, np.eye(self.dims))
+        while state[1] < self.needed:
+            node, t, since, rotation = state
             options = ([("clip", node)] if node < len(self.nodes) - 1 else []) + (
                 [("transition", i) for i in self.out[node]] if since >= self.longest else []
             )
@@ -334,16 +346,9 @@ class _Problem:
             cost = self.alpha * self._lookahead(targets, rotations, t)
             cost += np.array([0.0 if kind == "clip" else self.trans_cost[i] + self.beta for kind, i in options])
             cost += 1e-3 * rng.random(len(cost))  # ties broken at random, so duplicates differ
-            kind, index = options[int(np.argmin(cost))]
-            edges.append((kind, index))
-            if kind == "clip":
-                t += self.clip_frames[index]
-                since += self.clip_frames[index]
-            else:
-                since = 0
-                if self.rotating:
-                    rotation = rotation @ self.trans_rotation[index]
-            node = self.graph.edge_target((kind, index))
+            edge = options[int(np.argmin(cost))]
+            edges.append(edge)
+            state = self.step(state, edge)
         return self.path(start, edges)
 
     def pick(self, path: _Path, rng, tried):
@@ -355,10 +360,7 @@ class _Problem:
         window = np.concatenate([[0.0], np.cumsum(path.error)])
         ends = np.minimum(at[starts] + self.segment_frames, self.needed)
         cost = self.alpha * self.dt * (window[ends] - window[at[starts]])
-        edge_cost = np.array(
-            [self.trans_cost[i] + self.beta if kind == "transition" else 0.0 for kind, i in path.edges]
-        )
-        running = np.concatenate([[0.0], np.cumsum(edge_cost)])
+        running = path.running_cost
         cost += running[np.minimum(stops, len(path.edges))] - running[starts]
         rate = cost / (self.segment_frames * self.dt)
         excess = np.where(rate > self.threshold, rate - self.threshold, 0.0)
@@ -381,18 +383,17 @@ class _Problem:
         lead = next(
             (path.at[k] - path.at[j] for k in range(j, len(path.edges)) if path.edges[k][0] == "transition"), None
         )
-        old_cost = self.alpha * self.dt * path.error[t0:].sum() + sum(
-            self.trans_cost[index] + self.beta for kind, index in path.edges[i:j] if kind == "transition"
-        )
+        old_cost = self.alpha * self.dt * path.error[t0:].sum() + path.running_cost[j] - path.running_cost[i]
+        old_edges = path.edges[i:j]
         suffix = (path.played[path.at[j] :], path.frames[path.at[j] :]) if not tail else None
         best, best_cost = None, old_cost - 1e-9
         expanded = 0
-        stack = [(path.node[i], path.since[i], path.rotation[i], 0, [], 0.0)]
+        stack = [(path.node[i], path.since[i], path.rotation[i], 0, [], 0, 0.0)]
         while stack and expanded < self.SEARCH_NODES:
-            node, since, rotation, frames, edges, cost = stack.pop()
+            node, since, rotation, frames, edges, n_trans, cost = stack.pop()
             expanded += 1
             done = (frames >= self.needed - t0) if tail else (node == goal and abs(frames - old_frames) <= slack)
-            if done and edges != path.edges[i:j] and (tail or lead is None or since + lead >= self.longest):
+            if done and edges != old_edges and (tail or lead is None or since + lead >= self.longest):
                 total = cost + self._rest_cost(
                     path, t0 + frames, suffix, rotation @ path.rotation[j].T if not tail and self.rotating else None
                 )
@@ -402,13 +403,20 @@ class _Problem:
                     continue
             if frames > old_frames + slack:
                 continue
-            n_trans = sum(kind == "transition" for kind, _ in edges)
             if since >= self.longest and n_trans < self.MAX_TRANSITIONS:
                 for index in self.out[node]:
                     turned = rotation @ self.trans_rotation[index] if self.rotating else rotation
                     extra = self.trans_cost[index] + self.beta
                     stack.append(
-                        (self.trans_target[index], 0, turned, frames, [*edges, ("transition", index)], cost + extra)
+                        (
+                            self.trans_target[index],
+                            0,
+                            turned,
+                            frames,
+                            [*edges, ("transition", index)],
+                            n_trans + 1,
+                            cost + extra,
+                        )  # fmt: skip
                     )
             if node < len(self.nodes) - 1:
                 n = self.clip_frames[node]
@@ -425,6 +433,7 @@ class _Problem:
                         rotation,
                         frames + n,
                         [*edges, ("clip", node)],
+                        n_trans,
                         cost + self.alpha * self.dt * error,
                     )
                 )

@@ -43,9 +43,7 @@ def test_300_objects_are_placed_without_overlapping_boxes():
     overlap = np.all((boxes[:, None, 0] < boxes[None, :, 1]) & (boxes[None, :, 0] < boxes[:, None, 1]), axis=2)
     np.fill_diagonal(overlap, False)
     assert not overlap.any()
-    corners = np.concatenate([boxes[:, 0], boxes[:, 1], boxes[:, :, 0], boxes[:, ::-1, 1].reshape(-1, 2)])
     assert np.all(MEADOW.contains(boxes.reshape(-1, 2)))
-    assert len(corners)
     assert np.ptp(placement.headings) > 5 and 0.8 <= placement.scales.min() <= placement.scales.max() <= 1.2
     assert scene.place() == placement  # the seed decides
 
