@@ -254,6 +254,16 @@ class _Problem:
         self.straight = np.minimum(self.nodes[:, None] + np.arange(self.ahead), self.nodes[-1])
         self._check_reach(strategy.reach)
         self.start = strategy.start
+        self._clip_errors = {}
+        # per node: its edges (the clip first, if any), the node each looks ahead from (a clip
+        # goes straight on from here) and its fixed cost (C_T + beta for a transition)
+        self.choices = []
+        for node, out in enumerate(self.out):
+            clip = [("clip", node)] if node < len(self.nodes) - 1 else []
+            edges = clip + [("transition", i) for i in out]
+            targets = np.array([node] * len(clip) + [int(self.trans_target[i]) for i in out], dtype=np.int64)
+            fixed = np.array([0.0] * len(clip) + [self.trans_cost[i] + self.beta for i in out])
+            self.choices.append((edges, targets, fixed))
         self.avoid, self.in_step = strategy.avoid, strategy.in_step
         if self.avoid is not None and self.avoid.shape[1] < self.needed:
             raise ValidationError(
@@ -331,22 +341,26 @@ class _Problem:
         state = (node, 0, math.inf, np.eye(self.dims))
         while state[1] < self.needed:
             node, t, since, rotation = state
-            options = ([("clip", node)] if node < len(self.nodes) - 1 else []) + (
-                [("transition", i) for i in self.out[node]] if since >= self.longest else []
-            )
-            targets = np.array([node + 1 if kind == "clip" else self.trans_target[i] for kind, i in options])
-            targets = np.where(
-                [kind == "clip" for kind, _ in options], node, targets
-            )  # a clip goes straight on from here
-            rotations = None
-            if self.rotating:
-                rotations = np.stack(
-                    [rotation if kind == "clip" else rotation @ self.trans_rotation[i] for kind, i in options]
+            edges_here, targets, fixed = self.choices[node]
+            if since < self.longest:  # no transition until the last blend has played out: the clip alone
+                keep = 1 if node < len(self.nodes) - 1 else 0
+                edges_here, targets, fixed = edges_here[:keep], targets[:keep], fixed[:keep]
+            if not edges_here:
+                raise ValidationError(
+                    f"annotated walk: node {node} has no edge to take {since} frames after a transition"
                 )
-            cost = self.alpha * self._lookahead(targets, rotations, t)
-            cost += np.array([0.0 if kind == "clip" else self.trans_cost[i] + self.beta for kind, i in options])
-            cost += 1e-3 * rng.random(len(cost))  # ties broken at random, so duplicates differ
-            edge = options[int(np.argmin(cost))]
+            if len(edges_here) == 1:
+                rng.random(1)  # the draw a choice among several would take, so the stream stays the same
+                edge = edges_here[0]
+            else:
+                rotations = None
+                if self.rotating:
+                    rotations = np.stack(
+                        [rotation if kind == "clip" else rotation @ self.trans_rotation[i] for kind, i in edges_here]
+                    )
+                cost = self.alpha * self._lookahead(targets, rotations, t) + fixed
+                cost += 1e-3 * rng.random(len(cost))  # ties broken at random, so duplicates differ
+                edge = edges_here[int(np.argmin(cost))]
             edges.append(edge)
             state = self.step(state, edge)
         return self.path(start, edges)
@@ -364,9 +378,9 @@ class _Problem:
         cost += running[np.minimum(stops, len(path.edges))] - running[starts]
         rate = cost / (self.segment_frames * self.dt)
         excess = np.where(rate > self.threshold, rate - self.threshold, 0.0)
-        for k, (i, j) in enumerate(zip(starts, stops)):
-            if (int(i), int(min(j, len(path.edges)))) in tried:
-                excess[k] = 0.0
+        for i, j in tried:  # starts are 0, 1, ...: stretch k starts at edge k
+            if i < len(starts) and min(stops[i], len(path.edges)) == j:
+                excess[i] = 0.0
         if not excess.any():
             return None
         k = int(rng.choice(len(starts), p=excess / excess.sum()))
@@ -420,12 +434,7 @@ class _Problem:
                     )
             if node < len(self.nodes) - 1:
                 n = self.clip_frames[node]
-                played = self.features[self.nodes[node] : self.nodes[node] + n]
-                if self.rotating:
-                    played = played @ rotation.T
-                lo, hi = t0 + frames, min(t0 + frames + n, self.needed)
-                source = np.arange(self.nodes[node], self.nodes[node] + max(hi - lo, 0))
-                error = self.frame_error(played[: len(source)], source, lo).sum()
+                error = self._clip_error(node, t0 + frames, rotation)
                 stack.append(
                     (
                         node + 1,
@@ -440,6 +449,24 @@ class _Problem:
         if best is None:
             return None
         return self.path(path.start, [*path.edges[:i], *best, *path.edges[j:]])
+
+    def _clip_error(self, node: int, t: int, rotation) -> float:
+        """frame_error summed over clip `node` played from output frame t, turned by `rotation`;
+        remembered when the graph does not turn (searches meet the same clip at the same time
+        again and again)."""
+        key = (node, t)
+        if not self.rotating and key in self._clip_errors:
+            return self._clip_errors[key]
+        n = self.clip_frames[node]
+        played = self.features[self.nodes[node] : self.nodes[node] + n]
+        if self.rotating:
+            played = played @ rotation.T
+        hi = min(t + n, self.needed)
+        source = np.arange(self.nodes[node], self.nodes[node] + max(hi - t, 0))
+        error = float(self.frame_error(played[: len(source)], source, t).sum())
+        if not self.rotating:
+            self._clip_errors[key] = error
+        return error
 
     def _rest_cost(self, path, t, suffix, turn) -> float:
         """Constraint cost of the unchanged rest of the path played from output frame t (turned by
