@@ -60,6 +60,13 @@ def read_scene(path, *, n_jobs: int | None = None) -> Scene:
             file = path.parent / entry[kinds[0]]
             templates.append((GraphLayers if kinds[0] == "layers" else MotionGraph).load(file))
             counts.append(entry["count"])
+        for table, keys in (("arrows", {"position", "keyframes"}), ("self_movement", {"object", "keyframes"})):
+            for k, entry in enumerate(data.get(table, [])):
+                unknown = sorted(set(entry) - keys)
+                if unknown:
+                    raise ValidationError(
+                        f"[[{table}]] {k}: unknown key {unknown[0]!r}; expected {', '.join(sorted(keys))}"
+                    )
         constraints = []
         if data.get("arrows"):
             constraints.append(FlowField(arrows=[Arrow(**arrow) for arrow in data["arrows"]]))

@@ -379,3 +379,69 @@ def test_meshes_from_the_command_line(capsys, tmp_path, shared_data):
     code, _, err = run(capsys, "segment", fox, "--clip", "Trot", "-o", str(tmp_path / "x.npz"))
     assert code == 1 and "no clip 'Trot'" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "x.npz").exists()
+
+
+SCENE = """
+duration = 8
+seed = 2
+region = [[0, 0], [30, 0], [30, 20], [0, 20]]
+headings = "aligned"
+
+[[templates]]
+layers = "plants.npz"
+count = 6
+
+[[arrows]]
+position = [15, 10]
+keyframes = [[0, [0.8, 0]], [4, [0.8, 0]], [6, [0, 0.8]]]
+"""
+
+
+@pytest.fixture(scope="module")
+def plants_file(tmp_path_factory):
+    from flockkit.testing import inputs
+
+    motion, labels, wind = inputs.plants()
+    segmentation = flockkit.Segmentation(labels=labels, n_parts=2)
+    path = tmp_path_factory.mktemp("scene") / "plants.npz"
+    flockkit.build_layers(motion, segmentation=segmentation, features=wind, seed=1, transitions_per_minute=400).save(
+        path
+    )
+    return path
+
+
+def test_scene_writes_the_animation_its_usd_and_a_top_view(capsys, plants_file):
+    folder = plants_file.parent
+    (folder / "scene.toml").write_text(SCENE)
+    code, out, _ = run(capsys, "scene", str(folder / "scene.toml"), "-o", str(folder / "out"), "--quiet")
+    assert code == 0 and "6 objects, 80 frames" in out and "after" in out
+    animation = flockkit.SceneAnimation.load(folder / "out" / "scene.npz")
+    assert animation.placement.n_objects == 6 and animation.n_frames == 80
+    from pxr import Usd
+
+    stage = Usd.Stage.Open(str(folder / "out" / "scene.usda"))
+    assert len(stage.GetPseudoRoot().GetChild("Scene").GetChildren()) == 6
+    assert (folder / "out" / "scene.png").stat().st_size > 0
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        (SCENE.replace("duration = 8", ""), "missing 'duration'"),
+        ("colour = 'red'\n" + SCENE, "unknown entry 'colour'"),
+        (SCENE + "colour = 'red'\n", "[[arrows]] 0: unknown key 'colour'"),
+        (SCENE.replace("count = 6", "count = 0"), "counts[0]"),
+        (SCENE.replace("[4, [0.8, 0]], [6,", "[6, [0.8, 0]], [4,"), "must increase"),
+        (SCENE.replace("[0, [0.8, 0]], [4, [0.8, 0]], [6, [0, 0.8]]", "[0, [0, 0]]"), "zero length"),
+        (SCENE.replace("[30, 20], [0, 20]", "[0, 20], [30, 20]"), "simple polygon"),
+        (SCENE.replace("plants.npz", "nothere.npz"), "nothere.npz"),
+        (SCENE.replace("count = 6", "count = 5000"), "cover at least"),
+        ("duration = [\n", "not a TOML scene"),
+    ],
+)
+def test_bad_scenes_are_named_in_one_line_and_nothing_is_written(capsys, plants_file, text, message):
+    folder = plants_file.parent
+    (folder / "bad.toml").write_text(text)
+    code, _, err = run(capsys, "scene", str(folder / "bad.toml"), "-o", str(folder / "bad"), "--quiet")
+    assert code == 1 and message in err and len(err.strip().splitlines()) == 1, err
+    assert not (folder / "bad").exists()
