@@ -230,6 +230,11 @@ def _source(path: str, clip=None, fps=None):
     return flockkit.Motion.load(path)
 
 
+# Frames of the scene animation the CLI draws at most (frames are skipped evenly beyond): a
+# minute-long scene stays a GIF of about a megabyte, drawn in seconds.
+SCENE_GIF_FRAMES = 150
+
+
 def _cmd_scene(args) -> int:
     from .scene import read_scene
 
@@ -246,10 +251,11 @@ def _cmd_scene(args) -> int:
         animation.export(folder / "scene.usda")
         written.append(folder / "scene.usda")
     if not args.no_pictures:
-        from .viz import plot_scene
+        from .viz import animate_scene, plot_scene
 
         plot_scene(animation, folder / "scene.png")
-        written.append(folder / "scene.png")
+        animate_scene(animation, folder / "scene.gif", max_frames=SCENE_GIF_FRAMES, progress=not args.quiet)
+        written += [folder / "scene.png", folder / "scene.gif"]
     report = animation.report
     print(
         f"wrote {', '.join(str(p) for p in written)}: {animation.placement.n_objects} objects, "
@@ -623,9 +629,13 @@ def _import_arguments(parser) -> None:
 
 def _scene_arguments(parser) -> None:
     parser.add_argument("scene", help="scene file (.toml; see docs/concepts.md, scenes)")
-    parser.add_argument("-o", "--output", required=True, help="folder to write scene.npz, scene.usda, scene.png")
+    parser.add_argument(
+        "-o", "--output", required=True, help="folder to write scene.npz, scene.usda, scene.png, scene.gif"
+    )
     parser.add_argument("--no-usd", action="store_true", help="skip the USD export (needs flockkit[usd])")
-    parser.add_argument("--no-pictures", action="store_true", help="skip the top view (needs flockkit[viz])")
+    parser.add_argument(
+        "--no-pictures", action="store_true", help="skip the top view and animation (need flockkit[viz])"
+    )
     _scale_out(parser)
     _quiet(parser)
 

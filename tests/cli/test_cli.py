@@ -282,12 +282,17 @@ def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data
         "trace.png",
         "sticklebacks.png",
         "sticklebacks.gif",
+        "scene.png",
+        "scene.gif",
         "summary.json",
     }
     summary = json.loads((tmp_path / "demo" / "summary.json").read_text())
     assert summary["synthesized"]["seconds"] >= 120 and summary["synthesized"]["center of mass in the box"]
     assert min(summary["synthesized"]["share of the box crossed"]) > 0.6  # the box binds: the walk turns at its walls
     assert summary["sticklebacks"]["center kept in the video frame"]
+    least, median = summary["scene"]["share of frames heading within 30 degrees of the arrow (least, median)"]
+    assert median >= 0.8 and least >= 0.7, summary["scene"]
+    assert summary["scene"]["neighbours in step (before, after)"][1] <= 0.05
     assert max(summary["come-from-behind"]["residuals"]) <= 0.3 and summary["sticklebacks"]["transitions"] >= 3
     assert str((tmp_path / "demo").resolve()) in out
 
@@ -422,6 +427,9 @@ def test_scene_writes_the_animation_its_usd_and_a_top_view(capsys, plants_file):
     stage = Usd.Stage.Open(str(folder / "out" / "scene.usda"))
     assert len(stage.GetPseudoRoot().GetChild("Scene").GetChildren()) == 6
     assert (folder / "out" / "scene.png").stat().st_size > 0
+    from PIL import Image
+
+    assert Image.open(folder / "out" / "scene.gif").n_frames == 80
 
 
 @pytest.mark.parametrize(
