@@ -243,21 +243,13 @@ def animate(
     the scene's extent long, whatever its units (a capture in pixels too). `progress` shows a bar over the frames."""
     if not isinstance(motion, Motion):
         raise ValidationError(f"animate needs a flockkit.Motion; got {type(motion).__name__}")
-    path = _check_picture_path(path, ANIMATION_SUFFIXES, "animation")
+    path = _check_movie_path(path)
     regions = _named(regions)
-    suffix = path.suffix.lower()
-    fps = None if fps is None else number(fps, "animate: fps", minimum=0, strict=True)
     trail = number(trail, "animate: trail (seconds)", minimum=0)
     plt = _pyplot()
     from matplotlib import animation
 
-    if suffix == ".mp4" and not animation.FFMpegWriter.isAvailable():
-        raise MissingDependencyError("MP4 animations need ffmpeg on the PATH; write a .gif instead")
-    step = max(1, math.ceil((1.0 / motion.dt) / (fps or MAX_FPS) - 1e-9))
-    if max_frames is not None:
-        step = max(step, math.ceil(motion.n_frames / integer(max_frames, "animate: max_frames", minimum=1)))
-    frames = np.arange(0, motion.n_frames, step)
-    rate = fps or 1.0 / (motion.dt * step)
+    frames, rate = _timeline(motion.dt, motion.n_frames, fps, max_frames, "animate")
     xy, heading = motion.positions[..., :2], _unit(motion.velocities()[..., :2])
     low, high = _scene_bounds(xy, problem, obstacles, regions)
     keyed = problem is not None or bool(obstacles) or bool(regions)
@@ -284,9 +276,8 @@ def animate(
         label.set_text(f"t = {frame * motion.dt:.1f} s")
         return [arrows, label, *trails]
 
-    writer = animation.PillowWriter(fps=rate) if suffix == ".gif" else animation.FFMpegWriter(fps=rate)
     try:
-        _save_animation(animation.FuncAnimation(figure, draw, frames=frames, blit=False), path, writer, progress)
+        _save_animation(animation.FuncAnimation(figure, draw, frames=frames, blit=False), path, rate, progress)
     finally:
         plt.close(figure)
     return path
@@ -326,8 +317,33 @@ def _fit_view(ax, low, high) -> float:
     return float(max(high - low))
 
 
-def _save_animation(movie, path, writer, progress: bool) -> None:
-    """Write `movie` (a matplotlib animation) atomically, with a progress bar over its frames."""
+def _check_movie_path(path) -> Path:
+    """`path` checked as an animation's: a .gif, or an .mp4 where ffmpeg is on the PATH."""
+    path = _check_picture_path(path, ANIMATION_SUFFIXES, "animation")
+    if path.suffix.lower() == ".mp4":
+        from matplotlib import animation
+
+        if not animation.FFMpegWriter.isAvailable():
+            raise MissingDependencyError("MP4 animations need ffmpeg on the PATH; write a .gif instead")
+    return path
+
+
+def _timeline(dt: float, n_frames: int, fps, max_frames, what: str) -> tuple[np.ndarray, float]:
+    """(frames drawn, video frames per second): real time, `fps` (default 1 / dt capped at
+    MAX_FPS) by showing every k-th frame, and at most `max_frames` frames when given."""
+    fps = None if fps is None else number(fps, f"{what}: fps", minimum=0, strict=True)
+    step = max(1, math.ceil((1.0 / dt) / (fps or MAX_FPS) - 1e-9))
+    if max_frames is not None:
+        step = max(step, math.ceil(n_frames / integer(max_frames, f"{what}: max_frames", minimum=1)))
+    return np.arange(0, n_frames, step), fps or 1.0 / (dt * step)
+
+
+def _save_animation(movie, path, rate: float, progress: bool) -> None:
+    """Write `movie` (a matplotlib animation) atomically at `rate` frames per second (GIF through
+    Pillow, MP4 through ffmpeg), with a progress bar over its frames."""
+    from matplotlib import animation
+
+    writer = animation.PillowWriter(fps=rate) if path.suffix.lower() == ".gif" else animation.FFMpegWriter(fps=rate)
     with progress_bar(progress, unit="frame") as report, atomic_path(path) as tmp:
         callback = None if report is None else (lambda done, total: report(done + 1, total, f"drawing {path.name}"))
         movie.save(tmp, writer=writer, progress_callback=callback)
@@ -405,26 +421,20 @@ def plot_mesh(mesh, path=None, *, frame: int = 0, segmentation=None, axes=None, 
 
 def animate_mesh(mesh, path, *, segmentation=None, axes=None, fps=None, size=None, progress=False):
     """An animation of a mesh, drawn as plot_mesh draws a frame, in real time (as animate)."""
-    path = _check_picture_path(path, ANIMATION_SUFFIXES, "animation")
-    fps = None if fps is None else number(fps, "animate_mesh: fps", minimum=0, strict=True)
+    path = _check_movie_path(path)
+    frames, rate = _timeline(mesh.motion.dt, mesh.motion.n_frames, fps, None, "animate_mesh")
     figure, ax, draw = _mesh_drawing(mesh, segmentation, axes, size, title=mesh.name)
     plt = _pyplot()
     from matplotlib import animation
 
-    if path.suffix.lower() == ".mp4" and not animation.FFMpegWriter.isAvailable():
-        raise MissingDependencyError("MP4 animations need ffmpeg on the PATH; write a .gif instead")
-    step = max(1, math.ceil((1.0 / mesh.motion.dt) / (fps or MAX_FPS) - 1e-9))
-    frames = np.arange(0, mesh.motion.n_frames, step)
-    rate = fps or 1.0 / (mesh.motion.dt * step)
     label = ax.set_title("")
 
     def frame_and_time(frame):
         label.set_text(f"{mesh.name}, t = {frame * mesh.motion.dt:.1f} s")
         return [*draw(frame), label]
 
-    writer = animation.PillowWriter(fps=rate) if path.suffix.lower() == ".gif" else animation.FFMpegWriter(fps=rate)
     try:
-        _save_animation(animation.FuncAnimation(figure, frame_and_time, frames=frames, blit=False), path, writer,
+        _save_animation(animation.FuncAnimation(figure, frame_and_time, frames=frames, blit=False), path, rate,
                         progress)  # fmt: skip
     finally:
         plt.close(figure)
@@ -601,19 +611,13 @@ def animate_scene(animation, path, *, fps=None, size=None, max_frames=None, prog
     """A top-view animation of a SceneAnimation: every object's points (up to SCENE_POINTS of
     them, one colour per template) over the region, with the flow arrows turning as they are
     keyframed. Timing, `size`, `max_frames` and formats as for animate. Returns the path."""
-    path = _check_picture_path(path, ANIMATION_SUFFIXES, "animation")
-    fps = None if fps is None else number(fps, "animate_scene: fps", minimum=0, strict=True)
+    path = _check_movie_path(path)
+    frames, rate = _timeline(animation.dt, animation.n_frames, fps, max_frames, "animate_scene")
     plt = _pyplot()
     from matplotlib import animation as movies
 
     from .scene import FlowField
 
-    if path.suffix.lower() == ".mp4" and not movies.FFMpegWriter.isAvailable():
-        raise MissingDependencyError("MP4 animations need ffmpeg on the PATH; write a .gif instead")
-    step = max(1, math.ceil((1.0 / animation.dt) / (fps or MAX_FPS) - 1e-9))
-    if max_frames is not None:
-        step = max(step, math.ceil(animation.n_frames / integer(max_frames, "animate_scene: max_frames", minimum=1)))
-    frames = np.arange(0, animation.n_frames, step)
     xy, colours = [], []
     palette = plt.get_cmap("tab10")
     for motion, kind in zip(animation.motions, animation.placement.templates):
@@ -649,10 +653,8 @@ def animate_scene(animation, path, *, fps=None, size=None, max_frames=None, prog
         label.set_text(f"{animation.placement.n_objects} objects, t = {when:.1f} s")
         return [dots, quiver, label]
 
-    rate = fps or 1.0 / (animation.dt * step)
-    writer = movies.PillowWriter(fps=rate) if path.suffix.lower() == ".gif" else movies.FFMpegWriter(fps=rate)
     try:
-        _save_animation(movies.FuncAnimation(figure, draw, frames=len(frames), blit=False), path, writer, progress)
+        _save_animation(movies.FuncAnimation(figure, draw, frames=len(frames), blit=False), path, rate, progress)
     finally:
         plt.close(figure)
     return path
