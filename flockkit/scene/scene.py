@@ -41,6 +41,8 @@ MAX_IN_STEP = 0.05
 # Same-template objects whose positions are closer than this many footprint diagonals are
 # neighbours (they are seen together).
 NEIGHBOUR_DIAGONALS = 3.0
+# Batches a scene's walks are split into when walked in parallel (each carries the scene once).
+WALK_BATCHES = 16
 # Tries per object when placing before the region is declared too small.
 PLACEMENT_TRIES = 200
 
@@ -291,46 +293,63 @@ class Scene:
     def synthesize(self, progress: bool = False) -> SceneAnimation:
         """Place, walk every object's parts after its targets, then de-synchronise neighbours."""
         from .._progress import progress_bar
-        from ..parallel import imap
 
         placement = self.place()
         targets = self.targets(placement)
         seeds = np.random.SeedSequence(self.seed).spawn(2)[1].spawn(placement.n_objects)
-        calls = [
-            (self, i, placement, targets[i], int(seeds[i].generate_state(1)[0]), None)
-            for i in range(placement.n_objects)
-        ]
-        walks = []
         with progress_bar(progress, unit="object") as report:
-            for walk in imap(_walk_object, calls, n_jobs=self.n_jobs):
-                walks.append(walk)
-                if report:
-                    report(len(walks), len(calls), "walks")
-        animation = SceneAnimation(
-            templates=self.templates, placement=placement, walks=walks, dt=self.frame_time,
-            n_frames=self.n_frames, constraints=self.constraints, region=self.region,
-        )  # fmt: skip
-        frames, neighbours = animation.source_frames(), animation.neighbours()
-        before = _largest_in_step(frames, neighbours)
-        walks = self._desynchronise(animation, targets, seeds, frames, neighbours)
+            items = [(i, targets[i], int(seeds[i].generate_state(1)[0]), None) for i in range(placement.n_objects)]
+            walks = self._walk_many(placement, items, report, "walks")
+            animation = SceneAnimation(
+                templates=self.templates, placement=placement, walks=walks, dt=self.frame_time,
+                n_frames=self.n_frames, constraints=self.constraints, region=self.region,
+            )  # fmt: skip
+            frames, neighbours = animation.source_frames(), animation.neighbours()
+            before = _largest_in_step(frames, neighbours)
+            walks = self._desynchronise(animation, targets, seeds, frames, neighbours, report)
         report = {"in_step_before": before, "in_step_after": _largest_in_step(frames, neighbours)}
         return attrs.evolve(animation, walks=walks, report=report)
 
-    def _desynchronise(self, animation, targets, seeds, frames, near) -> list:
+    def _walk_many(self, placement, items, report, stage: str) -> list:
+        """The walks of `items` ((object, target, seed, avoid) each), in order: in a few batches
+        through joblib (the scene and its templates travel once a batch, not once an object)."""
+        from ..parallel import imap, jobs
+
+        count = 1 if jobs(self.n_jobs) == 1 else min(len(items), WALK_BATCHES)
+        batches = [items[k::count] for k in range(count)]  # interleaved: neighbours' costs spread evenly
+        done = [None] * len(items)
+        for k, walks in enumerate(imap(_walk_batch, [(self, placement, b) for b in batches], n_jobs=self.n_jobs)):
+            done[k::count] = walks
+            if report:
+                report(sum(len(b) for b in batches[: k + 1]), len(items), stage)
+        return done
+
+    def _desynchronise(self, animation, targets, seeds, frames, near, report) -> list:
         """Section 6.2: each object in step with a neighbour on more than MAX_IN_STEP of its frames
-        is walked again avoiding its neighbours' frames (in object order, so each sees the
-        others' latest walks); `frames` (animation.source_frames()) is kept up to date."""
+        is walked again avoiding its neighbours' frames. They go in rounds of objects no two of
+        which are neighbours (a greedy colouring, in object order), each round in parallel and
+        seeing the walks of the rounds before; `frames` (animation.source_frames()) is kept up
+        to date."""
         walks = list(animation.walks)
-        for i, neighbours in enumerate(near):
-            if not len(neighbours) or _in_step(frames[i], frames[neighbours]).max() <= MAX_IN_STEP:
-                continue
-            walks[i] = _walk_object(
-                self, i, animation.placement, targets[i], int(seeds[i].generate_state(2)[1]), frames[neighbours]
-            )
-            frames[i] = SceneAnimation._frames_of(
-                self.templates[animation.placement.templates[i]], walks[i], self.n_frames
-            )
+        need = [i for i, nb in enumerate(near) if len(nb) and _in_step(frames[i], frames[nb]).max() > MAX_IN_STEP]
+        colour = {}
+        for i in need:
+            taken = {colour[j] for j in near[i] if j in colour}
+            colour[i] = next(c for c in range(len(need) + 1) if c not in taken)
+        for c in range(max(colour.values(), default=-1) + 1):
+            members = [i for i in need if colour[i] == c]
+            items = [(i, targets[i], int(seeds[i].generate_state(2)[1]), frames[near[i]]) for i in members]
+            for i, walk in zip(members, self._walk_many(animation.placement, items, report, f"out of step ({c + 1})")):
+                walks[i] = walk
+                frames[i] = SceneAnimation._frames_of(
+                    self.templates[animation.placement.templates[i]], walk, self.n_frames
+                )
         return walks
+
+
+def _walk_batch(scene: Scene, placement: Placement, items) -> list:
+    """_walk_object for each (object, target, seed, avoid) of `items`."""
+    return [_walk_object(scene, i, placement, target, seed, avoid) for i, target, seed, avoid in items]
 
 
 def _walk_object(scene: Scene, i: int, placement: Placement, target: np.ndarray, seed: int, avoid):

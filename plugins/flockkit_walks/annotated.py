@@ -119,8 +119,8 @@ class AnnotatedWalk:
     budget : int
         Replacement attempts at most (default 20; 0: the initial pass alone).
     reach : float
-        A target farther than this from every arrow the source has (length units of arrows) is
-        refused before walking, with how close the source gets (default 0.5).
+        A target farther than this from every arrow the graph plays (its kept source frames;
+        length units of arrows) is refused before walking, with how close it gets (default 0.5).
     start : int, optional
         Start node (None: a random node among those that meet the first target).
     avoid : int array (K, F), optional
@@ -291,13 +291,15 @@ class _Problem:
                 return np.linalg.norm(vectors, axis=1, keepdims=True)
             return np.column_stack([np.linalg.norm(vectors[:, :2], axis=1), vectors[:, 2]])
 
-        closest, index = cKDTree(shape(self.features)).query(shape(self.track))
+        first = int(self.nodes[0])  # the frames the graph plays: its kept part of the source
+        closest, index = cKDTree(shape(self.features[first : int(self.nodes[-1]) + 1])).query(shape(self.track))
+        index = index + first
         worst = int(np.argmax(closest))
         if closest[worst] > reach:
             raise ValidationError(
                 f"walk parameter target: at t={worst * self.dt:g} s the target arrow "
-                f"{np.round(self.track[worst], 3).tolist()} is {closest[worst]:.3g} from the closest arrow the source "
-                f"has ({np.round(self.features[index[worst]], 3).tolist()} at source frame {int(index[worst])}); "
+                f"{np.round(self.track[worst], 3).tolist()} is {closest[worst]:.3g} from the closest arrow the graph "
+                f"plays ({np.round(self.features[index[worst]], 3).tolist()} at source frame {int(index[worst])}); "
                 f"the walk can come no closer than that (reach is {reach:g})"
             )
 

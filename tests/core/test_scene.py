@@ -158,7 +158,7 @@ def test_bad_scenes_get_named_errors():
         flockkit.Scene(templates=[plants()], region=MEADOW, counts=[0], duration=5)
     upward = FlowField(arrows=[Arrow(position=[0, 0, 0], keyframes=[(0, [0, 0, 1.0])])])
     scene = flockkit.Scene(templates=[plants()], region=MEADOW, counts=[1], duration=5, constraints=[upward])
-    with pytest.raises(ValidationError, match="closest arrow the source has"):
+    with pytest.raises(ValidationError, match="closest arrow the graph plays"):
         scene.synthesize()
     with pytest.raises(ValidationError, match="SelfMovement.object"):
         flockkit.Scene(templates=[plants()], region=MEADOW, counts=[1], duration=5,

@@ -31,7 +31,7 @@ def test_a_target_the_source_cannot_approach_is_refused_in_numbers():
     motion, labels, wind = inputs.plants()
     graph = flockkit.build_graph(motion, builder="windowed", seed=0)
     strategy = flockkit.get("walk", "annotated", target=[(0.0, [0.0, 0.0, 1.0])], features=wind)
-    with pytest.raises(ValidationError, match=r"is 1.\d+ from the closest arrow the source has"):
+    with pytest.raises(ValidationError, match=r"is 1.\d+ from the closest arrow the graph plays"):
         strategy.walk(graph, np.random.default_rng(0), 5.0)
 
 
@@ -42,3 +42,15 @@ def test_bad_parameters_are_named():
         flockkit.get("walk", "annotated", target=[(1.0, [1.0, 0.0]), (0.0, [0.0, 1.0])])
     with pytest.raises(ValidationError, match="alpha"):
         flockkit.get("walk", "annotated", target=[(0.0, [1.0, 0.0])], alpha=-1)
+
+
+def test_arrows_only_in_frames_the_graph_dropped_are_out_of_reach():
+    graph = inputs.graph()  # keeps source frames 0..113 of 121
+    arrows = flockkit.Features.from_motion(graph.motion).vectors.copy()
+    arrows[graph.nodes[-1] + 1 :] = [0.0, 0.1]  # a slow drift, only where no walk can go
+    features = flockkit.Features(vectors=arrows, dt=graph.motion.dt)
+    strategy = flockkit.get("walk", "annotated", target=[(0.0, [0.0, 0.1])], features=features, reach=0.3)
+    with pytest.raises(
+        ValidationError, match=r"closest arrow the graph plays .* at source frame (\d{1,2}|10\d|11[0-3])\)"
+    ):
+        strategy.walk(graph, np.random.default_rng(0), 5.0)
