@@ -118,9 +118,9 @@ def parts(*, dims: int = 3, seconds: float = 6.0, dt: float = 0.1) -> tuple[Moti
     return Motion(positions=positions, dt=dt), truth
 
 
-def plants(*, dt: float = 0.1, seconds: float = 24.0, points: int = 8):
+def plants(*, dt: float = 0.1, seconds: float = 24.0, points: int = 8, rates=(1.7, 2.9)):
     """Two stalks of `points` points each that lean with a wind turning a quarter turn every 6 s
-    (+x, +y, -x, -y: held 4 s, turning 2 s), each fluttering at its own rate: (Motion (T, 2 *
+    (+x, +y, -x, -y: held 4 s, turning 2 s), each fluttering at its own rate (`rates`, Hz): (Motion (T, 2 *
     points, 3), the stalk of each point (0 or 1), Features: the wind, length 0.8). A source whose
     arrows point every way, for scenes and annotated walks."""
     from ..features import Features
@@ -135,7 +135,7 @@ def plants(*, dt: float = 0.1, seconds: float = 24.0, points: int = 8):
     t = np.arange(n_frames) * dt
     height = np.linspace(0.0, 1.0, points)
     positions = np.empty((n_frames, 2 * points, 3))
-    for stalk, (x, rate) in enumerate(((-0.3, 1.7), (0.3, 2.9))):
+    for stalk, (x, rate) in enumerate(zip((-0.3, 0.3), rates)):
         lean = wind.vectors[:, :, None] * (0.5 + 0.1 * np.sin(2 * np.pi * rate * t))[:, None, None]  # (T, 2, 1)
         bend = height**2  # the tip bends most
         rows = slice(stalk * points, (stalk + 1) * points)
