@@ -173,14 +173,6 @@ class _Path:
 
     def __init__(self, problem, start, edges):
         self.problem, self.start, self.edges = problem, start, edges
-        graph = problem.graph
-        self.frames, rotations = flockkit.synthesis.played_frames(graph, flockkit.Walk(start=start, edges=edges))
-        self.played = problem.features[self.frames]
-        if problem.rotating:
-            self.played = np.einsum("fij,fj->fi", rotations, self.played)
-        n = min(len(self.frames), problem.needed)
-        self.error = np.zeros(problem.needed)
-        self.error[:n] = problem.frame_error(self.played[:n], self.frames[:n], 0)
         # per edge: the node it leaves, its first output frame, clip frames since the last transition, rotation
         self.node, self.at, self.since, self.rotation = [], [], [], []
         state = (start, 0, math.inf, np.eye(problem.dims))
@@ -190,6 +182,21 @@ class _Path:
             state = problem.step(state, edge)
         for column, value in zip((self.node, self.at, self.since, self.rotation), state):
             column.append(value)
+        # the source frame each output frame plays, as synthesis plays it (flockkit.synthesis.played_frames):
+        # each clip's frames but its last, then the frame of the node the walk ends at
+        clips = [k for k, (kind, _) in enumerate(edges) if kind == "clip"]
+        lengths = problem.clip_frames[[edges[k][1] for k in clips]]
+        first = problem.nodes[[edges[k][1] for k in clips]]
+        self.frames = np.append(np.repeat(first - np.cumsum(lengths) + lengths, lengths) + np.arange(lengths.sum()),
+                                problem.nodes[self.node[-1]])  # fmt: skip
+        self.played = problem.features[self.frames]
+        if problem.rotating:
+            rotations = np.stack([self.rotation[k] for k in clips] + [self.rotation[-1]])
+            turned = np.append(np.repeat(np.arange(len(clips)), lengths), len(clips))
+            self.played = np.einsum("fij,fj->fi", rotations[turned], self.played)
+        n = min(len(self.frames), problem.needed)
+        self.error = np.zeros(problem.needed)
+        self.error[:n] = problem.frame_error(self.played[:n], self.frames[:n], 0)
         # each edge's share of C_T + beta N_T, and its running sum (what pick weighs stretches by)
         self.edge_cost = np.array(
             [problem.trans_cost[i] + problem.beta if k == "transition" else 0.0 for k, i in edges]
@@ -254,7 +261,12 @@ class _Problem:
         self.straight = np.minimum(self.nodes[:, None] + np.arange(self.ahead), self.nodes[-1])
         self._check_reach(strategy.reach)
         self.start = strategy.start
-        self._clip_errors = {}
+        # runs of output frames with one target arrow: an error over a window inside a run does
+        # not depend on where in the run it lies, so it is remembered per run (see _window)
+        change = np.any(np.diff(self.track, axis=0) != 0, axis=1)
+        self.run = np.concatenate([[0], np.cumsum(change)])
+        self.run_end = np.concatenate([np.flatnonzero(change), [self.needed - 1]])[self.run]
+        self._remembered = {}
         # per node: its edges (the clip first, if any), the node each looks ahead from (a clip
         # goes straight on from here) and its fixed cost (C_T + beta for a transition)
         self.choices = []
@@ -355,12 +367,16 @@ class _Problem:
                 rng.random(1)  # the draw a choice among several would take, so the stream stays the same
                 edge = edges_here[0]
             else:
-                rotations = None
                 if self.rotating:
                     rotations = np.stack(
                         [rotation if kind == "clip" else rotation @ self.trans_rotation[i] for kind, i in edges_here]
                     )
-                cost = self.alpha * self._lookahead(targets, rotations, t) + fixed
+                    cost = self.alpha * self._lookahead(targets, rotations, t) + fixed
+                else:  # remembered per node, choices and target window, as clip errors are
+                    key = ("ahead", node, len(edges_here), self._window(t, self.ahead))
+                    if key not in self._remembered:
+                        self._remembered[key] = self.alpha * self._lookahead(targets, None, t) + fixed
+                    cost = self._remembered[key].copy()
                 cost += 1e-3 * rng.random(len(cost))  # ties broken at random, so duplicates differ
                 edge = edges_here[int(np.argmin(cost))]
             edges.append(edge)
@@ -452,13 +468,21 @@ class _Problem:
             return None
         return self.path(path.start, [*path.edges[:i], *best, *path.edges[j:]])
 
+    def _window(self, t: int, n: int) -> tuple:
+        """A key for an error over output frames t..t+n-1 (cut at the duration): the target's
+        run when the window lies in one and no walk is avoided, else the frame itself."""
+        m = min(n, self.needed - t)
+        if self.avoid is None and m > 0 and t + m - 1 <= self.run_end[t]:
+            return ("run", int(self.run[t]), m)
+        return ("at", t, m)
+
     def _clip_error(self, node: int, t: int, rotation) -> float:
         """frame_error summed over clip `node` played from output frame t, turned by `rotation`;
-        remembered when the graph does not turn (searches meet the same clip at the same time
-        again and again)."""
-        key = (node, t)
-        if not self.rotating and key in self._clip_errors:
-            return self._clip_errors[key]
+        remembered when the graph does not turn (searches meet the same clip under the same
+        target again and again)."""
+        key = ("clip", node, self._window(t, self.clip_frames[node]))
+        if not self.rotating and key in self._remembered:
+            return self._remembered[key]
         n = self.clip_frames[node]
         played = self.features[self.nodes[node] : self.nodes[node] + n]
         if self.rotating:
@@ -467,7 +491,7 @@ class _Problem:
         source = np.arange(self.nodes[node], self.nodes[node] + max(hi - t, 0))
         error = float(self.frame_error(played[: len(source)], source, t).sum())
         if not self.rotating:
-            self._clip_errors[key] = error
+            self._remembered[key] = error
         return error
 
     def _rest_cost(self, path, t, suffix, turn) -> float:
