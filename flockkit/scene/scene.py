@@ -41,8 +41,10 @@ MAX_IN_STEP = 0.05
 # Same-template objects whose positions are closer than this many footprint diagonals are
 # neighbours (they are seen together).
 NEIGHBOUR_DIAGONALS = 3.0
-# Batches a scene's walks are split into when walked in parallel (each carries the scene once).
+# Batches a scene's walks are split into when walked in parallel (each carries the scene once),
+# and the fewest objects a batch has.
 WALK_BATCHES = 16
+MIN_BATCH = 8
 # Tries per object when placing before the region is declared too small.
 PLACEMENT_TRIES = 200
 
@@ -199,6 +201,7 @@ class Scene:
         them, with the areas in numbers."""
         rng = np.random.default_rng(np.random.SeedSequence(self.seed).spawn(2)[0])
         feet = [_footprint(t)[1] for t in self.templates]
+        aligned = [self._held_arrows(k) if self.headings == "aligned" else None for k in range(len(self.templates))]
         kinds = np.repeat(np.arange(len(self.templates)), self.counts)
         rng.shuffle(kinds)
         low, high = self.region.bounds()
@@ -220,7 +223,7 @@ class Scene:
                     point = None
                     break
                 point = rng.uniform(low + diagonal, high - diagonal)
-                heading = self._heading(kind, i, point, rng)
+                heading = self._heading(aligned[kind], i, point, rng)
                 half = _turned_half(feet[kind] * scale, heading)
                 corners = point + half * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]])
                 if not np.all(self.region.contains(corners)):
@@ -240,19 +243,24 @@ class Scene:
                 )
         return Placement(positions=positions, headings=headings, scales=scales, templates=kinds)
 
-    def _heading(self, kind: int, i: int, point, rng) -> float:
+    def _held_arrows(self, kind: int) -> tuple[np.ndarray, np.ndarray]:
+        """Template `kind`'s arrows and, for each, how many of them lie within 0.1 of it (how
+        long the source holds it): what aligned headings choose among."""
+        arrows = _template_features(self.templates[kind], kind, needed=False).vectors
+        return arrows, (np.linalg.norm(arrows[:, None] - arrows[None], axis=2) < 0.1).sum(axis=1)
+
+    def _heading(self, held_arrows, i: int, point, rng) -> float:
         heading = rng.uniform(0, 2 * np.pi)
         if self.headings == "random":
             return heading
         first = self._world(point[None], np.zeros(1), [i])[0, 0]
-        arrows = _template_features(self.templates[kind], kind, needed=False).vectors
+        arrows, held = held_arrows
         flat = np.linalg.norm(arrows[:, :2], axis=1)
         near = np.flatnonzero(
             np.abs(flat - np.linalg.norm(first[:2])) <= 0.05 + np.abs(flat - np.linalg.norm(first[:2])).min()
         )
         # prefer arrows the source holds for a while over ones it passes through
-        held = (np.linalg.norm(arrows[near, None] - arrows[None], axis=2) < 0.1).sum(axis=1)
-        near = near[held >= 0.5 * held.max()]
+        near = near[held[near] >= 0.5 * held[near].max()]
         pick = arrows[near[int(rng.integers(len(near)))]]
         if np.linalg.norm(first[:2]) < 1e-12 or np.linalg.norm(pick[:2]) < 1e-12:
             return heading
@@ -311,14 +319,18 @@ class Scene:
         return attrs.evolve(animation, walks=walks, report=report)
 
     def _walk_many(self, placement, items, report, stage: str) -> list:
-        """The walks of `items` ((object, target, seed, avoid) each), in order: in a few batches
-        through joblib (the scene and its templates travel once a batch, not once an object)."""
+        """The walks of `items` ((object, target, seed, avoid) each), in order: in up to
+        WALK_BATCHES batches of at least MIN_BATCH objects through joblib (the scene and its
+        templates travel once a batch, not once an object), or here when there are too few."""
         from ..parallel import imap, jobs
 
-        count = 1 if jobs(self.n_jobs) == 1 else min(len(items), WALK_BATCHES)
+        # a batch carries the templates (megabytes): too few objects in it and the trip costs more
+        # than the walks; then they are walked here
+        count = 1 if jobs(self.n_jobs) == 1 else max(1, min(WALK_BATCHES, len(items) // MIN_BATCH))
         batches = [items[k::count] for k in range(count)]  # interleaved: neighbours' costs spread evenly
         done = [None] * len(items)
-        for k, walks in enumerate(imap(_walk_batch, [(self, placement, b) for b in batches], n_jobs=self.n_jobs)):
+        calls = [(self, placement, b) for b in batches]
+        for k, walks in enumerate(imap(_walk_batch, calls, n_jobs=self.n_jobs if count > 1 else 1)):
             done[k::count] = walks
             if report:
                 report(sum(len(b) for b in batches[: k + 1]), len(items), stage)

@@ -173,15 +173,25 @@ class _Path:
 
     def __init__(self, problem, start, edges):
         self.problem, self.start, self.edges = problem, start, edges
-        # per edge: the node it leaves, its first output frame, clip frames since the last transition, rotation
-        self.node, self.at, self.since, self.rotation = [], [], [], []
-        state = (start, 0, math.inf, np.eye(problem.dims))
-        for edge in edges:
-            for column, value in zip((self.node, self.at, self.since, self.rotation), state):
-                column.append(value)
-            state = problem.step(state, edge)
-        for column, value in zip((self.node, self.at, self.since, self.rotation), state):
-            column.append(value)
+        # per edge, and after the last: the node it leaves, its first output frame, clip frames
+        # since the last transition and the rotation (as problem.step goes, all at once)
+        is_transition = np.array([kind == "transition" for kind, _ in edges], dtype=bool)
+        index = np.array([i for _, i in edges], dtype=np.int64)
+        played = np.where(is_transition, 0, problem.clip_frames[np.where(is_transition, 0, index)])
+        at = np.concatenate([[0], np.cumsum(played)])
+        taken = np.concatenate([[0], np.cumsum(is_transition)])  # transitions before each edge
+        after = at[1:][is_transition]  # output frame at each transition taken
+        since = np.where(taken > 0, at - after[np.maximum(taken - 1, 0)] if len(after) else 0, np.inf)
+        last = problem.graph.edge_target(edges[-1]) if edges else start
+        sources = index.copy()
+        sources[is_transition] = problem.trans_source[index[is_transition]]
+        self.node, self.at, self.since = [*sources.tolist(), last], at.tolist(), since.tolist()
+        if problem.rotating:
+            self.rotation = [np.eye(problem.dims)]
+            for edge in edges:
+                self.rotation.append(problem.step((0, 0, 0, self.rotation[-1]), edge)[3])
+        else:
+            self.rotation = [np.eye(problem.dims)] * (len(edges) + 1)
         # the source frame each output frame plays, as synthesis plays it (flockkit.synthesis.played_frames):
         # each clip's frames but its last, then the frame of the node the walk ends at
         clips = [k for k, (kind, _) in enumerate(edges) if kind == "clip"]
@@ -244,6 +254,7 @@ class _Problem:
         self.clip_frames = tables.clip_stop - tables.clip_start
         self.trans_rotation = tables.rotation
         self.trans_target = tables.transition_target
+        self.trans_source = tables.transition_source
         self.rotating = len(graph.transitions) > 0 and not np.allclose(tables.rotation, np.eye(self.dims))
         distance = np.array([t.alignment.distance for t in graph.transitions])
         ordinary = [t.alignment.distance for t in graph.transitions if not t.is_turn]
@@ -376,9 +387,8 @@ class _Problem:
                     key = ("ahead", node, len(edges_here), self._window(t, self.ahead))
                     if key not in self._remembered:
                         self._remembered[key] = self.alpha * self._lookahead(targets, None, t) + fixed
-                    cost = self._remembered[key].copy()
-                cost += 1e-3 * rng.random(len(cost))  # ties broken at random, so duplicates differ
-                edge = edges_here[int(np.argmin(cost))]
+                    cost = self._remembered[key]
+                edge = edges_here[int(np.argmin(cost + 1e-3 * rng.random(len(cost))))]  # ties at random
             edges.append(edge)
             state = self.step(state, edge)
         return self.path(start, edges)
