@@ -307,19 +307,20 @@ class Scene:
         seeds = np.random.SeedSequence(self.seed).spawn(2)[1].spawn(placement.n_objects)
         with progress_bar(progress, unit="object") as report:
             items = [(i, targets[i], int(seeds[i].generate_state(1)[0]), None) for i in range(placement.n_objects)]
-            walks = self._walk_many(placement, items, report, "walks")
+            walks, played = self._walk_many(placement, items, report, "walks")
             animation = SceneAnimation(
                 templates=self.templates, placement=placement, walks=walks, dt=self.frame_time,
                 n_frames=self.n_frames, constraints=self.constraints, region=self.region,
             )  # fmt: skip
-            frames, neighbours = animation.source_frames(), animation.neighbours()
+            frames, neighbours = _stacked(played, self.n_frames), animation.neighbours()
             before = _largest_in_step(frames, neighbours)
             walks = self._desynchronise(animation, targets, seeds, frames, neighbours, report)
         report = {"in_step_before": before, "in_step_after": _largest_in_step(frames, neighbours)}
         return attrs.evolve(animation, walks=walks, report=report)
 
-    def _walk_many(self, placement, items, report, stage: str) -> list:
-        """The walks of `items` ((object, target, seed, avoid) each), in order: in up to
+    def _walk_many(self, placement, items, report, stage: str) -> tuple[list, list]:
+        """The walks of `items` ((object, target, seed, avoid) each) and the source frames they
+        play ((parts, frames) each), in order: in up to
         WALK_BATCHES batches of at least MIN_BATCH objects through joblib (the scene and its
         templates travel once a batch, not once an object), or here when there are too few."""
         from ..parallel import imap, jobs
@@ -328,13 +329,13 @@ class Scene:
         # than the walks; then they are walked here
         count = 1 if jobs(self.n_jobs) == 1 else max(1, min(WALK_BATCHES, len(items) // MIN_BATCH))
         batches = [items[k::count] for k in range(count)]  # interleaved: neighbours' costs spread evenly
-        done = [None] * len(items)
+        walks, played = [None] * len(items), [None] * len(items)
         calls = [(self, placement, b) for b in batches]
-        for k, walks in enumerate(imap(_walk_batch, calls, n_jobs=self.n_jobs if count > 1 else 1)):
-            done[k::count] = walks
+        for k, results in enumerate(imap(_walk_batch, calls, n_jobs=self.n_jobs if count > 1 else 1)):
+            walks[k::count], played[k::count] = zip(*results)
             if report:
                 report(sum(len(b) for b in batches[: k + 1]), len(items), stage)
-        return done
+        return walks, played
 
     def _desynchronise(self, animation, targets, seeds, frames, near, report) -> list:
         """Section 6.2: each object in step with a neighbour on more than MAX_IN_STEP of its frames
@@ -351,17 +352,31 @@ class Scene:
         for c in range(max(colour.values(), default=-1) + 1):
             members = [i for i in need if colour[i] == c]
             items = [(i, targets[i], int(seeds[i].generate_state(2)[1]), frames[near[i]]) for i in members]
-            for i, walk in zip(members, self._walk_many(animation.placement, items, report, f"out of step ({c + 1})")):
+            again, played = self._walk_many(animation.placement, items, report, f"out of step ({c + 1})")
+            for i, walk, own in zip(members, again, played):
                 walks[i] = walk
-                frames[i] = SceneAnimation._frames_of(
-                    self.templates[animation.placement.templates[i]], walk, self.n_frames
-                )
+                frames[i, : len(own)] = own
         return walks
 
 
 def _walk_batch(scene: Scene, placement: Placement, items) -> list:
-    """_walk_object for each (object, target, seed, avoid) of `items`."""
-    return [_walk_object(scene, i, placement, target, seed, avoid) for i, target, seed, avoid in items]
+    """(walk, the source frames it plays) of _walk_object for each (object, target, seed, avoid)
+    of `items` (the frames made here, on the worker, where the walk is)."""
+    results = []
+    for i, target, seed, avoid in items:
+        walk = _walk_object(scene, i, placement, target, seed, avoid)
+        template = scene.templates[placement.templates[i]]
+        results.append((walk, SceneAnimation._frames_of(template, walk, scene.n_frames)))
+    return results
+
+
+def _stacked(played, n_frames: int) -> np.ndarray:
+    """(objects, parts, frames) of each object's (parts, frames) source frames, -1 where an
+    object has fewer parts than the most."""
+    frames = np.full((len(played), max(len(own) for own in played), n_frames), -1, dtype=np.int64)
+    for i, own in enumerate(played):
+        frames[i, : len(own)] = own
+    return frames
 
 
 def _walk_object(scene: Scene, i: int, placement: Placement, target: np.ndarray, seed: int, avoid):
@@ -509,12 +524,13 @@ class SceneAnimation:
     def source_frames(self) -> np.ndarray:
         """(objects, parts, frames): the source frame each object's part plays at each output
         frame (-1 for parts an object's template does not have)."""
-        parts = max(len(_parts(t)[0]) for t in self.templates)
-        frames = np.full((self.placement.n_objects, parts, self.n_frames), -1, dtype=np.int64)
-        for i, walk in enumerate(self.walks):
-            own = self._frames_of(self.templates[self.placement.templates[i]], walk, self.n_frames)
-            frames[i, : len(own)] = own
-        return frames
+        return _stacked(
+            [
+                self._frames_of(self.templates[kind], walk, self.n_frames)
+                for kind, walk in zip(self.placement.templates, self.walks)
+            ],
+            self.n_frames,
+        )
 
     def bounding_boxes(self) -> np.ndarray:
         """(objects, 2, 2): the (low, high) corners in x, y of each object's placed footprint."""
