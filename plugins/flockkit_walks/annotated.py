@@ -21,6 +21,7 @@ the threshold, no replacement helps, or `budget` attempts are spent.
 from __future__ import annotations
 
 import math
+import weakref
 
 import attrs
 import numpy as np
@@ -231,6 +232,63 @@ class _Path:
         return {"E": energy, "C_T": self.c_t, "C_C": c_c, "N_T": self.n_t, "in_step_frames": in_step}
 
 
+class _Shared:
+    """What every annotated walk of one graph needs (with one beta), made once: edge tables,
+    each node's choices, and errors remembered under constant targets."""
+
+    REMEMBERED = 200_000  # entries per arrows and weights before the memo starts afresh
+
+    def __init__(self, graph, beta: float):
+        tables = graph.tables
+        dims = graph.motion.dims
+        self.nodes = np.asarray(graph.nodes)
+        self.clip_frames = tables.clip_stop - tables.clip_start
+        self.trans_rotation = tables.rotation
+        self.trans_target = tables.transition_target
+        self.trans_source = tables.transition_source
+        self.rotating = len(graph.transitions) > 0 and not np.allclose(tables.rotation, np.eye(dims))
+        distance = np.array([t.alignment.distance for t in graph.transitions])
+        ordinary = [t.alignment.distance for t in graph.transitions if not t.is_turn]
+        scale = float(np.median(ordinary)) if ordinary else 0.0
+        self.trans_cost = distance / scale if scale > 0 else np.zeros(len(distance))
+        self.longest = int(tables.transition_blend.max()) if len(graph.transitions) else 0
+        self.out = [[] for _ in self.nodes]
+        for index, t in enumerate(graph.transitions):
+            self.out[t.source].append(index)
+        # per node: its edges (the clip first, if any), the node each looks ahead from (a clip
+        # goes straight on from here) and its fixed cost (C_T + beta for a transition)
+        self.choices = []
+        for node, out in enumerate(self.out):
+            clip = [("clip", node)] if node < len(self.nodes) - 1 else []
+            edges = clip + [("transition", i) for i in out]
+            targets = np.array([node] * len(clip) + [int(self.trans_target[i]) for i in out], dtype=np.int64)
+            fixed = np.array([0.0] * len(clip) + [self.trans_cost[i] + beta for i in out])
+            self.choices.append((edges, targets, fixed))
+        self._memos = {}
+
+    def remembered(self, features: np.ndarray, alpha: float) -> dict:
+        """The memo of errors under constant targets for these source arrows and alpha."""
+        key = (features.tobytes(), alpha)
+        memo = self._memos.setdefault(key, {})
+        if len(memo) > self.REMEMBERED:
+            memo.clear()
+        return memo
+
+
+_SHARED = {}  # id(graph) -> (weak reference to the graph, {beta: _Shared}), dropped with the graph
+
+
+def _shared(graph, beta: float) -> _Shared:
+    entry = _SHARED.get(id(graph))
+    if entry is None or entry[0]() is not graph:
+        entry = _SHARED[id(graph)] = (weakref.ref(graph), {})
+        weakref.finalize(graph, _SHARED.pop, id(graph), None)
+    by_beta = entry[1]
+    if beta not in by_beta:
+        by_beta[beta] = _Shared(graph, beta)
+    return by_beta[beta]
+
+
 class _Problem:
     """One graph, one source feature track and one target track: what both passes need."""
 
@@ -254,21 +312,19 @@ class _Problem:
             )
         self.features = _pad(np.asarray(features.vectors), self.dims, "features")
         self.track = _pad(_track(strategy.target, np.arange(self.needed) * self.dt), self.dims, "target")
-        tables = graph.tables
-        self.nodes = np.asarray(graph.nodes)
-        self.clip_frames = tables.clip_stop - tables.clip_start
-        self.trans_rotation = tables.rotation
-        self.trans_target = tables.transition_target
-        self.trans_source = tables.transition_source
-        self.rotating = len(graph.transitions) > 0 and not np.allclose(tables.rotation, np.eye(self.dims))
-        distance = np.array([t.alignment.distance for t in graph.transitions])
-        ordinary = [t.alignment.distance for t in graph.transitions if not t.is_turn]
-        scale = float(np.median(ordinary)) if ordinary else 0.0
-        self.trans_cost = distance / scale if scale > 0 else np.zeros(len(distance))
-        self.longest = int(tables.transition_blend.max()) if len(graph.transitions) else 0
-        self.out = [[] for _ in self.nodes]
-        for index, t in enumerate(graph.transitions):
-            self.out[t.source].append(index)
+        shared = _shared(graph, self.beta)
+        self.nodes, self.clip_frames, self.trans_cost, self.longest = (
+            shared.nodes,
+            shared.clip_frames,
+            shared.trans_cost,
+            shared.longest,
+        )
+        self.trans_rotation, self.trans_target, self.trans_source = (
+            shared.trans_rotation,
+            shared.trans_target,
+            shared.trans_source,
+        )
+        self.rotating, self.out, self.choices = shared.rotating, shared.out, shared.choices
         self.segment_frames = max(2, round(strategy.segment / self.dt))
         self.threshold = strategy.threshold
         # frames played straight on from each node over the next two seconds or the longest clip
@@ -281,21 +337,16 @@ class _Problem:
         self._check_reach(strategy.reach)
         self.start = strategy.start
         # runs of output frames with one target arrow: an error over a window inside a run does
-        # not depend on where in the run it lies, so it is remembered per run (see _window)
+        # not depend on where in the run it lies, so it is remembered per target arrow (see _memo)
         change = np.any(np.diff(self.track, axis=0) != 0, axis=1)
         self.run = np.concatenate([[0], np.cumsum(change)])
         self.run_end = np.concatenate([np.flatnonzero(change), [self.needed - 1]])[self.run]
-        self._remembered = {}
-        # per node: its edges (the clip first, if any), the node each looks ahead from (a clip
-        # goes straight on from here) and its fixed cost (C_T + beta for a transition)
-        self.choices = []
-        for node, out in enumerate(self.out):
-            clip = [("clip", node)] if node < len(self.nodes) - 1 else []
-            edges = clip + [("transition", i) for i in out]
-            targets = np.array([node] * len(clip) + [int(self.trans_target[i]) for i in out], dtype=np.int64)
-            fixed = np.array([0.0] * len(clip) + [self.trans_cost[i] + self.beta for i in out])
-            self.choices.append((edges, targets, fixed))
         self.avoid, self.in_step = strategy.avoid, strategy.in_step
+        # errors over windows of one target arrow are the same for every walk of this graph with
+        # these arrows and weights: remembered across walks (a scene's duplicates share them);
+        # windows where the target changes, or walks that avoid others, are remembered per walk
+        self._per_walk = {}
+        self._per_run = shared.remembered(self.features, self.alpha) if self.avoid is None else {}
         if self.avoid is not None and self.avoid.shape[1] < self.needed:
             raise ValidationError(
                 f"walk parameter avoid covers {self.avoid.shape[1]} frames; the walk needs {self.needed}"
@@ -392,10 +443,11 @@ class _Problem:
                     )
                     cost = self.alpha * self._lookahead(targets, rotations, t) + fixed
                 else:  # remembered per node, choices and target window, as clip errors are
-                    key = ("ahead", node, len(edges_here), self._window(t, self.ahead))
-                    if key not in self._remembered:
-                        self._remembered[key] = self.alpha * self._lookahead(targets, None, t) + fixed
-                    cost = self._remembered[key]
+                    memo, window = self._memo(t, self.ahead)
+                    key = ("ahead", node, len(edges_here), window)
+                    if key not in memo:
+                        memo[key] = self.alpha * self._lookahead(targets, None, t) + fixed
+                    cost = memo[key]
                 edge = edges_here[int(np.argmin(cost + self.noise * rng.random(len(cost))))]
             edges.append(edge)
             state = self.step(state, edge)
@@ -486,21 +538,23 @@ class _Problem:
             return None
         return self.path(path.start, [*path.edges[:i], *best, *path.edges[j:]])
 
-    def _window(self, t: int, n: int) -> tuple:
-        """A key for an error over output frames t..t+n-1 (cut at the duration): the target's
-        run when the window lies in one and no walk is avoided, else the frame itself."""
+    def _memo(self, t: int, n: int) -> tuple[dict, tuple]:
+        """Where to remember an error over output frames t..t+n-1 (cut at the duration), and
+        under what: the target arrow itself when it holds over the window and no walk is
+        avoided (shared across walks), else the frame (this walk's)."""
         m = min(n, self.needed - t)
         if self.avoid is None and m > 0 and t + m - 1 <= self.run_end[t]:
-            return ("run", int(self.run[t]), m)
-        return ("at", t, m)
+            return self._per_run, (self.track[t].tobytes(), m)
+        return self._per_walk, (t, m)
 
     def _clip_error(self, node: int, t: int, rotation) -> float:
         """frame_error summed over clip `node` played from output frame t, turned by `rotation`;
         remembered when the graph does not turn (searches meet the same clip under the same
         target again and again)."""
-        key = ("clip", node, self._window(t, self.clip_frames[node]))
-        if not self.rotating and key in self._remembered:
-            return self._remembered[key]
+        memo, window = self._memo(t, self.clip_frames[node])
+        key = ("clip", node, window)
+        if not self.rotating and key in memo:
+            return memo[key]
         n = self.clip_frames[node]
         played = self.features[self.nodes[node] : self.nodes[node] + n]
         if self.rotating:
@@ -509,7 +563,7 @@ class _Problem:
         source = np.arange(self.nodes[node], self.nodes[node] + max(hi - t, 0))
         error = float(self.frame_error(played[: len(source)], source, t).sum())
         if not self.rotating:
-            self._remembered[key] = error
+            memo[key] = error
         return error
 
     def _rest_cost(self, path, t, suffix, turn) -> float:
