@@ -2,6 +2,9 @@
 de-synchronised neighbours, continuity, files and bad input."""
 
 import functools
+import json
+import os
+import subprocess
 
 import numpy as np
 import pytest
@@ -163,3 +166,44 @@ def test_bad_scenes_get_named_errors():
     with pytest.raises(ValidationError, match="SelfMovement.object"):
         flockkit.Scene(templates=[plants()], region=MEADOW, counts=[1], duration=5,
                        constraints=[SelfMovement(object=3, keyframes=[(0, [1, 0])])])  # fmt: skip
+
+
+BLENDER_PYTHON = os.environ.get("FLOCKKIT_BPY_PYTHON")  # a Python with Blender's bpy module (pip install bpy)
+BLENDER_SCENE = """
+import json, sys, bpy
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.wm.usd_import(filepath=sys.argv[1], relative_path=False)
+scene, found = bpy.context.scene, {}
+objects = sorted((o for o in bpy.data.objects if o.name.startswith("Object")), key=lambda o: o.name)
+for frame in map(int, sys.argv[2:]):
+    scene.frame_set(frame)
+    graph = bpy.context.evaluated_depsgraph_get()
+    found[frame] = []
+    for o in objects:
+        evaluated = o.evaluated_get(graph)
+        found[frame].append([list(evaluated.matrix_world @ v.co) for v in evaluated.data.vertices])
+print("RESULT" + json.dumps({"fps": scene.render.fps / scene.render.fps_base, "names": [o.name for o in objects],
+                             "frames": found}))
+"""
+
+
+@pytest.mark.skipif(
+    not BLENDER_PYTHON, reason="set FLOCKKIT_BPY_PYTHON to a Python with bpy (pip install bpy) to import in Blender"
+)
+def test_blender_imports_a_scene_of_meshes_where_flockkit_put_them(tmp_path):
+    layers = plants()
+    ribbon = [[k, k + 1, k + 8] for k in range(7)] + [[k + 1, k + 9, k + 8] for k in range(7)]  # the stalks joined
+    meshes = flockkit.GraphLayers(source=layers.source, segmentation=layers.segmentation, graphs=layers.graphs,
+                                  faces=ribbon, features=layers.features)  # fmt: skip
+    scene = flockkit.Scene(templates=[meshes], region=MEADOW, counts=[3], duration=4, seed=5, headings="aligned")
+    animation = scene.synthesize()
+    animation.export(tmp_path / "scene.usdc")  # the default 24 fps time line: Blender's own
+    seconds = (0.0, 1.0, 2.5)
+    frames = [round(24 * t) for t in seconds]
+    done = subprocess.run([BLENDER_PYTHON, "-c", BLENDER_SCENE, str(tmp_path / "scene.usdc"), *map(str, frames)],
+                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    found = json.loads(done.stdout.split("RESULT", 1)[1])
+    assert found["fps"] == 24 and len(found["names"]) == 3
+    for t, frame in zip(seconds, frames):
+        for i, vertices in enumerate(found["frames"][str(frame)]):
+            np.testing.assert_allclose(vertices, animation.motions[i].positions[round(t / animation.dt)], atol=1e-4)
