@@ -353,9 +353,10 @@ class _Problem:
             )
 
     def in_step_frames(self, frames, t) -> np.ndarray:
-        """Whether each of `frames` (played from output frame t) is within one source frame of an
-        avoided walk's."""
-        others = self.avoid[:, t : t + len(frames)]
+        """Whether each of `frames` (..., m: source frames played from output frame t on) is
+        within one source frame of an avoided walk's."""
+        others = self.avoid[:, t : t + frames.shape[-1]]
+        others = others.reshape(len(others), *[1] * (frames.ndim - 1), -1)
         return np.any((others >= 0) & (np.abs(others - frames) <= 1), axis=0)
 
     def frame_error(self, played, frames, t) -> np.ndarray:
@@ -407,8 +408,7 @@ class _Problem:
             played = np.einsum("kij,khj->khi", rotations, played)
         error = np.linalg.norm(played - track, axis=2)
         if self.avoid is not None:
-            others = self.avoid[:, t : t + len(track)]
-            error += self.in_step * np.any((others[None] >= 0) & (np.abs(others[None] - frames[:, None]) <= 1), axis=1)
+            error += self.in_step * self.in_step_frames(frames, t)
         return error.sum(axis=1) * self.dt
 
     def initial(self, rng) -> _Path:
