@@ -207,3 +207,18 @@ def test_blender_imports_a_scene_of_meshes_where_flockkit_put_them(tmp_path):
     for t, frame in zip(seconds, frames):
         for i, vertices in enumerate(found["frames"][str(frame)]):
             np.testing.assert_allclose(vertices, animation.motions[i].positions[round(t / animation.dt)], atol=1e-4)
+
+
+def test_the_annotated_walk_walks_every_part_of_layers_after_one_target():
+    layers = plants()
+    target = [(0.0, [0.0, 0.8]), (10.0, [0.0, 0.8]), (12.0, [-0.8, 0.0])]
+    walk = flockkit.walk(layers, strategy="annotated", duration=20.0, seed=3, target=target, features=layers.features)
+    assert isinstance(walk, flockkit.LayeredWalk) and len(walk.walks) == 2
+    assert walk == flockkit.walk(layers, strategy="annotated", duration=20.0, seed=3, target=target,
+                                 features=layers.features)  # fmt: skip
+    wanted = flockkit.features.interpolate_arrows(np.array([0.0, 10.0, 12.0]), np.array([v for _, v in target]),
+                                                  np.arange(200) * 0.1)  # fmt: skip
+    for graph, part in zip(layers.graphs, walk.walks):
+        played = layers.features.vectors[flockkit.synthesis.played_frames(graph, part)[0][:200]]
+        assert np.mean(np.linalg.norm(played - wanted, axis=1) <= TOLERANCE) >= 0.9
+    assert flockkit.synthesize(layers, walk).n_frames >= 200
