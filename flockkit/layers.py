@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import attrs
 import numpy as np
+from scipy.sparse import coo_matrix, diags, identity
 
 from . import _npzfile
 from ._arrays import readonly_int
@@ -28,6 +29,11 @@ LAYERS_FORMAT_VERSION = 1
 # unsmoothed and 0.039 with 2 rings and 8 passes, which cost 30% more time).
 SEAM_RINGS = 1
 SEAM_PASSES = 4
+# Synthesis copies a part's points run by run when its runs of consecutive indices hold this many
+# points on average, and gathers them otherwise.
+MIN_RUN = 4
+# Seam smoothing works on blocks of frames of about this many bytes, small enough to stay in cache.
+SEAM_BLOCK_BYTES = 1 << 20
 
 
 def _labels(value) -> np.ndarray:
@@ -139,6 +145,7 @@ class GraphLayers:
     faces: np.ndarray | None = attrs.field(default=None, converter=_faces_or_none)
     features: Features | None = attrs.field(default=None)
     _seams: tuple | None = attrs.field(init=False, default=None, repr=False, eq=False)  # made by synthesis
+    _runs: list | None = attrs.field(init=False, default=None, repr=False, eq=False)  # made by synthesis
 
     def __attrs_post_init__(self):
         from .graph import MotionGraph
@@ -286,23 +293,38 @@ def synthesize_layers(layers: GraphLayers, walk: LayeredWalk) -> Motion:
         raise ValidationError(f"synthesizing {layers.n_parts} layers needs a LayeredWalk of {layers.n_parts} walks")
     played = [_positions(graph, w) for graph, w in zip(layers.graphs, walk.walks)]  # no Motion each: no copies
     frames = min(len(p) for p in played)
-    # parts side by side (slices copy fast), then one gather back to the source's order: faster
-    # than scattering each part into its points
-    side_by_side = np.empty((frames, layers.source.n_agents, layers.source.dims))
-    start = 0
-    for part in played:
-        side_by_side[:, start : start + part.shape[1]] = part[:frames]
-        start += part.shape[1]
-    order = np.concatenate(layers.segmentation.parts())
-    positions = np.take(side_by_side, np.argsort(order), axis=1)
-    if layers.faces is not None and layers.n_parts > 1:
+    positions = np.empty((frames, layers.source.n_agents, layers.source.dims))
+    for part, (points, shift, runs) in zip(played, _part_runs(layers)):
+        if runs is None:  # scattered points: one gather
+            positions[:, points] = part[:frames]
+            continue
+        for start, stop in runs:  # runs of consecutive points: slices copy far faster than a gather
+            positions[:, start:stop] = part[:frames, start - shift[start] : stop - shift[start]]
+    if layers.faces is not None and layers.n_parts > 1 and SEAM_PASSES > 0:
         positions = _smooth_seams(positions, layers)
     return Motion._adopt(positions, layers.source.dt)
 
 
-def _adjacency(n_points: int, faces: np.ndarray):
-    from scipy.sparse import coo_matrix
+def _part_runs(layers: GraphLayers):
+    """Per part: its points and, where they form runs of MIN_RUN consecutive indices on average,
+    each point's index minus its index in the part and the (start, stop) of each run; made once
+    per layers."""
+    if layers._runs is None:
+        found = []
+        for points in layers.segmentation.parts():
+            breaks = np.flatnonzero(np.diff(points) != 1) + 1
+            if len(breaks) + 1 > max(1, len(points) // MIN_RUN):
+                found.append((points, None, None))
+                continue
+            starts, stops = points[np.append(0, breaks)], points[np.append(breaks - 1, len(points) - 1)] + 1
+            shift = np.zeros(layers.source.n_agents, dtype=np.int64)
+            shift[points] = points - np.arange(len(points))
+            found.append((points, shift, list(zip(starts.tolist(), stops.tolist()))))
+        object.__setattr__(layers, "_runs", found)
+    return layers._runs
 
+
+def _adjacency(n_points: int, faces: np.ndarray):
     edges = face_edges(faces)
     rows, cols = np.concatenate([edges[:, 0], edges[:, 1]]), np.concatenate([edges[:, 1], edges[:, 0]])
     return coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_points, n_points)).tocsr()
@@ -316,8 +338,8 @@ def seam_points(layers: GraphLayers) -> np.ndarray:
 
 
 def _seam_operator(layers: GraphLayers):
-    """(involved points, rows of them smoothed, the mean-of-neighbors operator on those rows, the
-    involved points' mean positions): what seam smoothing needs, made once per layers."""
+    """(involved points, those smoothed, A, c): SEAM_PASSES passes of smoothing composed into one
+    affine map, smoothed positions = A @ involved positions + c; made once per layers."""
     adjacency = _adjacency(layers.source.n_agents, layers.faces)
     zone = np.zeros(layers.source.n_agents, dtype=bool)
     zone[seam_points(layers)] = True
@@ -325,22 +347,32 @@ def _seam_operator(layers: GraphLayers):
         zone |= (adjacency @ zone.astype(float)) > 0
     # the passes read the zone and its neighbors only: work on that block of points
     involved = np.flatnonzero(zone | ((adjacency @ zone.astype(float)) > 0))
-    inner = np.flatnonzero(zone[involved])
+    inner = zone[involved]
     degree = np.asarray(adjacency.sum(axis=1)).ravel()[involved]
-    local = adjacency[involved][:, involved]
-    mean_of_neighbors = local[inner].multiply(1.0 / np.maximum(degree[inner], 1)[:, None]).tocsr()
-    return involved, inner, mean_of_neighbors, layers.source.positions.mean(axis=0)[involved]
+    mean_of_neighbors = adjacency[involved][:, involved].multiply(1.0 / np.maximum(degree, 1)[:, None])
+    # one pass: inner rows take their neighbors' mean displacement, the others keep theirs
+    one_pass = (diags(inner.astype(float)) @ mean_of_neighbors + diags((~inner).astype(float))).tocsr()
+    composed = identity(len(involved), format="csr")
+    for _ in range(SEAM_PASSES):
+        composed = one_pass @ composed
+    composed = composed[np.flatnonzero(inner)].tocsr()
+    rest = layers.source.positions.mean(axis=0)[involved]
+    return SEAM_PASSES, involved, involved[inner], composed, rest[inner] - composed @ rest
 
 
 def _smooth_seams(positions: np.ndarray, layers: GraphLayers) -> np.ndarray:
-    if layers._seams is None:
+    if layers._seams is None or layers._seams[0] != SEAM_PASSES:
         object.__setattr__(layers, "_seams", _seam_operator(layers))
-    involved, inner, mean_of_neighbors, rest = layers._seams
+    _, involved, smoothed, composed, offset = layers._seams
     frames, _, d = positions.shape
-    displacement = (positions[:, involved] - rest).transpose(1, 0, 2).reshape(len(involved), frames * d)
-    for _ in range(SEAM_PASSES):
-        displacement[inner] = mean_of_neighbors @ displacement
-    positions[:, involved] = displacement.reshape(len(involved), frames, d).transpose(1, 0, 2) + rest
+    if len(smoothed) == 0:
+        return positions
+    block = max(1, SEAM_BLOCK_BYTES // (8 * d * len(involved)))
+    for start in range(0, frames, block):
+        chunk = positions[start : start + block]
+        n = len(chunk)
+        points = np.take(chunk, involved, axis=1).transpose(1, 0, 2).reshape(len(involved), n * d)
+        chunk[:, smoothed] = (composed @ points).reshape(len(smoothed), n, d).transpose(1, 0, 2) + offset
     return positions
 
 

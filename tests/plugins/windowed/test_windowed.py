@@ -108,3 +108,47 @@ def test_windowed_passes_the_builder_kit_on_a_boids_motion(monkeypatch):
     assert len(checks) >= 6
     for check in checks:
         check("windowed", WINDOWED)
+
+
+def test_layered_synthesis_equals_each_part_played_and_smoothed_pass_by_pass(monkeypatch):
+    """The fast assembly (runs of points copied as slices, scattered points gathered) and the
+    composed smoothing give what playing each part and smoothing pass by pass gives."""
+    import flockkit.layers
+
+    side, frames = 12, 90
+    u, v = np.meshgrid(np.arange(side) / side, np.arange(side) / side)
+    u, v = u.ravel(), v.ravel()
+    t = np.arange(frames)[:, None] / 30
+    wave = np.where(u < 0.5, np.sin(2 * np.pi * (t + u)), 0.5 * np.sin(2 * np.pi * (1.7 * t + v)))
+    positions = np.stack([np.broadcast_to(u, wave.shape), np.broadcast_to(v, wave.shape), 0.1 * wave], axis=2)
+    index = np.arange(side * side).reshape(side, side)
+    quads = np.stack([index[:-1, :-1], index[:-1, 1:], index[1:, 1:], index[1:, :-1]], axis=2).reshape(-1, 4)
+    mesh = flockkit.AnimatedMesh(motion=flockkit.Motion(positions=positions, dt=1 / 30), faces=quads)
+    # part 0: the left half (runs of 6), part 1: every other point of the right half (scattered)
+    labels = np.where(u < 0.5, 0, 1 + (np.arange(side * side) % 2))
+    layers = flockkit.build_layers(mesh, segmentation=flockkit.Segmentation(labels=labels, n_parts=3), seed=0)
+    walk = flockkit.walk(layers, duration=8, seed=3)
+    played = [flockkit.synthesize(graph, w).positions for graph, w in zip(layers.graphs, walk.walks)]
+    n = min(len(p) for p in played)
+    expected = np.empty((n, side * side, 3))
+    for points, part in zip(layers.segmentation.parts(), played):
+        expected[:, points] = part[:n]
+    monkeypatch.setattr(flockkit.layers, "SEAM_PASSES", 0)
+    np.testing.assert_array_equal(flockkit.synthesize(layers, walk).positions, expected)
+
+    monkeypatch.setattr(flockkit.layers, "SEAM_PASSES", 3)
+    neighbors = [set() for _ in range(side * side)]
+    for a, b in flockkit.mesh.face_edges(quads):
+        neighbors[a].add(b)
+        neighbors[b].add(a)
+    spanning = {p for face in quads if len(set(labels[face])) > 1 for p in face}
+    zone = spanning | {q for p in spanning for q in neighbors[p]}  # SEAM_RINGS = 1
+    rest = positions.mean(axis=0)
+    displacement = expected - rest
+    for _ in range(3):
+        before = displacement.copy()
+        for p in zone:
+            displacement[:, p] = before[:, sorted(neighbors[p])].mean(axis=1)
+    smoothed = flockkit.synthesize(layers, walk).positions
+    np.testing.assert_allclose(smoothed, displacement + rest, atol=1e-12)
+    assert not np.allclose(smoothed, expected)
