@@ -6,7 +6,7 @@ convenience layer (``simulate``, ``build_graph``, ``walk``, ``solve``), rigid mo
 (``flockkit.rigid``) and the checks plugins share (``flockkit.validate``).
 """
 
-from . import errors, graph, io, layers, parallel, rigid, scene, validate
+from . import crowd, errors, graph, io, layers, parallel, rigid, scene, validate
 from .constraints import (
     Ball,
     Box,
@@ -19,6 +19,7 @@ from .constraints import (
     fence,
 )
 from .convenience import build_graph, build_layers, random_flock, segment, simulate, walk
+from .crowd import Event, Pose, SkeletalClip, Skeleton
 from .features import Features
 from .graph import Clip, MotionGraph, Transition, Walk
 from .hookspecs import hookimpl
@@ -71,6 +72,10 @@ __all__ = [
     "build_layers",
     "Scene",
     "SceneAnimation",
+    "Skeleton",
+    "Pose",
+    "SkeletalClip",
+    "Event",
     "GraphLayers",
     "LayeredWalk",
     "walk",
@@ -78,6 +83,7 @@ __all__ = [
     "Solution",
     "Proposal",
     "random_flock",
+    "crowd",
     "errors",
     "graph",
     "io",

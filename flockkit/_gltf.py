@@ -17,6 +17,7 @@ from urllib.parse import unquote
 
 import numpy as np
 
+from . import rigid
 from .errors import FileFormatError, ValidationError
 
 _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
@@ -191,6 +192,15 @@ class Document:
 
     def pose(self, animation: dict, times: np.ndarray):
         """Local transforms (T, nodes, 4, 4) and morph weights {node: (T, W)} at `times`."""
+        translation, rotation, scale, weights, matrices, fixed = self.trs(animation, times)
+        trs = _compose_trs(translation, rotation, scale)
+        matrices[:, ~fixed] = trs[:, ~fixed]
+        return matrices, weights
+
+    def trs(self, animation: dict, times: np.ndarray):
+        """Every node's local translation (T, nodes, 3), rotation (T, nodes, 4), scale (T, nodes,
+        3) at `times`, morph weights {node: (T, W)}, and the nodes given as a matrix instead
+        (T, nodes, 4, 4) with a mask of them."""
         nodes = self.json.get("nodes", [])
         t = len(times)
         translation = np.zeros((t, len(nodes), 3))
@@ -226,9 +236,7 @@ class Document:
                 scale[:, node] = values
             elif path == "weights":
                 weights[node] = values
-        trs = _compose_trs(translation, rotation, scale)
-        matrices[:, ~fixed] = trs[:, ~fixed]
-        return matrices, weights
+        return translation, rotation, scale, weights, matrices, fixed
 
     def world(self, local: np.ndarray) -> np.ndarray:
         """World matrices (T, nodes, 4, 4) from local ones, through the hierarchy."""
@@ -286,7 +294,7 @@ def _sample(inputs, outputs, times, interpolation, path):
         result = ((2 * u3 - 3 * u2 + 1) * values[k] + (u3 - 2 * u2 + u) * dt * tangent_out[k]
                   + (-2 * u3 + 3 * u2) * values[k + 1] + (u3 - u2) * dt * tangent_in[k + 1])  # fmt: skip
     elif path == "rotation":
-        result = _slerp(values[k], values[k + 1], u)
+        result = rigid.slerp(values[k], values[k + 1], u)
     else:
         result = (1 - u) * values[k] + u * values[k + 1]
     if path == "rotation":
@@ -294,27 +302,9 @@ def _sample(inputs, outputs, times, interpolation, path):
     return result
 
 
-def _slerp(a, b, u):
-    """Spherical interpolation of unit quaternions (x, y, z, w), the shorter way round."""
-    dot = np.sum(a * b, axis=1, keepdims=True)
-    b = np.where(dot < 0, -b, b)
-    dot = np.abs(dot)
-    angle = np.arccos(np.clip(dot, -1.0, 1.0))
-    sine = np.sin(angle)
-    near = sine < 1e-9
-    wa = np.where(near, 1 - u, np.sin((1 - u) * angle) / np.where(near, 1, sine))
-    wb = np.where(near, u, np.sin(u * angle) / np.where(near, 1, sine))
-    return wa * a + wb * b
-
-
 def _compose_trs(translation, rotation, scale):
     """4x4 matrices T R S from (..., 3), (..., 4) quaternions (x, y, z, w) and (..., 3)."""
-    x, y, z, w = np.moveaxis(rotation / np.linalg.norm(rotation, axis=-1, keepdims=True), -1, 0)
-    r = np.stack([
-        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
-        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
-        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
-    ], -2)  # fmt: skip
+    r = rigid.quaternion_matrix(rotation / np.linalg.norm(rotation, axis=-1, keepdims=True))
     m = np.zeros(translation.shape[:-1] + (4, 4))
     m[..., :3, :3] = r * scale[..., None, :]
     m[..., :3, 3] = translation
@@ -413,3 +403,74 @@ def _skinned(document, skin, primitive, points, world):
         moved = np.einsum("tvij,tvj->tvi", m[..., :3, :], homogeneous)
         result += weights[None, :, slot, None] * moved
     return result
+
+
+def skin_clips(path, fps):
+    """Per distinct skin, the skeleton (its joints and their ancestors, which carry the model's
+    placement, parents first) and every animation that moves it, sampled at `fps` (None: each
+    animation's key rate): yields (skin name, names, parents, rest translations (J, 3), rest
+    rotations (J, 4), scales (J, 3), {clip name: (fps, rotations (T, J, 4), translations
+    (T, J, 3))})."""
+    document = Document(path)
+    skins = document.json.get("skins", [])
+    if not skins:
+        raise ValidationError(f"{path}: has no skin; skeletal clips need one")
+    if not document.json.get("animations"):
+        raise ValidationError(f"{path}: has no animation")
+    nodes = document.json.get("nodes", [])
+    parents = document.parents()
+    order = {node: k for k, node in enumerate(document.scene_nodes())}
+    seen = set()
+    for s, skin in enumerate(skins):
+        joints = frozenset(skin.get("joints", []))
+        if not joints or joints in seen:
+            continue
+        seen.add(joints)
+        members = set(joints)
+        for joint in joints:
+            while joint in parents:
+                joint = parents[joint]
+                members.add(joint)
+        if any(m not in order for m in members):
+            raise FileFormatError(f"{path}: skin {s} has joints outside the default scene")
+        chosen = sorted(members, key=order.__getitem__)
+        index = {node: k for k, node in enumerate(chosen)}
+        names = [nodes[n].get("name") or f"node {n}" for n in chosen]
+        names = [name if names.count(name) == 1 else f"{name} ({n})" for name, n in zip(names, chosen)]
+        zero = np.zeros(1)
+        translation, rotation, scale, _, matrices, fixed = document.trs({}, zero)
+        if fixed[chosen].any():
+            raise FileFormatError(
+                f"{path}: skin {s} has joints placed by a matrix; flockkit skeletons need translation/rotation/scale"
+            )
+        clips = {}
+        for name, animation in zip(document.clips(), document.json["animations"]):
+            targets = {c.get("target", {}).get("node") for c in animation.get("channels", [])}
+            if not targets & members:
+                continue
+            inputs = [
+                document.accessor(animation["samplers"][c["sampler"]]["input"])[:, 0]
+                for c in animation.get("channels", [])
+                if c.get("target", {}).get("node") in members
+            ]
+            duration = max(float(i.max()) for i in inputs if len(i))
+            rate = fps
+            if rate is None:
+                steps = np.concatenate([np.diff(i) for i in inputs])
+                steps = steps[steps > 1e-6]
+                rate = float(np.round(1.0 / np.median(steps), 3)) if len(steps) else 30.0
+            times = np.arange(int(round(duration * rate)) + 1) / rate
+            t, r, sc, _, _, _ = document.trs(animation, times)
+            if not np.allclose(sc[:, chosen], scale[0, chosen], atol=1e-6):
+                raise ValidationError(f"{path}: clip {name!r} animates joint scales, which flockkit clips do not hold")
+            clips[name] = (rate, r[:, chosen], t[:, chosen])
+        parent = np.array([index.get(parents.get(n), -1) for n in chosen])
+        yield (
+            skin.get("name") or f"skin {s}",
+            names,
+            parent,
+            translation[0, chosen],
+            rotation[0, chosen],
+            scale[0, chosen],
+            clips,
+        )

@@ -1,6 +1,7 @@
 """Files in and out: captured motion read into a Motion (wide and long text tables, (T, N, D)
 .npy arrays), animated meshes (glTF, OBJ sequences, USD; ``read_mesh_animation``, from
-``flockkit.mesh``), and motions exported for other tools (CSV, JSON, glTF, USD).
+``flockkit.mesh``), skeletal clips (glTF skins, BVH; ``read_clips``, from ``flockkit.crowd``),
+and motions exported for other tools (CSV, JSON, glTF, USD).
 
 Captures do not record their frame rate in a form these readers can trust, so every reader takes
 ``dt=`` (seconds per frame) or ``fps=``.
@@ -25,6 +26,7 @@ import numpy as np
 from . import validate
 from ._atomic import atomic_path
 from ._gltf import FLOAT, UNSIGNED_SHORT, glb_bytes
+from .crowd.skeleton import read_clips
 from .errors import FileFormatError, ValidationError
 from .mesh import list_clips, read_mesh_animation
 from .motion import Motion
@@ -36,6 +38,7 @@ __all__ = [
     "read_npy",
     "read_mesh_animation",
     "list_clips",
+    "read_clips",
     "fill_gaps",
     "export",
     "write_csv",

@@ -15,7 +15,20 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["apply", "rotate", "compose", "invert", "chain", "kabsch", "turn", "rotation"]
+__all__ = [
+    "apply",
+    "rotate",
+    "compose",
+    "invert",
+    "chain",
+    "kabsch",
+    "turn",
+    "rotation",
+    "quaternion_product",
+    "quaternion_matrix",
+    "slerp",
+    "nlerp",
+]
 
 
 def rotate(rotation, vectors) -> np.ndarray:
@@ -119,3 +132,58 @@ def _plane(angle) -> np.ndarray:
     """Rotations (..., 2, 2) by `angle` radians."""
     c, s = np.cos(angle), np.sin(angle)
     return np.stack([np.stack([c, -s], axis=-1), np.stack([s, c], axis=-1)], axis=-2)
+
+
+# Quaternions are (..., 4) arrays (x, y, z, w), as glTF and scipy.spatial.transform store them.
+
+
+def quaternion_product(a, b) -> np.ndarray:
+    """The Hamilton product a b (..., 4): the rotation that applies `b`, then `a`."""
+    ax, ay, az, aw = np.moveaxis(np.asarray(a), -1, 0)
+    bx, by, bz, bw = np.moveaxis(np.asarray(b), -1, 0)
+    return np.stack(
+        [
+            aw * bx + ax * bw + ay * bz - az * by,
+            aw * by - ax * bz + ay * bw + az * bx,
+            aw * bz + ax * by - ay * bx + az * bw,
+            aw * bw - ax * bx - ay * by - az * bz,
+        ],
+        axis=-1,
+    )
+
+
+def quaternion_matrix(q) -> np.ndarray:
+    """Rotation matrices (..., 3, 3) of unit quaternions (..., 4)."""
+    x, y, z, w = np.moveaxis(np.asarray(q), -1, 0)
+    return np.stack(
+        [
+            np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+            np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+            np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1),
+        ],
+        -2,
+    )
+
+
+def slerp(a, b, u) -> np.ndarray:
+    """Spherical interpolation of unit quaternions (..., 4) by `u` (broadcast against (..., 1)),
+    the shorter way round."""
+    a, b = np.asarray(a), np.asarray(b)
+    dot = np.sum(a * b, axis=-1, keepdims=True)
+    b = np.where(dot < 0, -b, b)
+    angle = np.arccos(np.clip(np.abs(dot), -1.0, 1.0))
+    sine = np.sin(angle)
+    near = sine < 1e-9
+    wa = np.where(near, 1 - u, np.sin((1 - u) * angle) / np.where(near, 1, sine))
+    wb = np.where(near, u, np.sin(u * angle) / np.where(near, 1, sine))
+    return wa * a + wb * b
+
+
+def nlerp(a, b, u) -> np.ndarray:
+    """Normalized linear interpolation of unit quaternions (..., 4), the shorter way round: on the
+    sphere like slerp, with the same ends, at a fraction of its cost (what game engines blend
+    poses with)."""
+    a, b = np.asarray(a), np.asarray(b)
+    b = np.where(np.sum(a * b, axis=-1, keepdims=True) < 0, -b, b)
+    mixed = a + u * (b - a)
+    return mixed / np.linalg.norm(mixed, axis=-1, keepdims=True)
