@@ -57,6 +57,11 @@ def flockkit_register_segmenters(registry):
     """Register segmenters (protocol ``flockkit.interfaces.Segmenter``)."""
 
 
+@hookspec
+def flockkit_register_controllers(registry):
+    """Register animation controllers (protocol ``flockkit.interfaces.Controller``)."""
+
+
 # kind -> hook name; one row per extension kind.
 HOOKS = {
     "behavior": "flockkit_register_behaviors",
@@ -66,4 +71,5 @@ HOOKS = {
     "proposal": "flockkit_register_proposals",
     "objective": "flockkit_register_objectives",
     "segmenter": "flockkit_register_segmenters",
+    "controller": "flockkit_register_controllers",
 }

@@ -28,6 +28,7 @@ __all__ = [
     "ProposalMove",
     "Objective",
     "Segmenter",
+    "Controller",
 ]
 
 
@@ -124,6 +125,7 @@ KIND_FIELDS: dict[str, frozenset] = {
     "proposal": frozenset(),
     "objective": frozenset(),
     "segmenter": frozenset(),
+    "controller": frozenset(),
 }
 
 
@@ -284,6 +286,30 @@ class Segmenter(Protocol):
     def segment(self, motion: Motion, rng: np.random.Generator): ...
 
 
+@runtime_checkable
+class Controller(Protocol):
+    """Produces the pose of one animation stream over time: the tree of operations of paper 003,
+    section 3.4 (a clip, a blend of two children, children combined by blend masks, ...).
+
+    Contract
+    --------
+    ``skeleton``
+        An attribute: the ``flockkit.Skeleton`` its poses are for.
+    ``pose(times)``
+        A ``flockkit.Pose`` of shape (len(times),) for `times` (a 1D array of seconds >= 0 on the
+        stream's own clock): unit rotations, finite translations, one per joint of ``skeleton``.
+        A function of time alone: the pose at t is the same whether asked alone, in a batch or
+        after other times. Negative or non-finite times raise ValidationError.
+    ``events(start, stop)``
+        The ``flockkit.Event`` s whose times fall in [start, stop) of the stream's clock, in order
+        of time; consecutive windows split them without loss or repeat.
+    """
+
+    def pose(self, times): ...
+
+    def events(self, start: float, stop: float): ...
+
+
 class _Guided(Protocol):
     def forward(self, initial, steps, rng, *, guide=None): ...
 
@@ -330,4 +356,5 @@ PROTOCOLS: dict[str, type] = {
     "proposal": ProposalMove,
     "objective": Objective,
     "segmenter": Segmenter,
+    "controller": Controller,
 }

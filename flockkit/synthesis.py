@@ -22,7 +22,7 @@ from .errors import ValidationError
 from .graph import MotionGraph, Walk
 from .motion import Motion
 
-__all__ = ["synthesize", "synthesize_many", "played_frames"]
+__all__ = ["synthesize", "synthesize_many", "played_frames", "blended_frames"]
 
 
 def _smoothstep(u: np.ndarray) -> np.ndarray:
@@ -120,20 +120,42 @@ def _runs(starts, lengths) -> np.ndarray:
     return np.arange(lengths.sum()) + np.repeat(np.asarray(starts) - offsets, lengths)
 
 
+def _blend_rows(blends, n_frames: int):
+    """Over each blend that starts within `n_frames` output frames: the output rows, the source
+    frames and segments of the motion blended out of, and the weight of the motion blended into
+    (a smoothstep from 0 to 1, exclusive)."""
+    out, first, old_segment, blend = blends
+    count = np.minimum(blend, n_frames - out)
+    within = _runs(np.ones_like(count), count)  # 1..count inside each blend
+    weight = _smoothstep(within / np.repeat(blend + 1, count))
+    return _runs(out, count), _runs(first, count), np.repeat(old_segment, count), weight
+
+
 def _positions(graph: MotionGraph, walk: Walk) -> np.ndarray:
     source = graph.motion.positions
     (output_start, source_start, length), rotations, translations, mappings, blends = _plan(graph, walk)
     segment = np.repeat(np.arange(len(length)), length)
     positions = _place(source, _runs(source_start, length), segment, rotations, translations, mappings)
-    out, first, old_segment, blend = blends
-    if len(out):
-        count = np.minimum(blend, len(positions) - out)
-        within = _runs(np.ones_like(count), count)  # 1..count inside each blend
-        weight = _smoothstep(within / np.repeat(blend + 1, count))[:, None, None]
-        old = _place(source, _runs(first, count), np.repeat(old_segment, count), rotations, translations, mappings)
-        rows = _runs(out, count)
+    if len(blends[0]):
+        rows, old_frames, old_segments, weight = _blend_rows(blends, len(positions))
+        old = _place(source, old_frames, old_segments, rotations, translations, mappings)
+        weight = weight[:, None, None]
         positions[rows] = (1 - weight) * old + weight * positions[rows]
     return positions
+
+
+def blended_frames(graph: MotionGraph, walk: Walk) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """What each output frame of `walk` plays, blends included: (the source frame blended into
+    (F,), the source frame blended out of (F,; the same frame outside blends), the weight of the
+    first (F,; 1 outside blends)), for playing other data of the source frames (a skeleton's
+    poses) as synthesize plays positions. Raises ValidationError as synthesize does."""
+    (_, source_start, length), _, _, _, blends = _plan(graph, walk)
+    frames = _runs(source_start, length)
+    previous, weight = frames.copy(), np.ones(len(frames))
+    if len(blends[0]):
+        rows, old_frames, _, blend_weight = _blend_rows(blends, len(frames))
+        previous[rows], weight[rows] = old_frames, blend_weight
+    return frames, previous, weight
 
 
 def played_frames(graph: MotionGraph, walk: Walk) -> tuple[np.ndarray, np.ndarray]:

@@ -16,7 +16,7 @@ from .. import rigid
 from .._arrays import readonly_float, readonly_int
 from ..errors import ValidationError
 
-__all__ = ["Pose", "Skeleton", "SkeletalClip", "Event", "read_clips", "unit_quaternions"]
+__all__ = ["Pose", "Skeleton", "SkeletalClip", "Event", "read_clips", "stream_times", "unit_quaternions"]
 
 # Quaternions whose length is this close to 1 are normalized (file formats store float32 and
 # round); farther ones are refused, since they are not rotations somebody meant.
@@ -41,6 +41,17 @@ def unit_quaternions(value, *, field: str) -> np.ndarray:
     q = q / length[..., None]
     q.setflags(write=False)
     return q
+
+
+def stream_times(times, *, owner: str) -> np.ndarray:
+    """`times` as a 1D float array of finite seconds >= 0 on a stream's clock (a number counts as
+    one time), or a ValidationError naming `owner`: what every controller's ``pose`` accepts."""
+    t = np.atleast_1d(np.asarray(times, dtype=np.float64))
+    if t.ndim != 1:
+        raise ValidationError(f"{owner}.pose needs a 1D array of times in seconds; got shape {t.shape}")
+    if not np.all(np.isfinite(t)) or (len(t) and t.min() < 0):
+        raise ValidationError(f"{owner}.pose needs finite times >= 0 (seconds on the stream's clock)")
+    return t
 
 
 def _finite(value, *, field: str, shape_tail: tuple) -> np.ndarray:

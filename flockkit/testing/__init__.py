@@ -36,7 +36,7 @@ import attrs
 from ..errors import ValidationError
 from ..interfaces import PROTOCOLS, capabilities
 from ..registry import interface_problems
-from . import behavior, builder, inputs, metric, objective, proposal, segmenter, strategies, walk
+from . import behavior, builder, controller, inputs, metric, objective, proposal, segmenter, strategies, walk
 from ._expect import PARTNER_KINDS, default_partner, skip_reason
 
 __all__ = [
@@ -68,6 +68,7 @@ _KIND_CHECKS = {
     "objective": objective.CHECKS,
     "proposal": proposal.CHECKS,
     "segmenter": segmenter.CHECKS,
+    "controller": controller.CHECKS,
 }
 
 

@@ -15,7 +15,7 @@ from .. import rigid
 from ..graph import MotionGraph
 from ..motion import Alignment, Motion
 
-__all__ = ["recording", "graph", "parts", "WOBBLE_PERIOD"]
+__all__ = ["recording", "graph", "parts", "plants", "walker", "WOBBLE_PERIOD"]
 
 # The group circles the origin once every LAP seconds while its members wobble about their places
 # every WOBBLE_PERIOD seconds. The two periods are incommensurate, so a configuration recurs up
@@ -144,3 +144,30 @@ def plants(*, dt: float = 0.1, seconds: float = 24.0, points: int = 8, rates=(1.
         positions[:, rows, 2] = height
     labels = np.repeat([0, 1], points)
     return Motion(positions=positions, dt=dt), labels, wind
+
+
+def walker(*, fps: float = 30.0, seconds: float = 2.0, swing: float = 30.0):
+    """A skeletal clip in closed form: a five-joint figure (hips, spine, head, two legs) whose legs
+    swing `swing` degrees each way once per `seconds`, its hips bobbing, first frame equal to the
+    last (it loops), with a "step" event at each quarter and three quarters of the cycle."""
+    from ..crowd.skeleton import Event, Pose, SkeletalClip, Skeleton
+
+    rest = Pose(
+        rotations=np.tile([0.0, 0.0, 0.0, 1.0], (5, 1)),
+        translations=[[0, 0, 1.0], [0, 0, 0.4], [0, 0, 0.4], [-0.15, 0, 0], [0.15, 0, 0]],
+    )
+    skeleton = Skeleton(names=["hips", "spine", "head", "leg.L", "leg.R"], parents=[-1, 0, 1, 0, 0], rest=rest)
+    phase = 2 * np.pi * np.arange(int(round(seconds * fps)) + 1) / (seconds * fps)
+    angle = np.radians(swing) * np.sin(phase)
+    rotations = np.tile([0.0, 0.0, 0.0, 1.0], (len(phase), 5, 1))
+    for joint, sign in ((3, 1.0), (4, -1.0)):  # legs swing about x, opposite ways
+        rotations[:, joint, 0] = np.sin(sign * angle / 2)
+        rotations[:, joint, 3] = np.cos(sign * angle / 2)
+    rotations[:, 1, 1] = np.sin(0.05 * np.sin(phase))  # the spine sways about y
+    rotations[:, 1, 3] = np.cos(0.05 * np.sin(phase))
+    hips = np.zeros((len(phase), 3))
+    hips[:, 2] = 1.0 + 0.03 * np.cos(2 * phase)
+    events = [Event(time=seconds / 4, name="step"), Event(time=3 * seconds / 4, name="step")]
+    return SkeletalClip(
+        skeleton=skeleton, fps=fps, rotations=rotations, translations=hips, events=events, name="walker"
+    )

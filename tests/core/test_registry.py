@@ -41,7 +41,16 @@ def test_builtins_come_from_entry_points():
 def test_available_and_get():
     assert "boids" in flockkit.available("behavior")
     everything = flockkit.available()
-    assert set(everything) == {"behavior", "metric", "builder", "walk", "proposal", "objective", "segmenter"}
+    assert set(everything) == {
+        "behavior",
+        "metric",
+        "builder",
+        "walk",
+        "proposal",
+        "objective",
+        "segmenter",
+        "controller",
+    }
     model = flockkit.get("behavior", "boids", cohesion_weight=2.0)
     assert model.cohesion_weight == 2.0
 

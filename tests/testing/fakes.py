@@ -650,3 +650,67 @@ BROKEN_BY_KIND["segmenter"] = {
     "check_inputs_unchanged": MutatesMotionSegment,
     "check_rejects_bad_motion": AcceptsArrays,
 }
+
+
+# -- controllers: the built-in clip player is the correct base ------------------------------
+
+from flockkit_controllers import ClipPlayer  # noqa: E402
+
+from flockkit.crowd import Pose  # noqa: E402
+from flockkit.testing import inputs  # noqa: E402
+
+
+class Walker(ClipPlayer):
+    def __init__(self, **params):
+        super().__init__(clip=inputs.walker(), **params)
+
+
+class NoEvents:
+    skeleton = inputs.walker().skeleton
+
+    def pose(self, times):
+        return Walker().pose(times)
+
+
+class DropsAJoint(Walker):
+    def pose(self, times):
+        pose = super().pose(times)
+        return Pose(rotations=pose.rotations[:, 1:], translations=pose.translations[:, 1:])
+
+
+class RemembersTheLastCall(Walker):
+    """Plays on from wherever the previous call stopped: a pose depends on the calls before."""
+
+    def pose(self, times):
+        offset = getattr(self, "_offset", 0.0)
+        object.__setattr__(self, "_offset", offset + 0.1)
+        return super().pose(np.asarray(times) + offset)
+
+
+class RepeatsEventsAtCuts(Walker):
+    """Reaches a quarter second back before each window: an event just before a cut comes twice."""
+
+    def events(self, start, stop):
+        return super().events(max(start - 0.25, 0.0), stop)
+
+
+class AcceptsNegativeTimes(Walker):
+    def pose(self, times):
+        return self.clip.sample(np.abs(np.atleast_1d(np.asarray(times, dtype=float))))
+
+
+class SortsTimesInPlace(Walker):
+    def pose(self, times):
+        if isinstance(times, np.ndarray):
+            times.sort()
+        return super().pose(times)
+
+
+BROKEN_BY_KIND["controller"] = {
+    "check_interface": type("NoPose", (), {"events": lambda self, a, b: []}),
+    "check_poses_fit_the_skeleton": DropsAJoint,
+    "check_pose_is_a_function_of_time": RemembersTheLastCall,
+    "check_events_split_by_windows": RepeatsEventsAtCuts,
+    "check_rejects_bad_times": AcceptsNegativeTimes,
+    "check_times_unchanged": SortsTimesInPlace,
+}

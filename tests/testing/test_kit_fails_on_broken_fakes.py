@@ -18,6 +18,7 @@ from .fakes import (
     RandomVelocity,
     RandomWalk,
     Retime,
+    Walker,
 )
 
 CASES = [(kind, name) for kind, fakes in BROKEN_BY_KIND.items() for name in sorted(fakes)]
@@ -42,6 +43,7 @@ def test_every_check_has_a_broken_fake(kind):
         ("objective", ComTerm()),
         ("proposal", Retime()),
         ("segmenter", IcaKmeans()),
+        ("controller", Walker()),
     ]
 )
 def test_correct_components_pass(component, check):

@@ -1,0 +1,264 @@
+"""The built-in controllers (paper 003, section 3.4): a clip, a blend of two children (Equation 2),
+children combined by blend masks (Equation 3), and an endless walk through a motion graph of a
+clip (paper 000's synthesis feeding the crowd)."""
+
+from __future__ import annotations
+
+import math
+
+import attrs
+import numpy as np
+
+import flockkit
+from flockkit import validate
+from flockkit.crowd import Event, Pose, SkeletalClip, stream_times
+from flockkit.errors import ValidationError
+
+# Skeletal poses are 3D.
+SKELETAL = flockkit.Capabilities(dims=(3,))
+
+
+def _clip(value):
+    if not isinstance(value, SkeletalClip):
+        raise ValidationError(f"controller parameter clip must be a flockkit.SkeletalClip; got {type(value).__name__}")
+    return value
+
+
+def _controller(value, field: str):
+    if not callable(getattr(value, "pose", None)) or not isinstance(
+        getattr(value, "skeleton", None), flockkit.Skeleton
+    ):
+        raise ValidationError(
+            f"controller parameter {field} must be a controller (with skeleton and pose); got {value!r}"
+        )
+    return value
+
+
+def _same_skeleton(children, owner: str):
+    first = children[0].skeleton
+    for k, child in enumerate(children[1:], 1):
+        if not first.matches(child.skeleton):
+            raise ValidationError(
+                f"{owner}: child {k}'s skeleton ({child.skeleton.n_joints} joints) does not match child 0's "
+                f"({first.n_joints} joints): a controller combines poses of one skeleton"
+            )
+
+
+@attrs.frozen(kw_only=True)
+class ClipPlayer:
+    """Plays `clip` from `start` seconds into it, at `rate` times its speed, looping (`loop`) or
+    holding its last pose."""
+
+    capabilities = SKELETAL
+
+    clip: SkeletalClip = attrs.field(converter=_clip)
+    loop: bool = validate.parameter("clip", default=True, kind="flag")
+    rate: float = validate.parameter("clip", default=1.0, minimum=0, strict=True)
+    start: float = validate.parameter("clip", default=0.0, minimum=0)
+
+    @property
+    def skeleton(self) -> flockkit.Skeleton:
+        return self.clip.skeleton
+
+    def _unwrapped(self, t):
+        return self.start + self.rate * np.asarray(t, dtype=np.float64)
+
+    def pose(self, times) -> Pose:
+        u = self._unwrapped(stream_times(times, owner="clip"))
+        period = self.clip.duration
+        return self.clip.sample(np.mod(u, period) if self.loop and period > 0 else u)
+
+    def events(self, start: float, stop: float) -> list[Event]:
+        low, high = float(self._unwrapped(start)), float(self._unwrapped(stop))
+        period = self.clip.duration
+        if not self.loop or period <= 0:
+            found = [(e.time, e.name) for e in self.clip.events if low <= e.time < high]
+        else:
+            found = []
+            for cycle in range(math.floor(low / period), math.floor(high / period) + 1):
+                for e in self.clip.events:
+                    at = cycle * period + e.time % period  # an event at the very end is the next loop's start
+                    if low <= at < high:
+                        found.append((at, e.name))
+        return [Event(time=(at - self.start) / self.rate, name=name) for at, name in sorted(found)]
+
+
+def _weight(value):
+    """A number in [0, 1], or (time, weight) keyframes: an array (K, 2), times increasing."""
+    array = np.asarray(value, dtype=np.float64) if not isinstance(value, bool) else None
+    if array is None or not (array.ndim == 0 or (array.ndim == 2 and array.shape[1] == 2 and len(array))):
+        raise ValidationError(f"blend parameter weight must be a number or (time, weight) keyframes; got {value!r}")
+    weights = array if array.ndim == 0 else array[:, 1]
+    if not np.all(np.isfinite(array)) or np.any(weights < 0) or np.any(weights > 1):
+        raise ValidationError(f"blend parameter weight must lie in [0, 1] (0: child a, 1: child b); got {value!r}")
+    if array.ndim == 2 and np.any(np.diff(array[:, 0]) <= 0):
+        raise ValidationError("blend parameter weight: keyframe times must increase")
+    array.setflags(write=False)
+    return array
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class Blend:
+    """Equation 2: a + (b - a) s with rotations on the sphere, `weight` s constant or keyframed
+    over the stream's time (linear between keys, held outside). Events: both children's."""
+
+    capabilities = SKELETAL
+
+    a = attrs.field(converter=lambda v: _controller(v, "a"))
+    b = attrs.field(converter=lambda v: _controller(v, "b"))
+    weight: np.ndarray = attrs.field(default=0.5, converter=_weight)
+
+    def __attrs_post_init__(self):
+        _same_skeleton([self.a, self.b], "blend")
+
+    @property
+    def skeleton(self) -> flockkit.Skeleton:
+        return self.a.skeleton
+
+    def pose(self, times) -> Pose:
+        t = stream_times(times, owner="blend")
+        if self.weight.ndim == 0:
+            s = np.full(len(t), float(self.weight))
+        else:
+            s = np.interp(t, self.weight[:, 0], self.weight[:, 1])
+        return Pose.blend(self.a.pose(t), self.b.pose(t), s)
+
+    def events(self, start: float, stop: float) -> list[Event]:
+        return sorted(self.a.events(start, stop) + self.b.events(start, stop), key=lambda e: e.time)
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class Mask:
+    """Equation 3: each joint's pose from the one child whose blend mask holds it. `masks` are
+    one per child: a (J,) array of 0/1, or a joint name (that joint and every joint below it);
+    together they must hold every joint exactly once. Events: every child's."""
+
+    capabilities = SKELETAL
+
+    children: tuple = attrs.field(converter=tuple)
+    masks: tuple = attrs.field(converter=tuple)
+    _owner: np.ndarray = attrs.field(init=False, repr=False)
+
+    def __attrs_post_init__(self):
+        if len(self.children) < 1 or len(self.children) != len(self.masks):
+            raise ValidationError(
+                f"mask needs one mask per child; got {len(self.children)} children and {len(self.masks)} masks"
+            )
+        for k, child in enumerate(self.children):
+            _controller(child, f"children[{k}]")
+        _same_skeleton(self.children, "mask")
+        skeleton = self.skeleton
+        held = np.stack([self._mask(m, k, skeleton) for k, m in enumerate(self.masks)])
+        counts = held.sum(axis=0)
+        if np.any(counts != 1):
+            j = int(np.argmax(counts != 1))
+            raise ValidationError(
+                f"mask: joint {skeleton.names[j]!r} is held by {int(counts[j])} masks; each joint must be held by one"
+            )
+        object.__setattr__(self, "_owner", np.argmax(held, axis=0))
+
+    @staticmethod
+    def _mask(value, k, skeleton) -> np.ndarray:
+        if isinstance(value, str):
+            return skeleton.descendants(value)
+        array = np.asarray(value)
+        if array.shape != (skeleton.n_joints,) or not np.isin(array, (0, 1)).all():
+            raise ValidationError(
+                f"mask parameter masks[{k}] must be {skeleton.n_joints} values of 0 or 1, or a joint name"
+            )
+        return array.astype(bool)
+
+    @property
+    def skeleton(self) -> flockkit.Skeleton:
+        return self.children[0].skeleton
+
+    def pose(self, times) -> Pose:
+        t = stream_times(times, owner="mask")
+        poses = [child.pose(t) for child in self.children]
+        rotations, translations = poses[0].rotations.copy(), poses[0].translations.copy()
+        for k, pose in enumerate(poses[1:], 1):
+            joints = self._owner == k
+            rotations[:, joints] = pose.rotations[:, joints]
+            translations[:, joints] = pose.translations[:, joints]
+        return Pose._adopt(rotations, translations)
+
+    def events(self, start: float, stop: float) -> list[Event]:
+        return sorted((e for child in self.children for e in child.events(start, stop)), key=lambda e: e.time)
+
+
+@attrs.define(kw_only=True, eq=False)
+class GraphWalk:
+    """An endless stream that never plays the same loop twice: a random walk through a motion
+    graph of `clip`, built by `builder` (default paper 002's ``windowed``, for motion in place)
+    over the joints' positions relative to the root, blended across each transition as
+    synthesize blends. The walk grows as later times are asked for, always the same under `seed`.
+    Events: the clip's, where the walk plays through them."""
+
+    capabilities = SKELETAL
+
+    clip: SkeletalClip = attrs.field(converter=_clip)
+    seed: int = validate.parameter("graph-walk", default=0, kind="integer", minimum=0)
+    builder: object = attrs.field(default="windowed")
+    graph: flockkit.MotionGraph = attrs.field(init=False, repr=False)
+    _walk: dict = attrs.field(init=False, repr=False, factory=dict)
+
+    def __attrs_post_init__(self):
+        positions = self.clip.skeleton.positions(Pose._adopt(self.clip.rotations, self.clip.translations))
+        roots = np.flatnonzero(self.clip.skeleton.parents < 0)
+        relative = positions - positions[:, roots].mean(axis=1, keepdims=True)
+        motion = flockkit.Motion(positions=relative, dt=1.0 / self.clip.fps)
+        self.graph = flockkit.build_graph(motion, builder=self.builder, seed=self.seed)
+        rng = np.random.default_rng(self.seed)
+        self._walk.update(rng=rng, node=int(rng.integers(len(self.graph.nodes))), edges=[], since=math.inf, frames=None)
+        self._walk["start"] = self._walk["node"]
+
+    @property
+    def skeleton(self) -> flockkit.Skeleton:
+        return self.clip.skeleton
+
+    def _frames(self, needed: int):
+        """(frames blended into, frames blended out of, weights) of at least `needed` output frames."""
+        state = self._walk
+        while state["frames"] is None or len(state["frames"][0]) < needed:
+            played = 0 if state["frames"] is None else len(state["frames"][0])
+            target = max(needed, 2 * played, int(self.clip.fps * 10))
+            while played < target:
+                options = self.graph.allowed_edges(state["node"], state["since"])
+                edge = options[int(state["rng"].integers(len(options)))]
+                state["edges"].append(edge)
+                frames = self.graph.clips[edge[1]].n_frames - 1 if edge[0] == "clip" else 0
+                played += frames
+                state["since"] = state["since"] + frames if edge[0] == "clip" else 0
+                state["node"] = self.graph.edge_target(edge)
+            walk = flockkit.Walk(start=state["start"], edges=state["edges"])
+            state["frames"] = flockkit.synthesis.blended_frames(self.graph, walk)
+        return state["frames"]
+
+    def _output(self, index: np.ndarray) -> Pose:
+        into, out_of, weight = (a[index] for a in self._frames(int(index.max()) + 1))
+        old = Pose._adopt(self.clip.rotations[out_of], self.clip.translations[out_of])
+        new = Pose._adopt(self.clip.rotations[into], self.clip.translations[into])
+        return Pose.blend(old, new, weight)
+
+    def pose(self, times) -> Pose:
+        f = stream_times(times, owner="graph-walk") * self.clip.fps
+        if len(f) == 0:
+            return Pose._adopt(np.zeros((0, self.skeleton.n_joints, 4)), np.zeros((0, self.skeleton.n_joints, 3)))
+        k = np.floor(f).astype(np.int64)
+        return Pose.blend(self._output(k), self._output(k + 1), f - k)
+
+    def events(self, start: float, stop: float) -> list[Event]:
+        if not self.clip.events or stop <= start:
+            return []
+        fps = self.clip.fps
+        first, last = int(math.floor(start * fps)), int(math.floor(stop * fps))
+        into = self._frames(last + 2)[0]
+        found = []
+        for i in range(max(first, 0), last + 1):
+            if into[i + 1] != into[i] + 1:
+                continue  # a transition: the frames between are not played
+            for e in self.clip.events:
+                at = (i + e.time * fps - into[i]) / fps
+                if into[i] <= e.time * fps < into[i] + 1 and start <= at < stop:
+                    found.append(Event(time=at, name=e.name))
+        return found
