@@ -19,7 +19,7 @@ from .constraints import (
     fence,
 )
 from .convenience import build_graph, build_layers, random_flock, segment, simulate, walk
-from .crowd import Event, Pose, SkeletalClip, Skeleton
+from .crowd import Crowd, Event, Pose, SkeletalClip, Skeleton, Stream, StreamPool, UniquePool
 from .features import Features
 from .graph import Clip, MotionGraph, Transition, Walk
 from .hookspecs import hookimpl
@@ -76,6 +76,10 @@ __all__ = [
     "Pose",
     "SkeletalClip",
     "Event",
+    "Stream",
+    "StreamPool",
+    "UniquePool",
+    "Crowd",
     "GraphLayers",
     "LayeredWalk",
     "walk",

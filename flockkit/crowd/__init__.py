@@ -1,5 +1,22 @@
-"""Massive crowds (paper 003): skeletons and clips, controllers' streams, the crowd runtime."""
+"""Massive crowds (paper 003): skeletons and clips, shared streams of poses, the crowd runtime."""
 
+from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
+from .runtime import INSTANCE, Crowd, CrowdEvent
 from .skeleton import Event, Pose, SkeletalClip, Skeleton, read_clips, stream_times
 
-__all__ = ["SkeletalClip", "Event", "Pose", "Skeleton", "read_clips", "stream_times"]
+__all__ = [
+    "SkeletalClip",
+    "Event",
+    "Pose",
+    "Skeleton",
+    "read_clips",
+    "stream_times",
+    "Stream",
+    "StreamPool",
+    "UniquePool",
+    "equation_4",
+    "equation_5",
+    "Crowd",
+    "CrowdEvent",
+    "INSTANCE",
+]

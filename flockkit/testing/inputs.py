@@ -15,7 +15,7 @@ from .. import rigid
 from ..graph import MotionGraph
 from ..motion import Alignment, Motion
 
-__all__ = ["recording", "graph", "parts", "plants", "walker", "WOBBLE_PERIOD"]
+__all__ = ["recording", "graph", "parts", "plants", "walker", "random_clip", "WOBBLE_PERIOD"]
 
 # The group circles the origin once every LAP seconds while its members wobble about their places
 # every WOBBLE_PERIOD seconds. The two periods are incommensurate, so a configuration recurs up
@@ -171,3 +171,21 @@ def walker(*, fps: float = 30.0, seconds: float = 2.0, swing: float = 30.0):
     return SkeletalClip(
         skeleton=skeleton, fps=fps, rotations=rotations, translations=hips, events=events, name="walker"
     )
+
+
+def random_clip(joints: int, *, frames: int = 60, fps: float = 30.0, seed: int = 0):
+    """A skeletal clip of `joints` joints (a random tree) whose rotations wander smoothly (a few
+    random sines per joint): any size of skeleton, for crowds and benchmarks."""
+    from ..crowd.skeleton import Pose, SkeletalClip, Skeleton
+
+    rng = np.random.default_rng(seed)
+    parents = np.concatenate([[-1], [int(rng.integers(0, j)) for j in range(1, joints)]])
+    rest = Pose(rotations=np.tile([0.0, 0.0, 0.0, 1.0], (joints, 1)), translations=rng.normal(0, 0.3, (joints, 3)))
+    skeleton = Skeleton(names=[f"joint{j}" for j in range(joints)], parents=parents, rest=rest)
+    t = np.arange(frames)[:, None, None] / fps
+    rates, phases = rng.uniform(0.3, 2.0, (1, joints, 4)), rng.uniform(0, 2 * np.pi, (1, joints, 4))
+    rotations = 0.3 * np.sin(2 * np.pi * rates * t + phases)
+    rotations[..., 3] = 1.0
+    rotations /= np.linalg.norm(rotations, axis=-1, keepdims=True)
+    root = np.stack([np.sin(t[:, 0, 0]), np.cos(t[:, 0, 0]), 0.1 * t[:, 0, 0]], axis=1)
+    return SkeletalClip(skeleton=skeleton, fps=fps, rotations=rotations, translations=root, name=f"random{joints}")

@@ -1,0 +1,332 @@
+"""Shared animation streams and their pose history (paper 003, sections 4.1 and 4.5).
+
+A stream evaluates its controller once per frame while Running and keeps its last `history`
+poses (M_A) in a ring buffer; every agent part that shares the stream reads it at its own offset
+behind the head. All ring buffers live in ONE float32 store laid out in blocks of frames: block I
+holds, for each stream whose history is longer than I, that stream's pose I slots into its ring.
+A lookup table gives the store offset of (stream, slot) in O(1), so skeletons of different sizes
+and different histories share the store without padding (Figure 6).
+
+Each joint's entry is 12 float32 (48 bytes, the paper's 4 x 3 matrix): its local rotation
+(x, y, z, w), translation, scale and two reserved zeros, the three parts of a transform Unreal's
+FTransform keeps in the same 48 bytes. So the store's size is Equation 5 of the paper (the
+extracted text lost the history factor; with histories of one frame it is the printed formula):
+
+    Total_new = 48 * (U * MaxBones + sum over streams A of M_A * Bones_A) bytes.
+
+Streams evaluate their controllers PREFETCH_FRAMES frames ahead (a controller's pose is a function
+of time alone), a few streams each frame, so that a frame does not call a thousand controllers.
+"""
+
+from __future__ import annotations
+
+import attrs
+import numpy as np
+
+from .. import validate
+from ..errors import ValidationError
+from .skeleton import Pose, Skeleton
+
+__all__ = ["Stream", "StreamPool", "UniquePool", "ENTRY_FLOATS", "PREFETCH_FRAMES", "equation_5", "equation_4"]
+
+ENTRY_FLOATS = 12  # per joint: rotation 4, translation 3, scale 3, reserved 2: 48 bytes
+# Frames a stream's controller is evaluated ahead; refills are staggered over this many frames.
+PREFETCH_FRAMES = 32
+STATES = ("Running", "Stopped")
+
+
+def _controller(value):
+    if not callable(getattr(value, "pose", None)) or not isinstance(getattr(value, "skeleton", None), Skeleton):
+        raise ValidationError(f"Stream.controller must be a controller (with skeleton and pose); got {value!r}")
+    return value
+
+
+def _state(value):
+    if value not in STATES:
+        raise ValidationError(f"Stream.default must be 'Running' or 'Stopped'; got {value!r}")
+    return value
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class Stream:
+    """An animation stream (section 4.1): a controller, the number of past poses kept (`history`,
+    M_A frames: agents read offsets 0 .. history - 1), and its default state: Running from the
+    start, or Stopped until an agent part needs it."""
+
+    controller: object = attrs.field(converter=_controller)
+    history: int = attrs.field(validator=lambda i, a, v: validate.integer(v, "Stream.history", minimum=1))
+    default: str = attrs.field(default="Running", converter=_state)
+    name: str = attrs.field(default="")
+
+    @property
+    def skeleton(self) -> Skeleton:
+        return self.controller.skeleton
+
+
+def equation_5(bones, histories, *, unique: int = 0, max_bones: int | None = None) -> int:
+    """Bytes of the new layout (paper 003, Equation 5 with each stream's history):
+    48 (U MaxBones + sum_A M_A Bones_A)."""
+    bones, histories = np.asarray(bones, dtype=np.int64), np.asarray(histories, dtype=np.int64)
+    max_bones = int(bones.max()) if max_bones is None else max_bones
+    return int(48 * (unique * max_bones + np.sum(histories * bones)))
+
+
+def equation_4(bones, histories, *, unique: int = 0, transitions: int = 0) -> int:
+    """Bytes of the previous layout (Equation 4 with histories): every stream padded to the
+    largest skeleton and the longest history, and a slot of MaxBones per transition."""
+    bones, histories = np.asarray(bones, dtype=np.int64), np.asarray(histories, dtype=np.int64)
+    max_bones, longest = int(bones.max()), int(histories.max())
+    return int(48 * ((unique + transitions) * max_bones + len(bones) * longest * max_bones))
+
+
+def _entries(pose: Pose, scales: np.ndarray) -> np.ndarray:
+    """Poses (..., J) as store entries (..., J, 12) float32."""
+    out = np.zeros(pose.rotations.shape[:-1] + (ENTRY_FLOATS,), dtype=np.float32)
+    out[..., 0:4] = pose.rotations
+    out[..., 4:7] = pose.translations
+    out[..., 7:10] = scales
+    return out
+
+
+def blend_entries(a: np.ndarray, b: np.ndarray, weight: np.ndarray) -> np.ndarray:
+    """Store entries (n, J, 12) blended by `weight` (n,): rotations on the sphere (nlerp, the
+    shorter way round), translations and scales linearly (Listing 3's lerp, per joint); weight 0
+    gives `a` and 1 gives `b` exactly."""
+    w = weight.astype(a.dtype)[:, None, None]
+    flip = np.where(np.sum(a[..., 0:4] * b[..., 0:4], axis=-1, keepdims=True) < 0, -1, 1).astype(a.dtype)
+    out = a + w * (b - a)
+    out[..., 0:4] = a[..., 0:4] + w * (flip * b[..., 0:4] - a[..., 0:4])
+    out[..., 0:4] /= np.linalg.norm(out[..., 0:4], axis=-1, keepdims=True)
+    ends = np.flatnonzero((weight == 0) | (weight == 1))
+    if len(ends):
+        out[ends] = np.where(w[ends] == 0, a[ends], b[ends])
+    return out
+
+
+def entries_pose(entries: np.ndarray) -> Pose:
+    """Store entries (..., J, 12) as a float32 Pose (the store's precision)."""
+    return Pose._adopt(entries[..., 0:4], entries[..., 4:7])
+
+
+class StreamPool:
+    """The shared streams of a crowd and their pose history (sections 4.1, 4.5).
+
+    Parameters
+    ----------
+    streams : sequence of Stream
+    fps : float
+        Frames per second of the animation system (animFrameRate): one ``advance`` is one frame.
+
+    Streams are referred to by their index in `streams`.
+    """
+
+    def __init__(self, streams, *, fps: float = 30.0):
+        self.streams = tuple(streams)
+        if not self.streams or not all(isinstance(s, Stream) for s in self.streams):
+            raise ValidationError("StreamPool needs a non-empty sequence of flockkit.crowd.Stream")
+        self.fps = validate.number(fps, "StreamPool.fps", minimum=0, strict=True)
+        s = len(self.streams)
+        self.history = np.array([st.history for st in self.streams], dtype=np.int64)
+        self.bones = np.array([st.skeleton.n_joints for st in self.streams], dtype=np.int64)
+        longest = int(self.history.max())
+        # Figure 6: block by block (slot I of every stream holding more than I frames), so that a
+        # stream's slot is found by one lookup and no stream is padded.
+        self.lookup = np.full((s, longest), -1, dtype=np.int64)
+        offset = 0
+        for slot in range(longest):
+            for k in np.flatnonzero(self.history > slot):
+                self.lookup[k, slot] = offset
+                offset += int(self.bones[k]) * ENTRY_FLOATS
+        self.store = np.zeros(offset, dtype=np.float32)
+        self.head = np.zeros(s, dtype=np.int64)  # the slot written last
+        self.filled = np.zeros(s, dtype=np.int64)  # frames written since the stream (re)started
+        self.clock = np.zeros(s, dtype=np.int64)  # frames evaluated since the stream (re)started
+        self.running = np.array([st.default == "Running" for st in self.streams])
+        self.users = np.zeros(s, dtype=np.int64)  # agent parts reading the stream
+        self._ahead: dict[int, tuple] = {}  # stream -> (first frame, entries ahead, events ahead by frame)
+        self._stops = np.array([st.default == "Stopped" for st in self.streams])
+        self._scales = [st.skeleton.scales.astype(np.float32) for st in self.streams]
+        for k in np.flatnonzero(self.running):
+            self._restart(int(k))
+
+    # -- lookups --------------------------------------------------------------------------------
+
+    def check_streams(self, streams, *, field: str = "stream") -> np.ndarray:
+        ids = np.atleast_1d(np.asarray(streams))
+        if ids.dtype.kind not in "iu" or ids.size and (ids.min() < 0 or ids.max() >= len(self.streams)):
+            raise ValidationError(
+                f"{field}: unknown stream id {streams!r}; the pool has streams 0..{len(self.streams) - 1}"
+            )
+        return ids.astype(np.int64)
+
+    def rows(self, streams: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+        """Store offsets (in floats) of the poses `offsets` frames behind each stream's head."""
+        slots = (self.head[streams] - offsets) % self.history[streams]
+        return self.lookup[streams, slots]
+
+    def read(self, stream: int, offset: int = 0) -> Pose:
+        """The pose stored `offset` frames behind `stream`'s head (0: the newest), as a float32
+        Pose. Offsets outside 0 .. history - 1, or older than the frames written since the
+        stream started, are refused."""
+        (k,) = self.check_streams(stream)
+        offset = validate.integer(offset, "offset", minimum=0)
+        if offset >= self.history[k]:
+            raise ValidationError(f"offset {offset} is beyond stream {k}'s history of {self.history[k]} frames")
+        if offset >= self.filled[k]:
+            raise ValidationError(
+                f"stream {k} has written {self.filled[k]} frames since it started; offset {offset} is older"
+            )
+        start = int(self.rows(np.array([k]), np.array([offset]))[0])
+        j = int(self.bones[k])
+        return entries_pose(self.store[start : start + j * ENTRY_FLOATS].reshape(j, ENTRY_FLOATS).copy())
+
+    def is_running(self, stream: int) -> bool:
+        (k,) = self.check_streams(stream)
+        return bool(self.running[k])
+
+    def memory(self) -> int:
+        """Bytes of pose storage: the store (Equation 5 with U = 0)."""
+        return int(self.store.nbytes)
+
+    def windows(self, bones: int) -> np.ndarray:
+        """The store seen as overlapping rows of `bones` entries, one starting at every float:
+        rows[k] is the pose block starting at store offset k (a view; fancy indexing copies)."""
+        width = bones * ENTRY_FLOATS
+        count = max(len(self.store) - width + 1, 0)
+        return np.lib.stride_tricks.as_strided(self.store, shape=(count, width), strides=(4, 4), writeable=False)
+
+    # -- running --------------------------------------------------------------------------------
+
+    def _restart(self, k: int) -> None:
+        self.running[k] = True
+        self.head[k], self.filled[k], self.clock[k] = -1 % self.history[k], 0, 0
+        self._ahead.pop(k, None)
+        self._write(np.array([k]))  # a started stream has its first pose at once: offset 0 reads it
+
+    def acquire(self, streams: np.ndarray) -> np.ndarray:
+        """Count agent parts arriving on `streams` (repeats count); start Stopped ones. Returns the
+        streams that started."""
+        counts = np.bincount(streams, minlength=len(self.streams))
+        starting = np.flatnonzero((counts > 0) & ~self.running)
+        self.users += counts
+        for k in starting:
+            self._restart(int(k))
+        return starting
+
+    def release(self, streams: np.ndarray) -> None:
+        """Count agent parts leaving `streams`; a stream whose default is Stopped stops when its
+        last user leaves."""
+        self.users -= np.bincount(streams, minlength=len(self.streams))
+        ending = np.flatnonzero(self._stops & self.running & (self.users <= 0))
+        self.running[ending] = False
+        for k in ending:
+            self._ahead.pop(int(k), None)
+
+    def advance(self) -> list:
+        """One frame: every Running stream evaluates its controller and writes its head. Returns
+        (stream, Event) for the events its controller reports within the frame."""
+        return self._write(np.flatnonzero(self.running))
+
+    def _write(self, live: np.ndarray) -> list:
+        if not len(live):
+            return []
+        self.head[live] = (self.head[live] + 1) % self.history[live]
+        rows = self.lookup[live, self.head[live]]
+        events = []
+        for k, row in zip(live.tolist(), rows.tolist()):
+            entry, due = self._next(k)
+            self.store[row : row + entry.size] = entry.ravel()
+            events.extend((k, e) for e in due)
+        self.filled[live] = np.minimum(self.filled[live] + 1, self.history[live])
+        self.clock[live] += 1
+        return events
+
+    def _next(self, k: int):
+        """Stream k's entries for its next frame and the events within that frame, from its
+        prefetched block (refilled when used up; the first block of a stream is shorter by its
+        index modulo PREFETCH_FRAMES, so that refills of streams started together fall on
+        different frames)."""
+        frame = int(self.clock[k])
+        first, block, events = self._ahead.get(k, (0, None, None))
+        if block is None or frame - first >= len(block):
+            count = PREFETCH_FRAMES - (k % PREFETCH_FRAMES if frame == 0 else 0)
+            controller = self.streams[k].controller
+            pose = controller.pose((frame + np.arange(count)) / self.fps)
+            if pose.n_joints != self.bones[k] or pose.shape != (count,):
+                raise ValidationError(
+                    f"stream {k}'s controller gave poses of shape {pose.shape} x {pose.n_joints} joints for "
+                    f"{count} times and a skeleton of {self.bones[k]}"
+                )
+            events = {}
+            for e in controller.events(frame / self.fps, (frame + count) / self.fps):
+                at = min(max(int(np.floor(e.time * self.fps + 1e-9)), frame), frame + count - 1)
+                events.setdefault(at, []).append(e)
+            first, block = frame, _entries(pose, self._scales[k])
+            self._ahead[k] = (first, block, events)
+        return block[frame - first], events.pop(frame, ())
+
+
+class UniquePool:
+    """Per-agent animations without history (section 4.1): `size` slots (U), each holding a
+    controller of at most `max_bones` joints, evaluated every frame; agents in a slot read its
+    current pose. Its store is padded to `max_bones` per slot, as the paper's is."""
+
+    def __init__(self, size: int, *, max_bones: int, fps: float = 30.0):
+        self.size = validate.integer(size, "UniquePool.size", minimum=0)
+        self.max_bones = validate.integer(max_bones, "UniquePool.max_bones", minimum=1)
+        self.fps = validate.number(fps, "UniquePool.fps", minimum=0, strict=True)
+        self.store = np.zeros((self.size, self.max_bones, ENTRY_FLOATS), dtype=np.float32)
+        self.controllers: list = [None] * self.size
+        self.clock = np.zeros(self.size, dtype=np.int64)
+
+    def check_slots(self, slots, *, field: str = "slot") -> np.ndarray:
+        ids = np.atleast_1d(np.asarray(slots))
+        if ids.dtype.kind not in "iu" or ids.size and (ids.min() < 0 or ids.max() >= self.size):
+            raise ValidationError(f"{field}: unknown unique slot {slots!r}; the pool has slots 0..{self.size - 1}")
+        empty = [int(k) for k in ids if self.controllers[int(k)] is None]
+        if empty:
+            raise ValidationError(f"{field}: unique slot {empty[0]} holds no controller (set it first)")
+        return ids.astype(np.int64)
+
+    def set(self, slot: int, controller) -> None:
+        """Put `controller` in `slot`, its clock at 0, and evaluate its first pose."""
+        slot = validate.integer(slot, "slot", minimum=0)
+        if slot >= self.size:
+            raise ValidationError(f"slot {slot} is beyond the unique pool's {self.size} slots")
+        controller = _controller(controller)
+        if controller.skeleton.n_joints > self.max_bones:
+            raise ValidationError(
+                f"the controller's skeleton has {controller.skeleton.n_joints} joints; "
+                f"unique slots hold {self.max_bones}"
+            )
+        self.controllers[slot] = controller
+        self.clock[slot] = 0
+        self._evaluate(slot)
+
+    def clear(self, slot: int) -> None:
+        self.controllers[self.check_slots(slot)[0]] = None
+
+    def advance(self) -> list:
+        events = []
+        for slot, controller in enumerate(self.controllers):
+            if controller is not None:
+                start = self.clock[slot] / self.fps
+                events.extend((slot, e) for e in controller.events(start, start + 1 / self.fps))
+                self.clock[slot] += 1
+                self._evaluate(slot)
+        return events
+
+    def _evaluate(self, slot: int) -> None:
+        controller = self.controllers[slot]
+        pose = controller.pose([self.clock[slot] / self.fps])[0]
+        j = controller.skeleton.n_joints
+        self.store[slot, :j] = _entries(pose, controller.skeleton.scales.astype(np.float32))
+
+    def read(self, slot: int) -> Pose:
+        (k,) = self.check_slots(slot)
+        j = self.controllers[k].skeleton.n_joints
+        return entries_pose(self.store[k, :j].copy())
+
+    def memory(self) -> int:
+        """Bytes: 48 U MaxBones (Equation 5's first term)."""
+        return int(self.store.nbytes)

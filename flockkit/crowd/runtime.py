@@ -1,0 +1,365 @@
+"""The crowd runtime (paper 003, sections 4.2-4.4): agents split into part clusters, each reading
+a shared stream at its own offset (or a unique slot), transitions with blends, time dilation.
+
+The state of every agent part is its instance-buffer record (what a skinning shader reads,
+Listing 3): the stream it reads and its offset, the stream it blends to and that offset, when the
+blend started and how long it lasts, and the agent's visibility mask. Each ``update`` advances
+one frame; work per frame grows with the parts that change (dilating, blending), not the crowd.
+"""
+
+from __future__ import annotations
+
+import attrs
+import numpy as np
+
+from .. import validate
+from ..errors import ValidationError
+from .pool import ENTRY_FLOATS, StreamPool, UniquePool, blend_entries, entries_pose
+from .skeleton import Event, Pose
+
+__all__ = ["Crowd", "CrowdEvent", "INSTANCE", "NONE", "STREAMED", "UNIQUE", "DILATION_RATE"]
+
+NONE, STREAMED, UNIQUE = 0, 1, 2  # what an agent part reads (kind, target_kind)
+INSTANCE = np.dtype(
+    [
+        ("stream", "<i4"),  # stream (or unique slot) read; -1: none
+        ("offset", "<f4"),  # frames behind its head
+        ("target", "<i4"),  # stream (or slot) blended to; -1: not blending
+        ("target_offset", "<f4"),
+        ("blend_start", "<f4"),  # crowd time (s) the blend started
+        ("blend_time", "<f4"),  # seconds; 0: not blending
+        ("kind", "u1"),  # NONE, STREAMED or UNIQUE
+        ("target_kind", "u1"),
+        ("mask", "<u2"),  # the agent's visible clusters, bit c for cluster c
+    ]
+)
+# The default time dilation moves an offset a quarter frame per frame (changeRate 0.25): parts
+# play at three quarters speed while they spread out, slow enough not to look frozen.
+DILATION_RATE = 0.25
+
+
+@attrs.frozen
+class CrowdEvent:
+    """An event a stream (or a unique slot, `unique`) reached at its head this frame; an agent
+    part reading that stream at offset k reaches it k frames later."""
+
+    stream: int
+    event: Event
+    unique: bool = False
+
+
+def _agent_ids(agents, n_agents: int) -> np.ndarray:
+    ids = np.atleast_1d(np.asarray(agents))
+    if ids.ndim != 1 or (ids.size and ids.dtype.kind not in "iu"):
+        raise ValidationError(f"agents must be agent ids (integers); got {agents!r}")
+    ids = ids.astype(np.int64)
+    if ids.size and (ids.min() < 0 or ids.max() >= n_agents):
+        bad = int(ids[(ids < 0) | (ids >= n_agents)][0])
+        raise ValidationError(f"unknown agent id {bad}; the crowd has agents 0..{n_agents - 1}")
+    if len(np.unique(ids)) != len(ids):
+        raise ValidationError("agents must not repeat an id")
+    return ids
+
+
+class Crowd:
+    """Agents whose part clusters read shared streams (sections 4.2-4.4).
+
+    Parameters
+    ----------
+    pool : StreamPool
+    n_agents : int
+    clusters : mapping of str to int or (n_agents,) ints
+        Per cluster (body, scarf, flag, ...), the stream each agent's part reads at the start; -1
+        where an agent does not have the cluster. All streams of a cluster share one skeleton.
+    unique : UniquePool, optional
+        Slots for per-agent animations (``transition_to_unique``).
+    seed : int, optional
+        For the agents' starting offsets and the targets of time dilation.
+
+    The pool is run until every Running stream has its whole history, then each part gets a
+    random offset in it, so that agents sharing a stream differ from the first frame.
+    """
+
+    def __init__(self, pool: StreamPool, *, n_agents: int, clusters, unique: UniquePool | None = None, seed=None):
+        if not isinstance(pool, StreamPool):
+            raise ValidationError(f"Crowd needs a flockkit.crowd.StreamPool; got {type(pool).__name__}")
+        if unique is not None and not isinstance(unique, UniquePool):
+            raise ValidationError(f"Crowd unique must be a flockkit.crowd.UniquePool; got {type(unique).__name__}")
+        self.pool, self.unique = pool, unique
+        self.n_agents = validate.integer(n_agents, "n_agents", minimum=1)
+        if not isinstance(clusters, dict) or not clusters or len(clusters) > 16:
+            raise ValidationError("Crowd clusters must be a mapping of 1 to 16 cluster names to streams")
+        self.clusters = tuple(clusters)
+        self.rng = np.random.default_rng(seed)
+        self.time = 0.0
+        self.frame = 0
+        n, c = self.n_agents, len(self.clusters)
+        buffer = np.zeros((n, c), dtype=INSTANCE)
+        buffer["stream"] = buffer["target"] = -1
+        self.skeletons = []
+        for k, name in enumerate(self.clusters):
+            streams = np.broadcast_to(np.asarray(clusters[name]), (n,))
+            if streams.dtype.kind not in "iu":
+                raise ValidationError(f"Crowd clusters[{name!r}] must be stream ids (-1: the agent lacks it)")
+            has = streams >= 0
+            if not has.any():
+                raise ValidationError(f"Crowd clusters[{name!r}]: no agent has this cluster")
+            used = pool.check_streams(np.unique(streams[has]), field=f"Crowd clusters[{name!r}]")
+            skeleton = pool.streams[used[0]].skeleton
+            for s in used:
+                if not skeleton.matches(pool.streams[s].skeleton):
+                    raise ValidationError(
+                        f"Crowd clusters[{name!r}]: stream {s}'s skeleton does not match stream {used[0]}'s; "
+                        "a cluster's streams share one skeleton"
+                    )
+            self.skeletons.append(skeleton)
+            buffer["stream"][:, k] = np.where(has, streams, -1)
+            buffer["kind"][:, k] = np.where(has, STREAMED, NONE)
+        buffer["mask"] = np.sum((buffer["kind"] != NONE) * (1 << np.arange(c)), axis=1, keepdims=True).astype(np.uint16)
+        self._buffer = buffer
+        self._dilate_to = np.full((n, c), np.nan, dtype=np.float32)  # NaN: not dilating
+        self._rate = np.zeros((n, c), dtype=np.float32)
+        reading = buffer["kind"] == STREAMED
+        pool.acquire(buffer["stream"][reading])
+        for _ in range(int(pool.history.max()) - 1):  # fill every running stream's history
+            pool.advance()
+        streams = buffer["stream"][reading]
+        available = np.minimum(pool.filled[streams], pool.history[streams])
+        buffer["offset"][reading] = self.rng.integers(0, available)
+
+    # -- checks ---------------------------------------------------------------------------------
+
+    def _cluster(self, cluster) -> int:
+        if cluster not in self.clusters:
+            raise ValidationError(
+                f"unknown cluster {cluster!r}; the crowd's clusters are {', '.join(map(repr, self.clusters))}"
+            )
+        return self.clusters.index(cluster)
+
+    def _parts(self, agents, cluster) -> tuple[np.ndarray, int]:
+        ids, c = _agent_ids(agents, self.n_agents), self._cluster(cluster)
+        lacking = ids[self._buffer["kind"][ids, c] == NONE]
+        if len(lacking):
+            raise ValidationError(f"agent {int(lacking[0])} has no {cluster!r} cluster to transition")
+        return ids, c
+
+    @staticmethod
+    def _seconds(value, field: str, *, optional: bool = False):
+        if optional and value is None:
+            return None
+        return validate.number(value, field, minimum=0, strict=True)
+
+    # -- transitions ----------------------------------------------------------------------------
+
+    def transition_to_streamed(self, agents, cluster, stream, blend_time, *, time_to_dilate=None, offsets=None) -> None:
+        """Blend `agents`' part `cluster` over `blend_time` seconds to shared `stream` (section 4.3).
+
+        Into a Running stream, each part blends to a random offset within the history written.
+        Into a Stopped stream (which starts now), every part starts at offset 0, the head, and
+        time dilation (Listing 2) moves each offset to a random target in [0, history - 1] at
+        changeRate = (M_new - M) / (time_to_dilate * fps) frames per frame (default: DILATION_RATE),
+        M = 0. `time_to_dilate` given for a Running stream applies the same from offset 0.
+        `offsets` (one per agent, or one for all) chooses the target offsets in a Running stream
+        instead. A part already blending first lands on its blend's target. Refused calls change
+        nothing.
+        """
+        ids, c = self._parts(agents, cluster)
+        (k,) = self.pool.check_streams(stream)
+        if not self.skeletons[c].matches(self.pool.streams[k].skeleton):
+            raise ValidationError(
+                f"stream {k}'s skeleton ({self.pool.bones[k]} joints) does not match cluster {cluster!r}'s "
+                f"({self.skeletons[c].n_joints} joints)"
+            )
+        blend_time = self._seconds(blend_time, "blend_time")
+        time_to_dilate = self._seconds(time_to_dilate, "time_to_dilate", optional=True)
+        was_running = bool(self.pool.running[k])
+        if offsets is not None:
+            chosen = np.broadcast_to(np.asarray(offsets), (len(ids),))
+            if not was_running or time_to_dilate is not None:
+                raise ValidationError(
+                    "offsets are for a Running stream without time dilation (a Stopped one starts at 0)"
+                )
+            if chosen.dtype.kind not in "iu" or chosen.min() < 0 or chosen.max() >= self.pool.filled[k]:
+                raise ValidationError(
+                    f"offsets must be integers in 0..{self.pool.filled[k] - 1} (the frames stream {k} holds); "
+                    f"got {offsets!r}"
+                )
+        self._land(ids, c)
+        self.pool.acquire(np.full(len(ids), k))
+        history = int(self.pool.history[k])
+        if was_running and time_to_dilate is None:
+            if offsets is None:
+                chosen = self.rng.integers(0, self.pool.filled[k], size=len(ids))
+            offsets = chosen.astype(np.float32)
+            self._dilate_to[ids, c] = np.nan
+        else:
+            offsets = np.zeros(len(ids), dtype=np.float32)
+            self._dilate_to[ids, c] = self.rng.integers(0, history, size=len(ids))
+            seconds = time_to_dilate if time_to_dilate is not None else (history - 1) / (DILATION_RATE * self.pool.fps)
+            self._rate[ids, c] = (history - 1) / (max(seconds, 1e-9) * self.pool.fps)
+        self._start_blend(ids, c, STREAMED, k, offsets, blend_time)
+
+    def transition_to_unique(self, agents, cluster, slot, blend_time) -> None:
+        """Blend `agents`' part `cluster` over `blend_time` seconds to unique slot `slot`, which
+        they read at its current pose."""
+        ids, c = self._parts(agents, cluster)
+        if self.unique is None:
+            raise ValidationError("this crowd has no UniquePool: pass unique= to Crowd")
+        (k,) = self.unique.check_slots(slot)
+        if not self.skeletons[c].matches(self.unique.controllers[k].skeleton):
+            raise ValidationError(f"unique slot {k}'s skeleton does not match cluster {cluster!r}'s")
+        blend_time = self._seconds(blend_time, "blend_time")
+        self._land(ids, c)
+        self._dilate_to[ids, c] = np.nan
+        self._start_blend(ids, c, UNIQUE, k, np.zeros(len(ids), dtype=np.float32), blend_time)
+
+    def _start_blend(self, ids, c, kind, target, offsets, blend_time) -> None:
+        record = self._buffer[ids, c]
+        record["target_kind"], record["target"], record["target_offset"] = kind, target, offsets
+        record["blend_start"], record["blend_time"] = self.time, blend_time
+        self._buffer[ids, c] = record
+
+    def _land(self, ids, c) -> None:
+        """Parts of `ids` in cluster `c` that are blending take their blend's target now."""
+        blending = ids[self._buffer["blend_time"][ids, c] > 0]
+        if len(blending):
+            self._collapse(blending, np.full(len(blending), c))
+
+    def _collapse(self, agents: np.ndarray, clusters: np.ndarray) -> None:
+        """Finished (or interrupted) blends: the target becomes the source; the source stream
+        loses a user."""
+        record = self._buffer[agents, clusters]
+        leaving = record["stream"][record["kind"] == STREAMED]
+        record["kind"], record["stream"], record["offset"] = (
+            record["target_kind"],
+            record["target"],
+            record["target_offset"],
+        )
+        record["target_kind"], record["target"], record["target_offset"] = NONE, -1, 0
+        record["blend_start"], record["blend_time"] = 0, 0
+        self._buffer[agents, clusters] = record
+        self.pool.release(leaving)
+
+    # -- frames ---------------------------------------------------------------------------------
+
+    def update(self) -> list[CrowdEvent]:
+        """Advance one frame (1 / pool.fps seconds): Running streams write their heads, unique
+        slots evaluate, offsets dilate, blends advance and finished ones land on their targets
+        (streams left without users stop if Stopped by default). Returns the events reached."""
+        events = [CrowdEvent(stream=s, event=e) for s, e in self.pool.advance()]
+        if self.unique is not None:
+            events += [CrowdEvent(stream=s, event=e, unique=True) for s, e in self.unique.advance()]
+        self.frame += 1
+        self.time = self.frame / self.pool.fps
+        agents, clusters = np.nonzero(~np.isnan(self._dilate_to))
+        if len(agents):
+            record = self._buffer[agents, clusters]
+            blending = record["blend_time"] > 0
+            field = np.where(blending, record["target_offset"], record["offset"])
+            stream = np.where(blending, record["target"], record["stream"])
+            goal = self._dilate_to[agents, clusters]
+            moved = np.minimum(np.minimum(field + self._rate[agents, clusters], goal), self.pool.filled[stream] - 1)
+            record["target_offset"] = np.where(blending, moved, record["target_offset"])
+            record["offset"] = np.where(blending, record["offset"], moved)
+            self._buffer[agents, clusters] = record
+            done = moved >= goal
+            self._dilate_to[agents[done], clusters[done]] = np.nan
+        agents, clusters = np.nonzero(self._buffer["blend_time"] > 0)
+        if len(agents):
+            record = self._buffer[agents, clusters]
+            finished = self.time - record["blend_start"] >= record["blend_time"] - 1e-6
+            self._collapse(agents[finished], clusters[finished])
+        return events
+
+    # -- reading --------------------------------------------------------------------------------
+
+    def offsets(self, cluster) -> np.ndarray:
+        """Each agent's offset in `cluster` (N,): of the stream it blends to while blending, else
+        of the stream it reads; NaN where it has no such part or reads a unique slot."""
+        c = self._cluster(cluster)
+        record = self._buffer[:, c]
+        blending = record["blend_time"] > 0
+        kind = np.where(blending, record["target_kind"], record["kind"])
+        values = np.where(blending, record["target_offset"], record["offset"]).astype(np.float64)
+        return np.where(kind == STREAMED, values, np.nan)
+
+    def dilation_targets(self, cluster) -> np.ndarray:
+        """Each agent's time-dilation target offset in `cluster` (N,); NaN where not dilating."""
+        return self._dilate_to[:, self._cluster(cluster)].astype(np.float64)
+
+    def alphas(self, cluster) -> np.ndarray:
+        """Each agent's blend weight α = clamp(elapsed / blend_time, 0, 1) in `cluster` (Listing
+        3): 0 reads the source only; NaN where it is not blending."""
+        record = self._buffer[:, self._cluster(cluster)]
+        blending = record["blend_time"] > 0
+        alpha = np.clip((self.time - record["blend_start"]) / np.where(blending, record["blend_time"], 1), 0, 1)
+        return np.where(blending, alpha, np.nan)
+
+    def _read(self, kind, index, offset, bones) -> np.ndarray:
+        """Entries (n, bones, 12) of parts reading (kind, stream or slot, offset); fractional
+        offsets mix the two frames around them."""
+        out = np.empty((len(kind), bones, ENTRY_FLOATS), dtype=np.float32)
+        streamed = np.flatnonzero(kind == STREAMED)
+        if len(streamed):
+            windows = self.pool.windows(bones)
+            streams, whole = index[streamed], np.floor(offset[streamed]).astype(np.int64)
+            out[streamed] = windows[self.pool.rows(streams, whole)].reshape(-1, bones, ENTRY_FLOATS)
+            part = offset[streamed] - whole
+            between = np.flatnonzero(part > 0)
+            if len(between):
+                rows = streamed[between]
+                older = np.minimum(whole[between] + 1, self.pool.history[streams[between]] - 1)
+                later = windows[self.pool.rows(streams[between], older)].reshape(-1, bones, ENTRY_FLOATS)
+                out[rows] = blend_entries(out[rows], later, part[between])
+        unique = np.flatnonzero(kind == UNIQUE)
+        if len(unique):
+            out[unique] = self.unique.store[index[unique], :bones]
+        return out
+
+    def entries(self, agents=None, cluster=None) -> np.ndarray:
+        """Store entries (n, J, 12) float32 of `agents` (default all) in `cluster`: sources read at
+        their offsets and, while blending, mixed with their targets by α (rotations on the
+        sphere). Agents without the cluster are refused."""
+        c = self._cluster(cluster if cluster is not None else self.clusters[0])
+        ids = np.arange(self.n_agents) if agents is None else _agent_ids(agents, self.n_agents)
+        record = self._buffer[ids, c]
+        if np.any(record["kind"] == NONE):
+            raise ValidationError(f"agent {int(ids[record['kind'] == NONE][0])} has no {self.clusters[c]!r} cluster")
+        bones = self.skeletons[c].n_joints
+        out = self._read(record["kind"], record["stream"], record["offset"], bones)
+        blending = np.flatnonzero(record["blend_time"] > 0)
+        if len(blending):
+            r = record[blending]
+            target = self._read(r["target_kind"], r["target"], r["target_offset"], bones)
+            alpha = np.clip((self.time - r["blend_start"]) / r["blend_time"], 0, 1)
+            out[blending] = blend_entries(out[blending], target, alpha)
+        return out
+
+    def poses(self, agents=None, cluster=None, *, space: str = "local"):
+        """The poses of `agents` (default all) in `cluster`, vectorized: ``space="local"`` a
+        float32 Pose (n, J) of local rotations and translations; ``"world"`` world (model-space)
+        joint matrices (n, J, 4, 4) float32 by forward kinematics."""
+        if space not in ("local", "world"):
+            raise ValidationError(f"space must be 'local' or 'world'; got {space!r}")
+        entries = self.entries(agents, cluster)
+        pose = entries_pose(entries)
+        if space == "local":
+            return pose
+        c = self._cluster(cluster if cluster is not None else self.clusters[0])
+        return self.skeletons[c].world(Pose._adopt(pose.rotations, pose.translations), dtype=np.float32)
+
+    def instance_buffer(self) -> np.ndarray:
+        """What a skinning shader needs per agent part (N, C), a structured array of INSTANCE
+        records: stream, offset, target, target_offset, blend_start, blend_time, kind,
+        target_kind and the agent's visibility mask. A read-only view, valid until the next
+        update or transition."""
+        view = self._buffer.view()
+        view.setflags(write=False)
+        return view
+
+    def set_visible(self, agents, cluster, visible: bool) -> None:
+        """Show or hide `agents`' part `cluster` (the shader skips hidden clusters)."""
+        ids, c = self._parts(agents, cluster)
+        bit = np.uint16(1 << c)
+        masks = self._buffer["mask"][ids]
+        self._buffer["mask"][ids] = np.where(validate.flag(visible, "visible"), masks | bit, masks & ~bit)

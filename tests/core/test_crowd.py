@@ -1,0 +1,235 @@
+"""The stream pool and the crowd runtime (paper 003, sections 4.1-4.5)."""
+
+import numpy as np
+import pytest
+
+import flockkit
+from flockkit.crowd import Crowd, Stream, StreamPool, UniquePool, equation_4, equation_5
+from flockkit.errors import ValidationError
+from flockkit.testing import inputs
+
+WALKER = inputs.walker()
+FPS = 30.0
+
+
+def player(clip=WALKER, **params):
+    return flockkit.get("controller", "clip", clip=clip, **params)
+
+
+def as_float32(pose):
+    return pose.rotations.astype(np.float32), pose.translations.astype(np.float32)
+
+
+def make_crowd(n_agents=40, seed=0):
+    pool = StreamPool(
+        [
+            Stream(controller=player(), history=20),
+            Stream(controller=player(rate=1.5), history=40),
+            Stream(controller=player(rate=0.7, start=0.3), history=30, default="Stopped"),
+            Stream(controller=player(), history=20),  # the same controller as stream 0
+        ],
+        fps=FPS,
+    )
+    return pool, Crowd(pool, n_agents=n_agents, clusters={"body": np.arange(n_agents) % 2}, seed=seed)
+
+
+def test_offset_k_reads_the_pose_written_k_frames_ago():
+    controller = player(rate=1.3)
+    pool = StreamPool([Stream(controller=controller, history=12)], fps=FPS)
+    for _ in range(25):  # past one trip round the ring
+        pool.advance()
+    newest = pool.clock[0] - 1  # the frame number of the head
+    for k in (0, 1, 5, 11):
+        read = pool.read(0, k)
+        expected = controller.pose([(newest - k) / FPS])[0]
+        np.testing.assert_array_equal(read.rotations, expected.rotations.astype(np.float32))
+        np.testing.assert_array_equal(read.translations, expected.translations.astype(np.float32))
+    with pytest.raises(ValidationError, match="beyond stream 0's history of 12"):
+        pool.read(0, 12)
+    fresh = StreamPool([Stream(controller=controller, history=12)], fps=FPS)
+    with pytest.raises(ValidationError, match="written 1 frames"):
+        fresh.read(0, 3)
+    with pytest.raises(ValidationError, match="unknown stream id 4"):
+        pool.read(4, 0)
+
+
+def test_a_stopped_stream_starts_at_offset_0_and_dilation_reaches_its_targets_on_time():
+    pool, crowd = make_crowd()
+    assert not pool.is_running(2)
+    movers = np.arange(0, 20)
+    crowd.transition_to_streamed(movers, "body", 2, blend_time=0.2, time_to_dilate=1.0)
+    assert pool.is_running(2)
+    np.testing.assert_array_equal(crowd.offsets("body")[movers], 0)  # the first frame reads the head
+    targets = crowd.dilation_targets("body")[movers]
+    assert np.all((targets >= 0) & (targets <= 29)) and len(np.unique(targets)) > 5
+    rate = 29 / (1.0 * FPS)  # (M_new - M) / (timeToDilate * animFrameRate), M = 0
+    trace = []
+    for _ in range(int(FPS * 1.0)):
+        crowd.update()
+        trace.append(crowd.offsets("body")[movers])
+    trace = np.array(trace)
+    assert np.all(np.diff(trace, axis=0) <= rate + 1e-5)  # never faster than the change rate
+    np.testing.assert_allclose(trace[-1], targets, atol=rate)  # there after time_to_dilate, within one frame's change
+    crowd.update()
+    np.testing.assert_array_equal(crowd.offsets("body")[movers], targets)
+    assert np.all(np.isnan(crowd.dilation_targets("body")[movers]))
+
+
+def test_blends_run_from_source_to_target_over_the_blend_time():
+    pool, crowd = make_crowd()
+    agents = np.array([1, 3, 5])  # on stream 1
+    before = crowd.entries(agents, "body")
+    source_offsets = crowd.offsets("body")[agents]
+    crowd.transition_to_streamed(agents, "body", 0, blend_time=0.5, offsets=[2, 7, 11])
+    np.testing.assert_array_equal(crowd.alphas("body")[agents], 0)
+    np.testing.assert_array_equal(crowd.entries(agents, "body"), before)  # α = 0: the source at its offset
+    alphas = []
+    for _ in range(int(0.5 * FPS) - 1):
+        crowd.update()
+        alphas.append(crowd.alphas("body")[agents[0]])
+        windows = pool.windows(5)
+        source = windows[pool.rows(np.full(3, 1), source_offsets.astype(int))].reshape(3, 5, 12)
+        target = windows[pool.rows(np.zeros(3, dtype=int), np.array([2, 7, 11]))].reshape(3, 5, 12)
+        mixed = crowd.entries(agents, "body")
+        alpha = alphas[-1]
+        np.testing.assert_allclose(
+            mixed[..., 4:7], source[..., 4:7] + alpha * (target[..., 4:7] - source[..., 4:7]), atol=1e-6
+        )
+        np.testing.assert_allclose(np.linalg.norm(mixed[..., 0:4], axis=-1), 1, atol=1e-6)  # on the sphere
+    np.testing.assert_allclose(alphas, np.arange(1, len(alphas) + 1) / (0.5 * FPS), atol=1e-5)
+    crowd.update()  # α reaches 1: the target at its offset, and the blend lands
+    assert np.all(np.isnan(crowd.alphas("body")[agents]))
+    target = pool.windows(5)[pool.rows(np.zeros(3, dtype=int), np.array([2, 7, 11]))].reshape(3, 5, 12)
+    np.testing.assert_array_equal(crowd.entries(agents, "body"), target)
+    assert crowd.instance_buffer()["stream"][agents, 0].tolist() == [0, 0, 0]
+
+
+def test_blending_two_identical_streams_returns_that_stream():
+    pool, crowd = make_crowd()
+    agents = np.array([0, 2, 4, 6])  # on stream 0; stream 3 plays the same controller in step
+    offsets = crowd.offsets("body")[agents].astype(int)
+    crowd.transition_to_streamed(agents, "body", 3, blend_time=1.0, offsets=offsets)
+    for _ in range(7):
+        crowd.update()
+        alone = pool.windows(5)[pool.rows(np.zeros(4, dtype=int), offsets)].reshape(4, 5, 12)
+        np.testing.assert_allclose(crowd.entries(agents, "body"), alone, atol=1e-6)
+        assert np.all(crowd.alphas("body")[agents] > 0)
+
+
+def test_a_stream_stops_when_its_last_user_leaves_and_restarts_cleanly():
+    pool, crowd = make_crowd()
+    agents = np.arange(6)
+    crowd.transition_to_streamed(agents, "body", 2, blend_time=0.1)
+    assert pool.users[2] == 6 and pool.is_running(2)
+    for _ in range(10):
+        crowd.update()
+    crowd.transition_to_streamed(agents[:3], "body", 0, blend_time=0.1)
+    for _ in range(5):
+        crowd.update()
+    assert pool.users[2] == 3 and pool.is_running(2)
+    crowd.transition_to_streamed(agents[3:], "body", 0, blend_time=0.1)
+    assert pool.is_running(2)  # still read by the blends out of it
+    for _ in range(5):
+        crowd.update()
+    assert pool.users[2] == 0 and not pool.is_running(2)
+    assert pool.users.sum() == 40  # every part counted once, on the stream it reads
+    crowd.transition_to_streamed([7], "body", 2, blend_time=0.1)  # restarts from its beginning
+    assert pool.is_running(2) and pool.filled[2] == 1
+    controller = pool.streams[2].controller
+    np.testing.assert_array_equal(pool.read(2, 0).rotations, controller.pose([0.0]).rotations[0].astype(np.float32))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_memory_equals_equation_5_for_mixed_skeletons_and_histories(seed):
+    rng = np.random.default_rng(seed)
+    clips = {j: inputs.random_clip(j, frames=10, seed=j) for j in (82, 25, 24)}
+    bones = rng.choice([82, 25, 24], size=30)
+    histories = rng.integers(20, 121, size=30)
+    pool = StreamPool(
+        [Stream(controller=player(clips[b]), history=int(h), default="Stopped") for b, h in zip(bones, histories)]
+    )
+    assert pool.memory() == equation_5(bones, histories)
+    assert pool.memory() == 48 * int(np.sum(bones * histories))
+    unique = UniquePool(7, max_bones=82)
+    assert unique.memory() + pool.memory() == equation_5(bones, histories, unique=7)
+    assert equation_4(bones, histories, transitions=4096) > equation_5(bones, histories)
+
+
+def test_poses_local_and_world_agree_with_forward_kinematics():
+    pool, crowd = make_crowd()
+    for _ in range(3):
+        crowd.update()
+    local = crowd.poses([0, 1, 2], "body")
+    world = crowd.poses([0, 1, 2], "body", space="world")
+    expected = WALKER.skeleton.world(flockkit.Pose(rotations=local.rotations, translations=local.translations))
+    np.testing.assert_allclose(world, expected, atol=1e-5)
+    # a part reads its stream at its offset: agent 0 (stream 0) equals the pool's read
+    offset = int(crowd.offsets("body")[0])
+    np.testing.assert_array_equal(local.rotations[0], pool.read(0, offset).rotations)
+
+
+def test_unique_slots_and_visibility():
+    pool, crowd = make_crowd()
+    unique = UniquePool(2, max_bones=8, fps=FPS)
+    crowd = Crowd(pool, n_agents=10, clusters={"body": 0}, unique=unique, seed=0)
+    unique.set(1, player(rate=2.0))
+    crowd.transition_to_unique([4], "body", 1, blend_time=0.1)
+    for _ in range(4):
+        crowd.update()
+    np.testing.assert_array_equal(crowd.entries([4], "body")[0, :, 0:4], unique.read(1).rotations)
+    assert np.isnan(crowd.offsets("body")[4])
+    crowd.set_visible([4, 5], "body", False)
+    masks = crowd.instance_buffer()["mask"][:, 0]
+    assert masks[4] == 0 and masks[5] == 0 and masks[6] == 1
+
+
+def test_events_come_from_the_streams_that_play_them():
+    pool = StreamPool([Stream(controller=player(), history=10)], fps=FPS)
+    crowd = Crowd(pool, n_agents=3, clusters={"body": 0}, seed=0)
+    events = [e for _ in range(int(2 * FPS)) for e in crowd.update()]
+    assert [e.event.name for e in events] == ["step", "step"]  # the walker steps twice a cycle
+    assert all(e.stream == 0 and not e.unique for e in events)
+
+
+def test_bad_input_is_refused_and_changes_nothing():
+    pool, crowd = make_crowd()
+    crowd.transition_to_streamed([0, 2], "body", 2, blend_time=0.3)
+    before, users, running = crowd.instance_buffer().copy(), pool.users.copy(), pool.running.copy()
+    other = StreamPool([Stream(controller=player(inputs.random_clip(7)), history=5)])
+    odd = Crowd(other, n_agents=2, clusters={"arm": 0, "flag": [0, -1]})
+    cases = [
+        (lambda: crowd.transition_to_streamed([1, 99], "body", 0, 0.2), "unknown agent id 99"),
+        (lambda: crowd.transition_to_streamed([1, 1], "body", 0, 0.2), "repeat"),
+        (lambda: crowd.transition_to_streamed([1], "body", 9, 0.2), "unknown stream id 9"),
+        (lambda: crowd.transition_to_streamed([1], "body", 0, 0.0), "blend_time"),
+        (lambda: crowd.transition_to_streamed([1], "body", 0, -1), "blend_time"),
+        (lambda: crowd.transition_to_streamed([1], "legs", 0, 0.2), "unknown cluster 'legs'"),
+        (lambda: crowd.transition_to_streamed([1], "body", 0, 0.2, offsets=[25]), "offsets must be integers in 0..19"),
+        (
+            lambda: crowd.transition_to_streamed([1], "body", 0, 0.2, offsets=[0], time_to_dilate=1),
+            "without time dilation",
+        ),
+        (lambda: crowd.transition_to_unique([1], "body", 0, 0.2), "no UniquePool"),
+        (lambda: odd.transition_to_streamed([1], "flag", 0, 0.2), "agent 1 has no 'flag' cluster"),
+        (lambda: crowd.poses([0], "body", space="screen"), "space"),
+    ]
+    for call, message in cases:
+        with pytest.raises(ValidationError, match=message):
+            call()
+    np.testing.assert_array_equal(crowd.instance_buffer(), before)
+    np.testing.assert_array_equal(pool.users, users)
+    np.testing.assert_array_equal(pool.running, running)
+    mixed = StreamPool(
+        [Stream(controller=player(), history=5), Stream(controller=player(inputs.random_clip(7)), history=5)]
+    )
+    with pytest.raises(ValidationError, match="does not match"):
+        Crowd(mixed, n_agents=4, clusters={"body": [0, 1, 0, 1]})
+    crowd2 = Crowd(mixed, n_agents=2, clusters={"body": 0})
+    with pytest.raises(ValidationError, match=r"stream 1's skeleton \(7 joints\) does not match cluster 'body'"):
+        crowd2.transition_to_streamed([0], "body", 1, 0.2)
+    with pytest.raises(ValidationError, match="Stream.history"):
+        Stream(controller=player(), history=0)
+    with pytest.raises(ValidationError, match="Stream.default"):
+        Stream(controller=player(), history=3, default="Paused")
+    with pytest.raises(ValidationError, match="Stream.controller"):
+        Stream(controller="clip", history=3)
