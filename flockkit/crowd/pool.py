@@ -88,19 +88,30 @@ def _entries(pose: Pose, scales: np.ndarray) -> np.ndarray:
     return out
 
 
-def blend_entries(a: np.ndarray, b: np.ndarray, weight: np.ndarray) -> np.ndarray:
-    """Store entries (n, J, 12) blended by `weight` (n,): rotations on the sphere (nlerp, the
-    shorter way round), translations and scales linearly (Listing 3's lerp, per joint); weight 0
-    gives `a` and 1 gives `b` exactly."""
-    w = weight.astype(a.dtype)[:, None, None]
-    flip = np.where(np.sum(a[..., 0:4] * b[..., 0:4], axis=-1, keepdims=True) < 0, -1, 1).astype(a.dtype)
-    out = a + w * (b - a)
-    out[..., 0:4] = a[..., 0:4] + w * (flip * b[..., 0:4] - a[..., 0:4])
-    out[..., 0:4] /= np.linalg.norm(out[..., 0:4], axis=-1, keepdims=True)
-    ends = np.flatnonzero((weight == 0) | (weight == 1))
-    if len(ends):
-        out[ends] = np.where(w[ends] == 0, a[ends], b[ends])
-    return out
+def namespace(array):
+    """The array API namespace of `array` (numpy, CuPy, ...): the one code path that samples and
+    blends poses wherever the store lives."""
+    return array.__array_namespace__() if hasattr(array, "__array_namespace__") else np
+
+
+def blend_entries(a, b, weight):
+    """Store entries `a` (n, J, 12) blended towards `b` by `weight` (n,): rotations on the sphere
+    (nlerp, the shorter way round), translations and scales linearly (Listing 3's lerp, per
+    joint); weight 0 gives `a` and 1 gives `b` exactly. Array API calls only, so the same code
+    runs on a GPU array library's arrays; `a` is overwritten."""
+    xp = namespace(a)
+    w = xp.reshape(xp.astype(weight, a.dtype), (-1, 1, 1))
+    change = b - a
+    opposite = xp.vecdot(a[..., 0:4], b[..., 0:4]) < 0
+    if bool(xp.any(opposite)):  # the other hemisphere: blend towards -b, the same rotation
+        change[..., 0:4] = xp.where(opposite[..., None], -b[..., 0:4] - a[..., 0:4], change[..., 0:4])
+    change *= w
+    change += a
+    rotations = change[..., 0:4]
+    change[..., 0:4] = rotations / xp.sqrt(xp.vecdot(rotations, rotations))[..., None]
+    if bool(xp.any((w <= 0) | (w >= 1))):
+        change = xp.where(w <= 0, a, xp.where(w >= 1, b, change))
+    return change
 
 
 def entries_pose(entries: np.ndarray) -> Pose:
@@ -116,11 +127,14 @@ class StreamPool:
     streams : sequence of Stream
     fps : float
         Frames per second of the animation system (animFrameRate): one ``advance`` is one frame.
+    xp : array namespace, optional
+        Where the store lives (default numpy): a GPU array library's namespace (``cupy``) keeps
+        it on the device, where ``Crowd.poses`` samples and blends it through the same code.
 
     Streams are referred to by their index in `streams`.
     """
 
-    def __init__(self, streams, *, fps: float = 30.0):
+    def __init__(self, streams, *, fps: float = 30.0, xp=None):
         self.streams = tuple(streams)
         if not self.streams or not all(isinstance(s, Stream) for s in self.streams):
             raise ValidationError("StreamPool needs a non-empty sequence of flockkit.crowd.Stream")
@@ -137,7 +151,8 @@ class StreamPool:
             for k in np.flatnonzero(self.history > slot):
                 self.lookup[k, slot] = offset
                 offset += int(self.bones[k]) * ENTRY_FLOATS
-        self.store = np.zeros(offset, dtype=np.float32)
+        self.xp = np if xp is None else xp
+        self.store = self.xp.zeros(offset, dtype=self.xp.float32)
         self.head = np.zeros(s, dtype=np.int64)  # the slot written last
         self.filled = np.zeros(s, dtype=np.int64)  # frames written since the stream (re)started
         self.clock = np.zeros(s, dtype=np.int64)  # frames evaluated since the stream (re)started
@@ -176,9 +191,7 @@ class StreamPool:
             raise ValidationError(
                 f"stream {k} has written {self.filled[k]} frames since it started; offset {offset} is older"
             )
-        start = int(self.rows(np.array([k]), np.array([offset]))[0])
-        j = int(self.bones[k])
-        return entries_pose(self.store[start : start + j * ENTRY_FLOATS].reshape(j, ENTRY_FLOATS).copy())
+        return entries_pose(self.gather(np.array([k]), np.array([offset]), int(self.bones[k]))[0])
 
     def is_running(self, stream: int) -> bool:
         (k,) = self.check_streams(stream)
@@ -186,7 +199,16 @@ class StreamPool:
 
     def memory(self) -> int:
         """Bytes of pose storage: the store (Equation 5 with U = 0)."""
-        return int(self.store.nbytes)
+        return int(self.store.size) * 4
+
+    def gather(self, streams: np.ndarray, offsets: np.ndarray, bones: int):
+        """Entries (n, bones, 12) of `streams` (all of `bones` joints) `offsets` frames behind their
+        heads: numpy takes whole rows of a strided view; other namespaces take by flat index."""
+        rows = self.rows(streams, offsets)
+        if self.xp is np:
+            return self.windows(bones)[rows].reshape(-1, bones, ENTRY_FLOATS)
+        index = (rows[:, None] + np.arange(bones * ENTRY_FLOATS)).reshape(-1)
+        return self.xp.reshape(self.xp.take(self.store, self.xp.asarray(index)), (-1, bones, ENTRY_FLOATS))
 
     def windows(self, bones: int) -> np.ndarray:
         """The store seen as overlapping rows of `bones` entries, one starting at every float:
@@ -235,7 +257,7 @@ class StreamPool:
         events = []
         for k, row in zip(live.tolist(), rows.tolist()):
             entry, due = self._next(k)
-            self.store[row : row + entry.size] = entry.ravel()
+            self.store[row : row + entry.size] = entry.ravel() if self.xp is np else self.xp.asarray(entry.ravel())
             events.extend((k, e) for e in due)
         self.filled[live] = np.minimum(self.filled[live] + 1, self.history[live])
         self.clock[live] += 1

@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import validate
 from ..errors import ValidationError
-from .pool import ENTRY_FLOATS, StreamPool, UniquePool, blend_entries, entries_pose
+from .pool import StreamPool, UniquePool, blend_entries, entries_pose
 from .skeleton import Event, Pose
 
 __all__ = ["Crowd", "CrowdEvent", "INSTANCE", "NONE", "STREAMED", "UNIQUE", "DILATION_RATE"]
@@ -46,6 +46,13 @@ class CrowdEvent:
     stream: int
     event: Event
     unique: bool = False
+
+
+def _merge(xp, first, first_rows: np.ndarray, second, second_rows: np.ndarray):
+    """Rows of `first` and `second` put back in the order their row numbers give (concatenation
+    and one take: no integer-array assignment, which the array API standard lacks)."""
+    order = np.argsort(np.concatenate([first_rows, second_rows]), kind="stable")
+    return xp.take(xp.concat([first, second], axis=0), xp.asarray(order), axis=0)
 
 
 def _agent_ids(agents, n_agents: int) -> np.ndarray:
@@ -119,6 +126,7 @@ class Crowd:
         self._buffer = buffer
         self._dilate_to = np.full((n, c), np.nan, dtype=np.float32)  # NaN: not dilating
         self._rate = np.zeros((n, c), dtype=np.float32)
+        self._changing = np.zeros(0, dtype=np.int64)  # flat indices (agent * C + cluster) dilating or blending
         reading = buffer["kind"] == STREAMED
         pool.acquire(buffer["stream"][reading])
         for _ in range(int(pool.history.max()) - 1):  # fill every running stream's history
@@ -214,6 +222,7 @@ class Crowd:
         self._start_blend(ids, c, UNIQUE, k, np.zeros(len(ids), dtype=np.float32), blend_time)
 
     def _start_blend(self, ids, c, kind, target, offsets, blend_time) -> None:
+        self._changing = np.union1d(self._changing, ids * len(self.clusters) + c)
         record = self._buffer[ids, c]
         record["target_kind"], record["target"], record["target_offset"] = kind, target, offsets
         record["blend_start"], record["blend_time"] = self.time, blend_time
@@ -251,24 +260,32 @@ class Crowd:
             events += [CrowdEvent(stream=s, event=e, unique=True) for s, e in self.unique.advance()]
         self.frame += 1
         self.time = self.frame / self.pool.fps
-        agents, clusters = np.nonzero(~np.isnan(self._dilate_to))
-        if len(agents):
-            record = self._buffer[agents, clusters]
-            blending = record["blend_time"] > 0
-            field = np.where(blending, record["target_offset"], record["offset"])
-            stream = np.where(blending, record["target"], record["stream"])
-            goal = self._dilate_to[agents, clusters]
-            moved = np.minimum(np.minimum(field + self._rate[agents, clusters], goal), self.pool.filled[stream] - 1)
-            record["target_offset"] = np.where(blending, moved, record["target_offset"])
-            record["offset"] = np.where(blending, record["offset"], moved)
-            self._buffer[agents, clusters] = record
-            done = moved >= goal
-            self._dilate_to[agents[done], clusters[done]] = np.nan
-        agents, clusters = np.nonzero(self._buffer["blend_time"] > 0)
-        if len(agents):
-            record = self._buffer[agents, clusters]
-            finished = self.time - record["blend_start"] >= record["blend_time"] - 1e-6
+        flat = self._changing
+        if not len(flat):
+            return events
+        agents, clusters = np.divmod(flat, len(self.clusters))
+        record = self._buffer[agents, clusters]
+        goal = self._dilate_to[agents, clusters]
+        dilating = np.flatnonzero(~np.isnan(goal))
+        if len(dilating):
+            r = record[dilating]
+            blending = r["blend_time"] > 0
+            field = np.where(blending, r["target_offset"], r["offset"])
+            stream = np.where(blending, r["target"], r["stream"])
+            step = field + self._rate[agents[dilating], clusters[dilating]]
+            moved = np.minimum(np.minimum(step, goal[dilating]), self.pool.filled[stream] - 1)
+            r["target_offset"] = np.where(blending, moved, r["target_offset"])
+            r["offset"] = np.where(blending, r["offset"], moved)
+            record[dilating] = r
+            arrived = dilating[moved >= goal[dilating]]
+            goal[arrived] = np.nan
+            self._dilate_to[agents[arrived], clusters[arrived]] = np.nan
+        self._buffer[agents, clusters] = record
+        blending = record["blend_time"] > 0
+        finished = blending & (self.time - record["blend_start"] >= record["blend_time"] - 1e-6)
+        if finished.any():
             self._collapse(agents[finished], clusters[finished])
+        self._changing = flat[~np.isnan(goal) | (blending & ~finished)]
         return events
 
     # -- reading --------------------------------------------------------------------------------
@@ -295,45 +312,43 @@ class Crowd:
         alpha = np.clip((self.time - record["blend_start"]) / np.where(blending, record["blend_time"], 1), 0, 1)
         return np.where(blending, alpha, np.nan)
 
-    def _read(self, kind, index, offset, bones) -> np.ndarray:
-        """Entries (n, bones, 12) of parts reading (kind, stream or slot, offset); fractional
-        offsets mix the two frames around them."""
-        out = np.empty((len(kind), bones, ENTRY_FLOATS), dtype=np.float32)
+    def _read(self, kind, index, offset, bones):
+        """Entries (n, bones, 12) of parts reading (kind, stream or slot, offset), in the pool's
+        array namespace; an offset between frames (while dilating) reads the nearest one, as a
+        shader reading whole frames does."""
         streamed = np.flatnonzero(kind == STREAMED)
-        if len(streamed):
-            windows = self.pool.windows(bones)
-            streams, whole = index[streamed], np.floor(offset[streamed]).astype(np.int64)
-            out[streamed] = windows[self.pool.rows(streams, whole)].reshape(-1, bones, ENTRY_FLOATS)
-            part = offset[streamed] - whole
-            between = np.flatnonzero(part > 0)
-            if len(between):
-                rows = streamed[between]
-                older = np.minimum(whole[between] + 1, self.pool.history[streams[between]] - 1)
-                later = windows[self.pool.rows(streams[between], older)].reshape(-1, bones, ENTRY_FLOATS)
-                out[rows] = blend_entries(out[rows], later, part[between])
+        taken = self.pool.gather(index[streamed], np.rint(offset[streamed]).astype(np.int64), bones)
+        if len(streamed) == len(kind):
+            return taken
+        xp = self.pool.xp
         unique = np.flatnonzero(kind == UNIQUE)
-        if len(unique):
-            out[unique] = self.unique.store[index[unique], :bones]
-        return out
+        slots = xp.asarray(self.unique.store[index[unique], :bones]) if len(unique) else taken[:0]
+        return _merge(xp, taken, streamed, slots, unique)
 
-    def entries(self, agents=None, cluster=None) -> np.ndarray:
+    def entries(self, agents=None, cluster=None):
         """Store entries (n, J, 12) float32 of `agents` (default all) in `cluster`: sources read at
         their offsets and, while blending, mixed with their targets by α (rotations on the
-        sphere). Agents without the cluster are refused."""
+        sphere), in the pool's array namespace. Agents without the cluster are refused."""
         c = self._cluster(cluster if cluster is not None else self.clusters[0])
         ids = np.arange(self.n_agents) if agents is None else _agent_ids(agents, self.n_agents)
         record = self._buffer[ids, c]
         if np.any(record["kind"] == NONE):
             raise ValidationError(f"agent {int(ids[record['kind'] == NONE][0])} has no {self.clusters[c]!r} cluster")
         bones = self.skeletons[c].n_joints
-        out = self._read(record["kind"], record["stream"], record["offset"], bones)
         blending = np.flatnonzero(record["blend_time"] > 0)
-        if len(blending):
-            r = record[blending]
-            target = self._read(r["target_kind"], r["target"], r["target_offset"], bones)
-            alpha = np.clip((self.time - r["blend_start"]) / r["blend_time"], 0, 1)
-            out[blending] = blend_entries(out[blending], target, alpha)
-        return out
+        if not len(blending):
+            return self._read(record["kind"], record["stream"], record["offset"], bones)
+        xp = self.pool.xp
+        steady = np.flatnonzero(record["blend_time"] <= 0)
+        r = record[blending]
+        source = self._read(r["kind"], r["stream"], r["offset"], bones)
+        target = self._read(r["target_kind"], r["target"], r["target_offset"], bones)
+        alpha = np.clip((self.time - r["blend_start"]) / r["blend_time"], 0, 1).astype(np.float32)
+        mixed = blend_entries(source, target, xp.asarray(alpha))
+        if not len(steady):
+            return mixed
+        s = record[steady]
+        return _merge(xp, self._read(s["kind"], s["stream"], s["offset"], bones), steady, mixed, blending)
 
     def poses(self, agents=None, cluster=None, *, space: str = "local"):
         """The poses of `agents` (default all) in `cluster`, vectorized: ``space="local"`` a
@@ -345,6 +360,8 @@ class Crowd:
         pose = entries_pose(entries)
         if space == "local":
             return pose
+        if self.pool.xp is not np:
+            raise ValidationError("world poses are computed with numpy: read local poses from a store on a device")
         c = self._cluster(cluster if cluster is not None else self.clusters[0])
         return self.skeletons[c].world(Pose._adopt(pose.rotations, pose.translations), dtype=np.float32)
 

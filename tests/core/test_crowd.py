@@ -233,3 +233,35 @@ def test_bad_input_is_refused_and_changes_nothing():
         Stream(controller=player(), history=3, default="Paused")
     with pytest.raises(ValidationError, match="Stream.controller"):
         Stream(controller="clip", history=3)
+
+
+def test_sampling_and_blending_run_through_the_array_api_alone():
+    """A store in array-api-strict (the standard and nothing more, as a GPU library's would be)
+    gives the poses a numpy store gives: one code path for CPU and GPU."""
+    strict = pytest.importorskip("array_api_strict", reason="pip install array-api-strict (in the test extra)")
+
+    def run(xp):
+        pool = StreamPool(
+            [
+                Stream(controller=player(), history=20),
+                Stream(controller=player(rate=1.5), history=40),
+                Stream(controller=player(rate=0.7, start=0.3), history=30, default="Stopped"),
+            ],
+            fps=FPS,
+            xp=xp,
+        )
+        unique = UniquePool(1, max_bones=5, fps=FPS)
+        unique.set(0, player(rate=2.0))
+        crowd = Crowd(pool, n_agents=30, clusters={"body": np.arange(30) % 2}, unique=unique, seed=4)
+        crowd.transition_to_streamed(np.arange(0, 12), "body", 2, blend_time=0.4)
+        crowd.transition_to_unique([13], "body", 0, blend_time=0.2)
+        for _ in range(5):
+            crowd.update()
+        return crowd.poses(cluster="body"), crowd.alphas("body")
+
+    reference, alphas = run(None)
+    assert np.sum(alphas > 0) == 13  # blending, steady and unique parts all read
+    strict_pose, _ = run(strict)
+    assert strict_pose.rotations.__array_namespace__() is strict
+    np.testing.assert_allclose(np.asarray(strict_pose.rotations), reference.rotations, atol=1e-6)
+    np.testing.assert_allclose(np.asarray(strict_pose.translations), reference.translations, atol=1e-6)
