@@ -120,8 +120,8 @@ def main():
     per_part = (time.perf_counter() - begin) / len(sample) * 1000
     naive = per_part * parts
     ours = updates.mean() + buffer
-    print(f"naive per-agent evaluation: {per_part * 1000:.1f} us per part (measured on {len(sample)} parts) "
-          f"x {parts} parts = {naive:.0f} ms per frame; flockkit {ours:.2f} ms: {naive / ours:.0f}x faster")  # fmt: skip
+    print(f"naive per-agent evaluation: {per_part * 1000:.1f} us per part (measured on {len(sample)} parts) x "
+          f"{parts} parts = {naive:.0f} ms per frame; flockkit {ours:.2f} ms: {naive / ours:.0f}x faster")  # fmt: skip
 
 
 if __name__ == "__main__":

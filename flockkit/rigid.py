@@ -184,6 +184,6 @@ def nlerp(a, b, u) -> np.ndarray:
     sphere like slerp, with the same ends, at a fraction of its cost (what game engines blend
     poses with)."""
     a, b = np.asarray(a), np.asarray(b)
-    b = np.where(np.sum(a * b, axis=-1, keepdims=True) < 0, -b, b)
+    b = np.where(np.vecdot(a, b)[..., None] < 0, -b, b)  # vecdot: far faster than summing a * b over 4
     mixed = a + u * (b - a)
-    return mixed / np.linalg.norm(mixed, axis=-1, keepdims=True)
+    return mixed / np.sqrt(np.vecdot(mixed, mixed))[..., None]

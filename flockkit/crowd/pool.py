@@ -158,7 +158,18 @@ class StreamPool:
         self.clock = np.zeros(s, dtype=np.int64)  # frames evaluated since the stream (re)started
         self.running = np.array([st.default == "Running" for st in self.streams])
         self.users = np.zeros(s, dtype=np.int64)  # agent parts reading the stream
-        self._ahead: dict[int, tuple] = {}  # stream -> (first frame, entries ahead, events ahead by frame)
+        # prefetched poses: per skeleton size, (streams of that size, PREFETCH_FRAMES, J, 12); a
+        # stream's block starts at frame _first and holds _count frames (0: refill at once)
+        self._group = {int(b): np.flatnonzero(self.bones == b) for b in np.unique(self.bones)}
+        self._place = np.zeros(s, dtype=np.int64)
+        for members in self._group.values():
+            self._place[members] = np.arange(len(members))
+        self._ahead = {
+            b: np.zeros((len(m), PREFETCH_FRAMES, b, ENTRY_FLOATS), np.float32) for b, m in self._group.items()
+        }
+        self._first = np.zeros(s, dtype=np.int64)
+        self._count = np.zeros(s, dtype=np.int64)
+        self._events: dict[int, dict] = {}  # stream -> {frame: events} ahead, for streams that have some
         self._stops = np.array([st.default == "Stopped" for st in self.streams])
         self._scales = [st.skeleton.scales.astype(np.float32) for st in self.streams]
         for k in np.flatnonzero(self.running):
@@ -222,7 +233,8 @@ class StreamPool:
     def _restart(self, k: int) -> None:
         self.running[k] = True
         self.head[k], self.filled[k], self.clock[k] = -1 % self.history[k], 0, 0
-        self._ahead.pop(k, None)
+        self._count[k] = 0
+        self._events.pop(k, None)
         self._write(np.array([k]))  # a started stream has its first pose at once: offset 0 reads it
 
     def acquire(self, streams: np.ndarray) -> np.ndarray:
@@ -241,8 +253,6 @@ class StreamPool:
         self.users -= np.bincount(streams, minlength=len(self.streams))
         ending = np.flatnonzero(self._stops & self.running & (self.users <= 0))
         self.running[ending] = False
-        for k in ending:
-            self._ahead.pop(int(k), None)
 
     def advance(self) -> list:
         """One frame: every Running stream evaluates its controller and writes its head. Returns
@@ -252,40 +262,54 @@ class StreamPool:
     def _write(self, live: np.ndarray) -> list:
         if not len(live):
             return []
+        for k in live[self.clock[live] - self._first[live] >= self._count[live]]:
+            self._refill(int(k))
         self.head[live] = (self.head[live] + 1) % self.history[live]
         rows = self.lookup[live, self.head[live]]
         events = []
-        for k, row in zip(live.tolist(), rows.tolist()):
-            entry, due = self._next(k)
-            self.store[row : row + entry.size] = entry.ravel() if self.xp is np else self.xp.asarray(entry.ravel())
-            events.extend((k, e) for e in due)
+        for k in self._events.keys() & set(live.tolist()):
+            events.extend((k, e) for e in self._events[k].pop(int(self.clock[k]), ()))
+        for bones, members in self._group.items():
+            mine = np.isin(live, members)
+            streams = live[mine]
+            if not len(streams):
+                continue
+            entries = self._ahead[bones][self._place[streams], self.clock[streams] - self._first[streams]]
+            if self.xp is np:
+                width = bones * ENTRY_FLOATS
+                count = len(self.store) - width + 1
+                windows = np.lib.stride_tricks.as_strided(self.store, shape=(count, width), strides=(4, 4))
+                windows[rows[mine]] = entries.reshape(len(streams), width)
+            else:
+                for row, entry in zip(rows[mine].tolist(), entries):
+                    self.store[row : row + entry.size] = self.xp.asarray(entry.ravel())
         self.filled[live] = np.minimum(self.filled[live] + 1, self.history[live])
         self.clock[live] += 1
         return events
 
-    def _next(self, k: int):
-        """Stream k's entries for its next frame and the events within that frame, from its
-        prefetched block (refilled when used up; the first block of a stream is shorter by its
-        index modulo PREFETCH_FRAMES, so that refills of streams started together fall on
-        different frames)."""
+    def _refill(self, k: int) -> None:
+        """Evaluate stream k's controller for its next block of frames, and note its events there.
+        A stream's first block is shorter by its index modulo PREFETCH_FRAMES, so that refills of
+        streams started together fall on different frames."""
         frame = int(self.clock[k])
-        first, block, events = self._ahead.get(k, (0, None, None))
-        if block is None or frame - first >= len(block):
-            count = PREFETCH_FRAMES - (k % PREFETCH_FRAMES if frame == 0 else 0)
-            controller = self.streams[k].controller
-            pose = controller.pose((frame + np.arange(count)) / self.fps)
-            if pose.n_joints != self.bones[k] or pose.shape != (count,):
-                raise ValidationError(
-                    f"stream {k}'s controller gave poses of shape {pose.shape} x {pose.n_joints} joints for "
-                    f"{count} times and a skeleton of {self.bones[k]}"
-                )
-            events = {}
-            for e in controller.events(frame / self.fps, (frame + count) / self.fps):
-                at = min(max(int(np.floor(e.time * self.fps + 1e-9)), frame), frame + count - 1)
-                events.setdefault(at, []).append(e)
-            first, block = frame, _entries(pose, self._scales[k])
-            self._ahead[k] = (first, block, events)
-        return block[frame - first], events.pop(frame, ())
+        count = PREFETCH_FRAMES - (k % PREFETCH_FRAMES if frame == 0 else 0)
+        controller = self.streams[k].controller
+        pose = controller.pose((frame + np.arange(count)) / self.fps)
+        if pose.n_joints != self.bones[k] or pose.shape != (count,):
+            raise ValidationError(
+                f"stream {k}'s controller gave poses of shape {pose.shape} x {pose.n_joints} joints for "
+                f"{count} times and a skeleton of {self.bones[k]}"
+            )
+        self._ahead[int(self.bones[k])][self._place[k], :count] = _entries(pose, self._scales[k])
+        self._first[k], self._count[k] = frame, count
+        found = {}
+        for e in controller.events(frame / self.fps, (frame + count) / self.fps):
+            at = min(max(int(np.floor(e.time * self.fps + 1e-9)), frame), frame + count - 1)
+            found.setdefault(at, []).append(e)
+        if found:
+            self._events[k] = found
+        else:
+            self._events.pop(k, None)
 
 
 class UniquePool:

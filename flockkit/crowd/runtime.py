@@ -264,25 +264,26 @@ class Crowd:
         if not len(flat):
             return events
         agents, clusters = np.divmod(flat, len(self.clusters))
-        record = self._buffer[agents, clusters]
+        buffer = self._buffer  # field by field: gathering whole records is slower
+        blending = buffer["blend_time"][agents, clusters] > 0
         goal = self._dilate_to[agents, clusters]
-        dilating = np.flatnonzero(~np.isnan(goal))
-        if len(dilating):
-            r = record[dilating]
-            blending = r["blend_time"] > 0
-            field = np.where(blending, r["target_offset"], r["offset"])
-            stream = np.where(blending, r["target"], r["stream"])
-            step = field + self._rate[agents[dilating], clusters[dilating]]
-            moved = np.minimum(np.minimum(step, goal[dilating]), self.pool.filled[stream] - 1)
-            r["target_offset"] = np.where(blending, moved, r["target_offset"])
-            r["offset"] = np.where(blending, r["offset"], moved)
-            record[dilating] = r
-            arrived = dilating[moved >= goal[dilating]]
-            goal[arrived] = np.nan
-            self._dilate_to[agents[arrived], clusters[arrived]] = np.nan
-        self._buffer[agents, clusters] = record
-        blending = record["blend_time"] > 0
-        finished = blending & (self.time - record["blend_start"] >= record["blend_time"] - 1e-6)
+        dilating = ~np.isnan(goal)
+        for field, stream, which in (
+            ("target_offset", "target", dilating & blending),
+            ("offset", "stream", dilating & ~blending),
+        ):
+            a, c = agents[which], clusters[which]
+            if not len(a):
+                continue
+            step = buffer[field][a, c] + self._rate[a, c]
+            moved = np.minimum(np.minimum(step, goal[which]), self.pool.filled[buffer[stream][a, c]] - 1)
+            buffer[field][a, c] = moved
+            arrived = moved >= goal[which]
+            self._dilate_to[a[arrived], c[arrived]] = np.nan
+            goal[np.flatnonzero(which)[arrived]] = np.nan
+        finished = blending & (
+            self.time - buffer["blend_start"][agents, clusters] >= buffer["blend_time"][agents, clusters] - 1e-6
+        )
         if finished.any():
             self._collapse(agents[finished], clusters[finished])
         self._changing = flat[~np.isnan(goal) | (blending & ~finished)]

@@ -333,7 +333,8 @@ class SkeletalClip:
 
     def sample(self, times) -> Pose:
         """Poses (len(times), J) at `times` in seconds, held before 0 and after the end: rotations
-        interpolated on the sphere (slerp), translations linearly."""
+        interpolated on the sphere (nlerp: between frames a few degrees apart it strays from
+        slerp by thousandths of a degree, at a fraction of the cost), translations linearly."""
         t = np.atleast_1d(np.asarray(times, dtype=np.float64))
         if t.ndim != 1 or not np.all(np.isfinite(t)):
             raise ValidationError("SkeletalClip.sample needs finite times (a number or a 1D array)")
@@ -342,8 +343,7 @@ class SkeletalClip:
         u = (frame - k)[:, None, None]
         if self.n_frames == 1:
             return Pose._adopt(np.repeat(self.rotations, len(t), axis=0), np.repeat(self.translations, len(t), axis=0))
-        rotations = rigid.slerp(self.rotations[k], self.rotations[k + 1], u)
-        rotations /= np.linalg.norm(rotations, axis=-1, keepdims=True)
+        rotations = rigid.nlerp(self.rotations[k], self.rotations[k + 1], u)
         translations = self.translations[k] + u * (self.translations[k + 1] - self.translations[k])
         return Pose._adopt(rotations, translations)
 
