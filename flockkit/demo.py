@@ -8,7 +8,10 @@
 4. solve the come-from-behind scenario (paper 004, Figure 5) and draw its sampler trace;
 5. fill a square with 12 flocks walked from that graph, each heading where the wind arrows point
    (east, turning north halfway), out of step with its neighbours (paper 002's scenes);
-6. with the shared captures present, build a graph from the five sticklebacks (pixels of a
+6. a crowd of 48 stick figures sharing two walking streams at their own offsets (paper 003):
+   at 1 s half of them blend into a Stopped "cheer" stream, which starts, and time dilation
+   spreads their offsets; at 3.5 s they walk again and the cheer stream stops;
+7. with the shared captures present, build a graph from the five sticklebacks (pixels of a
    1280 x 720 video, read with y up) and walk it for a minute with the school's center kept one
    group radius inside the video frame.
 """
@@ -104,7 +107,12 @@ def run_demo(out, *, data=None, progress=False, report=print) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     tour = _Tour(out, progress)
     data_driven, graph = _data_driven(tour)
-    summary = {**data_driven, "come-from-behind": _constrained(tour), "scene": _scene(tour, graph)}
+    summary = {
+        **data_driven,
+        "come-from-behind": _constrained(tour),
+        "scene": _scene(tour, graph),
+        "crowd": _crowd(tour),
+    }
     folder = shared_data_folder(data)
     if folder is None:
         summary["sticklebacks"] = "skipped: ../shared/data/sticklebacks-5 not found (use --data)"
@@ -188,6 +196,52 @@ def _scene(tour: _Tour, graph) -> dict:
             round(float(np.median(within)), 3),
         ],
         "neighbours in step (before, after)": [animation.report["in_step_before"], animation.report["in_step_after"]],
+    }
+
+
+def _crowd(tour: _Tour) -> dict:
+    """Paper 003: a crowd of stick figures on shared streams; half cheer, then walk again."""
+    from . import viz
+    from .crowd import Crowd, Stream, StreamPool, equation_5
+    from .registry import get
+    from .testing.inputs import walker
+
+    clip = walker()
+    cheer = get("controller", "blend", a=get("controller", "clip", clip=clip, rate=2.6),
+                b=get("controller", "clip", clip=walker(swing=70.0), rate=0.8), weight=0.6)  # fmt: skip
+    streams = [
+        Stream(controller=get("controller", "clip", clip=clip), history=60),
+        Stream(controller=get("controller", "clip", clip=clip, rate=1.3), history=45),
+        Stream(controller=cheer, history=60, default="Stopped"),
+    ]
+    pool = StreamPool(streams, fps=30.0)
+    crowd = Crowd(pool, n_agents=48, clusters={"body": np.arange(48) % 2}, seed=3)
+    cheering, offsets, running = np.arange(0, 48, 2), [], {}
+
+    def script(crowd, frame):
+        if frame == 30:
+            crowd.transition_to_streamed(cheering, "body", 2, blend_time=0.4, time_to_dilate=3.0)
+            running["at the cheer"] = crowd.pool.is_running(2)
+        if frame == 105:
+            crowd.transition_to_streamed(cheering, "body", 0, blend_time=0.4)
+        if 30 <= frame < 105:
+            offsets.append(crowd.offsets("body")[cheering])
+
+    with tour.step("a crowd of 48 for 5 s"):
+        viz.animate_crowd(crowd, tour.path("crowd.gif"), seconds=5.0, on_frame=script, axes="yz",
+                          progress=tour.progress)  # fmt: skip
+    offsets = np.array(offsets)
+    viz.plot_offsets((30 + np.arange(len(offsets))) / 30.0, offsets, tour.path("crowd-offsets.png"),
+                     title="offsets of the cheering half after the cheer stream starts")  # fmt: skip
+    return {
+        "agents": crowd.n_agents,
+        "streams": len(streams),
+        "memory (bytes, Equation 5)": [pool.memory(), equation_5(pool.bones, pool.history)],
+        "cheer stream running (at the cheer, at the end)": [running["at the cheer"], pool.is_running(2)],
+        "distinct offsets among the cheering half (at the start, at 3.5 s)": [
+            int(len(np.unique(offsets[0]))),
+            int(len(np.unique(np.rint(offsets[-1])))),
+        ],
     }
 
 

@@ -22,6 +22,8 @@ __all__ = [
     "plot_difference_matrix",
     "plot_graph",
     "plot_trace",
+    "animate_crowd",
+    "plot_offsets",
     "PICTURE_SUFFIXES",
     "ANIMATION_SUFFIXES",
 ]
@@ -658,3 +660,100 @@ def animate_scene(animation, path, *, fps=None, size=None, max_frames=None, prog
     finally:
         plt.close(figure)
     return path
+
+
+def animate_crowd(crowd, path, *, seconds: float = 3.0, cluster=None, agents=None, on_frame=None, axes="xz",
+                  fps=None, size=None, progress=False):  # fmt: skip
+    """Run `crowd` (a ``flockkit.Crowd``) for `seconds` and draw it: each of `agents` (default up
+    to the first 48) a stick figure of its part `cluster` (default the first), joints joined to
+    their parents, laid out on a grid and seen along the axes `axes` (horizontal, vertical),
+    coloured by the stream the part reads (while blending, by the stream it blends to, drawn
+    thicker). The crowd advances, as a game loop would advance it; ``on_frame(crowd, frame)`` is
+    called before each update, to start transitions. Returns the path."""
+    path = _check_movie_path(path)
+    seconds = number(seconds, "animate_crowd: seconds", minimum=0, strict=True)
+    if len(axes) != 2 or any(a not in "xyz" for a in axes):
+        raise ValidationError(f"animate_crowd: axes must be two of 'x', 'y', 'z' (horizontal, vertical); got {axes!r}")
+    cluster = crowd.clusters[0] if cluster is None else cluster
+    agents = np.arange(min(crowd.n_agents, 48)) if agents is None else np.asarray(agents)
+    c = crowd.cluster_index(cluster)
+    parents = crowd.skeletons[c].parents
+    pick = ["xyz".index(a) for a in axes]
+    n_frames = int(round(seconds * crowd.pool.fps))
+    joints, streams, blending = [], [], []
+    for frame in range(n_frames):
+        if on_frame is not None:
+            on_frame(crowd, frame)
+        crowd.update()
+        joints.append(crowd.poses(agents, cluster, space="world")[..., :3, 3][..., pick])
+        record = crowd.instance_buffer()[agents, c]
+        moving = record["blend_time"] > 0
+        streams.append(np.where(moving, record["target"], record["stream"]) + np.where(
+            np.where(moving, record["target_kind"], record["kind"]) == 2, 1000, 0))  # fmt: skip
+        blending.append(moving)
+    joints = np.array(joints)  # (frames, agents, J, 2)
+    extent = np.ptp(joints.reshape(-1, 2), axis=0).max() if joints.size else 1.0
+    spacing = 0.8 * max(float(np.ptp(joints[..., 0], axis=-1).max()), 1e-9) + 0.4 * extent / max(len(agents), 1) ** 0.5
+    height = max(float(np.ptp(joints[..., 1], axis=-1).max()), 1e-9) * 1.4
+    columns = max(1, int(np.ceil(np.sqrt(len(agents) * height / spacing))))  # a roughly square crowd
+    grid = np.stack([np.arange(len(agents)) % columns, -(np.arange(len(agents)) // columns)], axis=1)
+    centers = joints.mean(axis=(0, 2))  # each agent's mean joint position: figures stay in their cells
+    placed = joints - centers[None, :, None] + (grid * [spacing, height])[None, :, None]
+    frames, rate = _timeline(1.0 / crowd.pool.fps, n_frames, fps, None, "animate_crowd")
+    plt = _pyplot()
+    from matplotlib import animation as movies
+    from matplotlib.collections import LineCollection
+
+    low, high = placed.reshape(-1, 2).min(axis=0), placed.reshape(-1, 2).max(axis=0)
+    figure, ax = _scene_figure(plt, low, high, size, keyed=False, longer=640)
+    _fit_view(ax, low, high)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    bones = np.flatnonzero(parents >= 0)
+    palette = plt.get_cmap("tab10")
+    lines = LineCollection([], zorder=3)
+    ax.add_collection(lines)
+    label = ax.set_title("")
+
+    def draw(index):
+        frame = frames[index]
+        segments = np.stack([placed[frame][:, bones], placed[frame][:, parents[bones]]], axis=2).reshape(-1, 2, 2)
+        colours = [palette(int(s) % 10) for s in streams[frame] for _ in bones]
+        widths = [2.2 if b else 1.0 for b in blending[frame] for _ in bones]
+        lines.set_segments(segments)
+        lines.set_color(colours)
+        lines.set_linewidth(widths)
+        label.set_text(f"{len(agents)} agents coloured by stream, t = {(frame + 1) / crowd.pool.fps:.1f} s")
+        return [lines, label]
+
+    try:
+        _save_animation(movies.FuncAnimation(figure, draw, frames=len(frames), blit=False), path, rate, progress)
+    finally:
+        plt.close(figure)
+    return path
+
+
+def plot_offsets(times, offsets, path=None, *, targets=None, title="offsets during time dilation"):
+    """Agent parts' offsets (frames behind their stream's head) over `times` (F,) seconds:
+    `offsets` (F, n), one line each, with their dilation `targets` (n,) dotted. Returns the
+    Figure; writes it to `path` if given."""
+    if path is not None:
+        path = _check_picture_path(path)
+    times, offsets = np.asarray(times, dtype=float), np.asarray(offsets, dtype=float)
+    if offsets.ndim != 2 or offsets.shape[0] != len(times):
+        raise ValidationError(f"plot_offsets: offsets must be (len(times), parts); got {offsets.shape}")
+    plt = _pyplot()
+    figure, ax = plt.subplots(figsize=(7, 3.6))
+    palette = plt.get_cmap("viridis")
+    order = np.argsort(offsets[-1])
+    for rank, k in enumerate(order):
+        colour = palette(rank / max(len(order) - 1, 1))
+        ax.plot(times, offsets[:, k], color=colour, lw=1)
+        if targets is not None:
+            ax.axhline(float(np.asarray(targets)[k]), color=colour, lw=0.6, ls=":")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("offset (frames behind the head)")
+    ax.set_title(title)
+    if path is not None:
+        _save(figure, path)
+    return figure

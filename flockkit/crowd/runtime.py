@@ -137,7 +137,9 @@ class Crowd:
 
     # -- checks ---------------------------------------------------------------------------------
 
-    def _cluster(self, cluster) -> int:
+    def cluster_index(self, cluster) -> int:
+        """The index of `cluster` (its bit in the visibility mask, its column of the instance
+        buffer); a ValidationError naming the clusters if there is none."""
         if cluster not in self.clusters:
             raise ValidationError(
                 f"unknown cluster {cluster!r}; the crowd's clusters are {', '.join(map(repr, self.clusters))}"
@@ -145,7 +147,7 @@ class Crowd:
         return self.clusters.index(cluster)
 
     def _parts(self, agents, cluster) -> tuple[np.ndarray, int]:
-        ids, c = _agent_ids(agents, self.n_agents), self._cluster(cluster)
+        ids, c = _agent_ids(agents, self.n_agents), self.cluster_index(cluster)
         lacking = ids[self._buffer["kind"][ids, c] == NONE]
         if len(lacking):
             raise ValidationError(f"agent {int(lacking[0])} has no {cluster!r} cluster to transition")
@@ -294,7 +296,7 @@ class Crowd:
     def offsets(self, cluster) -> np.ndarray:
         """Each agent's offset in `cluster` (N,): of the stream it blends to while blending, else
         of the stream it reads; NaN where it has no such part or reads a unique slot."""
-        c = self._cluster(cluster)
+        c = self.cluster_index(cluster)
         record = self._buffer[:, c]
         blending = record["blend_time"] > 0
         kind = np.where(blending, record["target_kind"], record["kind"])
@@ -303,12 +305,12 @@ class Crowd:
 
     def dilation_targets(self, cluster) -> np.ndarray:
         """Each agent's time-dilation target offset in `cluster` (N,); NaN where not dilating."""
-        return self._dilate_to[:, self._cluster(cluster)].astype(np.float64)
+        return self._dilate_to[:, self.cluster_index(cluster)].astype(np.float64)
 
     def alphas(self, cluster) -> np.ndarray:
         """Each agent's blend weight α = clamp(elapsed / blend_time, 0, 1) in `cluster` (Listing
         3): 0 reads the source only; NaN where it is not blending."""
-        record = self._buffer[:, self._cluster(cluster)]
+        record = self._buffer[:, self.cluster_index(cluster)]
         blending = record["blend_time"] > 0
         alpha = np.clip((self.time - record["blend_start"]) / np.where(blending, record["blend_time"], 1), 0, 1)
         return np.where(blending, alpha, np.nan)
@@ -330,7 +332,7 @@ class Crowd:
         """Store entries (n, J, 12) float32 of `agents` (default all) in `cluster`: sources read at
         their offsets and, while blending, mixed with their targets by α (rotations on the
         sphere), in the pool's array namespace. Agents without the cluster are refused."""
-        c = self._cluster(cluster if cluster is not None else self.clusters[0])
+        c = self.cluster_index(cluster if cluster is not None else self.clusters[0])
         ids = np.arange(self.n_agents) if agents is None else _agent_ids(agents, self.n_agents)
         record = self._buffer[ids, c]
         if np.any(record["kind"] == NONE):
@@ -363,7 +365,7 @@ class Crowd:
             return pose
         if self.pool.xp is not np:
             raise ValidationError("world poses are computed with numpy: read local poses from a store on a device")
-        c = self._cluster(cluster if cluster is not None else self.clusters[0])
+        c = self.cluster_index(cluster if cluster is not None else self.clusters[0])
         return self.skeletons[c].world(Pose._adopt(pose.rotations, pose.translations), dtype=np.float32)
 
     def instance_buffer(self) -> np.ndarray:

@@ -147,22 +147,25 @@ def plants(*, dt: float = 0.1, seconds: float = 24.0, points: int = 8, rates=(1.
 
 
 def walker(*, fps: float = 30.0, seconds: float = 2.0, swing: float = 30.0):
-    """A skeletal clip in closed form: a five-joint figure (hips, spine, head, two legs) whose legs
-    swing `swing` degrees each way once per `seconds`, its hips bobbing, first frame equal to the
-    last (it loops), with a "step" event at each quarter and three quarters of the cycle."""
+    """A skeletal clip in closed form: a stick figure of eleven joints (hips, spine, head, arms,
+    hands, legs, feet; z up, facing y) whose legs swing `swing` degrees each way once per
+    `seconds` and arms swing against them, its spine swaying and hips bobbing, first frame equal
+    to the last (it loops), with a "step" event at each quarter and three quarters of the cycle."""
     from ..crowd.skeleton import Event, Pose, SkeletalClip, Skeleton
 
-    rest = Pose(
-        rotations=np.tile([0.0, 0.0, 0.0, 1.0], (5, 1)),
-        translations=[[0, 0, 1.0], [0, 0, 0.4], [0, 0, 0.4], [-0.15, 0, 0], [0.15, 0, 0]],
+    names = ["hips", "spine", "head", "arm.L", "hand.L", "arm.R", "hand.R", "leg.L", "foot.L", "leg.R", "foot.R"]
+    parents = [-1, 0, 1, 1, 3, 1, 5, 0, 7, 0, 9]
+    offsets = [[0, 0, 1.0], [0, 0, 0.45], [0, 0, 0.3], [-0.2, 0, 0.35], [0, 0, -0.55], [0.2, 0, 0.35],
+               [0, 0, -0.55], [-0.12, 0, 0], [0, 0, -0.95], [0.12, 0, 0], [0, 0, -0.95]]  # fmt: skip
+    skeleton = Skeleton(
+        names=names, parents=parents, rest=Pose(rotations=np.tile([0.0, 0, 0, 1], (11, 1)), translations=offsets)
     )
-    skeleton = Skeleton(names=["hips", "spine", "head", "leg.L", "leg.R"], parents=[-1, 0, 1, 0, 0], rest=rest)
     phase = 2 * np.pi * np.arange(int(round(seconds * fps)) + 1) / (seconds * fps)
     angle = np.radians(swing) * np.sin(phase)
-    rotations = np.tile([0.0, 0.0, 0.0, 1.0], (len(phase), 5, 1))
-    for joint, sign in ((3, 1.0), (4, -1.0)):  # legs swing about x, opposite ways
-        rotations[:, joint, 0] = np.sin(sign * angle / 2)
-        rotations[:, joint, 3] = np.cos(sign * angle / 2)
+    rotations = np.tile([0.0, 0.0, 0.0, 1.0], (len(phase), 11, 1))
+    for joint, share in ((7, 1.0), (9, -1.0), (3, -0.6), (5, 0.6)):  # legs and arms swing about x
+        rotations[:, joint, 0] = np.sin(share * angle / 2)
+        rotations[:, joint, 3] = np.cos(share * angle / 2)
     rotations[:, 1, 1] = np.sin(0.05 * np.sin(phase))  # the spine sways about y
     rotations[:, 1, 3] = np.cos(0.05 * np.sin(phase))
     hips = np.zeros((len(phase), 3))

@@ -284,6 +284,8 @@ def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data
         "sticklebacks.gif",
         "scene.png",
         "scene.gif",
+        "crowd.gif",
+        "crowd-offsets.png",
         "summary.json",
     }
     summary = json.loads((tmp_path / "demo" / "summary.json").read_text())
@@ -293,6 +295,11 @@ def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data
     least, median = summary["scene"]["share of frames heading within 30 degrees of the arrow (least, median)"]
     assert median >= 0.8 and least >= 0.7, summary["scene"]
     assert summary["scene"]["neighbours in step (before, after)"][1] <= 0.05
+    crowd = summary["crowd"]
+    assert crowd["memory (bytes, Equation 5)"][0] == crowd["memory (bytes, Equation 5)"][1]
+    assert crowd["cheer stream running (at the cheer, at the end)"] == [True, False]
+    start, spread = crowd["distinct offsets among the cheering half (at the start, at 3.5 s)"]
+    assert start == 1 and spread >= 12  # all at the head, then spread out by time dilation
     assert max(summary["come-from-behind"]["residuals"]) <= 0.3 and summary["sticklebacks"]["transitions"] >= 3
     assert str((tmp_path / "demo").resolve()) in out
 

@@ -9,6 +9,7 @@ from flockkit.errors import ValidationError
 from flockkit.testing import inputs
 
 WALKER = inputs.walker()
+J = WALKER.skeleton.n_joints
 FPS = 30.0
 
 
@@ -87,9 +88,8 @@ def test_blends_run_from_source_to_target_over_the_blend_time():
     for _ in range(int(0.5 * FPS) - 1):
         crowd.update()
         alphas.append(crowd.alphas("body")[agents[0]])
-        windows = pool.windows(5)
-        source = windows[pool.rows(np.full(3, 1), source_offsets.astype(int))].reshape(3, 5, 12)
-        target = windows[pool.rows(np.zeros(3, dtype=int), np.array([2, 7, 11]))].reshape(3, 5, 12)
+        source = pool.gather(np.full(3, 1), source_offsets.astype(int), J)
+        target = pool.gather(np.zeros(3, dtype=int), np.array([2, 7, 11]), J)
         mixed = crowd.entries(agents, "body")
         alpha = alphas[-1]
         np.testing.assert_allclose(
@@ -99,7 +99,7 @@ def test_blends_run_from_source_to_target_over_the_blend_time():
     np.testing.assert_allclose(alphas, np.arange(1, len(alphas) + 1) / (0.5 * FPS), atol=1e-5)
     crowd.update()  # α reaches 1: the target at its offset, and the blend lands
     assert np.all(np.isnan(crowd.alphas("body")[agents]))
-    target = pool.windows(5)[pool.rows(np.zeros(3, dtype=int), np.array([2, 7, 11]))].reshape(3, 5, 12)
+    target = pool.gather(np.zeros(3, dtype=int), np.array([2, 7, 11]), J)
     np.testing.assert_array_equal(crowd.entries(agents, "body"), target)
     assert crowd.instance_buffer()["stream"][agents, 0].tolist() == [0, 0, 0]
 
@@ -111,7 +111,7 @@ def test_blending_two_identical_streams_returns_that_stream():
     crowd.transition_to_streamed(agents, "body", 3, blend_time=1.0, offsets=offsets)
     for _ in range(7):
         crowd.update()
-        alone = pool.windows(5)[pool.rows(np.zeros(4, dtype=int), offsets)].reshape(4, 5, 12)
+        alone = pool.gather(np.zeros(4, dtype=int), offsets, J)
         np.testing.assert_allclose(crowd.entries(agents, "body"), alone, atol=1e-6)
         assert np.all(crowd.alphas("body")[agents] > 0)
 
@@ -170,7 +170,7 @@ def test_poses_local_and_world_agree_with_forward_kinematics():
 
 def test_unique_slots_and_visibility():
     pool, crowd = make_crowd()
-    unique = UniquePool(2, max_bones=8, fps=FPS)
+    unique = UniquePool(2, max_bones=J, fps=FPS)
     crowd = Crowd(pool, n_agents=10, clusters={"body": 0}, unique=unique, seed=0)
     unique.set(1, player(rate=2.0))
     crowd.transition_to_unique([4], "body", 1, blend_time=0.1)
@@ -250,7 +250,7 @@ def test_sampling_and_blending_run_through_the_array_api_alone():
             fps=FPS,
             xp=xp,
         )
-        unique = UniquePool(1, max_bones=5, fps=FPS)
+        unique = UniquePool(1, max_bones=J, fps=FPS)
         unique.set(0, player(rate=2.0))
         crowd = Crowd(pool, n_agents=30, clusters={"body": np.arange(30) % 2}, unique=unique, seed=4)
         crowd.transition_to_streamed(np.arange(0, 12), "body", 2, blend_time=0.4)

@@ -143,3 +143,41 @@ def test_the_graph_picture_keys_its_colours_and_turns():
     assert any(label.startswith("transition, coloured by cost") for label in labels)
     assert any("node with turns of \u00b115\u00b0" in label for label in labels)
     assert any(ax.get_ylabel() == "transition cost E" for ax in figure.axes)  # the colour bar
+
+
+def test_a_crowd_gif_colours_parts_by_stream_and_the_offsets_plot_shows_dilation(tmp_path):
+    from PIL import Image
+
+    from flockkit.crowd import Crowd, Stream, StreamPool
+    from flockkit.testing import inputs
+
+    walker = inputs.walker()
+    play = lambda **k: flockkit.get("controller", "clip", clip=walker, **k)  # noqa: E731
+    pool = StreamPool(
+        [Stream(controller=play(), history=30), Stream(controller=play(rate=1.7), history=30, default="Stopped")]
+    )
+    crowd = Crowd(pool, n_agents=6, clusters={"body": 0}, seed=0)
+
+    def cheer(crowd, frame):
+        if frame == 0:
+            crowd.transition_to_streamed([0, 1, 2], "body", 1, blend_time=0.2, time_to_dilate=2.0)
+
+    viz.animate_crowd(crowd, tmp_path / "crowd.gif", seconds=1.0, on_frame=cheer, axes="yz", size=(320, 240))
+    with Image.open(tmp_path / "crowd.gif") as image:
+        assert image.size == (320, 240) and image.n_frames == 15  # 1 s at 30 fps, drawn at 15
+        image.seek(image.n_frames - 1)
+        pixels = np.asarray(image.convert("RGB")).astype(int)
+    blue = (pixels[..., 2] > pixels[..., 0] + 40) & (pixels[..., 2] > 150)  # stream 0: tab10 blue
+    orange = (pixels[..., 0] > pixels[..., 2] + 80) & (pixels[..., 1] > 80)  # stream 1: tab10 orange
+    assert blue.sum() > 50 and orange.sum() > 50
+    assert np.mean(np.flatnonzero(orange.any(axis=0))) < np.mean(
+        np.flatnonzero(blue.any(axis=0))
+    )  # agents 0-2 are left
+    assert crowd.frame == 30  # the crowd ran
+    figure = viz.plot_offsets(
+        np.arange(4) / 30, np.array([[0, 0], [0.5, 0.4], [1, 0.8], [1.5, 0.8]]), tmp_path / "o.png", targets=[3, 0.8]
+    )
+    assert (tmp_path / "o.png").read_bytes().startswith(b"\x89PNG") and len(figure.axes[0].lines) == 4
+    with pytest.raises(ValidationError, match="axes"):
+        viz.animate_crowd(crowd, tmp_path / "bad.gif", axes="xw")
+    assert not (tmp_path / "bad.gif").exists()
