@@ -253,15 +253,19 @@ class Crowd:
 
     # -- frames ---------------------------------------------------------------------------------
 
-    def update(self) -> list[CrowdEvent]:
-        """Advance one frame (1 / pool.fps seconds): Running streams write their heads, unique
-        slots evaluate, offsets dilate, blends advance and finished ones land on their targets
-        (streams left without users stop if Stopped by default). Returns the events reached."""
+    def update(self, dt=None) -> list[CrowdEvent]:
+        """Advance one frame: Running streams write their heads, unique slots evaluate, offsets
+        dilate, blends advance and finished ones land on their targets (streams left without
+        users stop if Stopped by default). Streams always move one frame (their history is in
+        frames, section 4.3's fixed-step simulation); blends run on the crowd's clock, which
+        advances `dt` seconds (default 1 / pool.fps), as a shader's global timer does. Returns
+        the events the streams' heads reached."""
+        dt = 1.0 / self.pool.fps if dt is None else validate.number(dt, "update: dt", minimum=0, strict=True)
         events = [CrowdEvent(stream=s, event=e) for s, e in self.pool.advance()]
         if self.unique is not None:
             events += [CrowdEvent(stream=s, event=e, unique=True) for s, e in self.unique.advance()]
         self.frame += 1
-        self.time = self.frame / self.pool.fps
+        self.time += dt
         flat = self._changing
         if not len(flat):
             return events

@@ -97,6 +97,8 @@ def test_blends_run_from_source_to_target_over_the_blend_time():
         )
         np.testing.assert_allclose(np.linalg.norm(mixed[..., 0:4], axis=-1), 1, atol=1e-6)  # on the sphere
     np.testing.assert_allclose(alphas, np.arange(1, len(alphas) + 1) / (0.5 * FPS), atol=1e-5)
+    with pytest.raises(ValidationError, match="dt"):
+        crowd.update(dt=0)
     crowd.update()  # α reaches 1: the target at its offset, and the blend lands
     assert np.all(np.isnan(crowd.alphas("body")[agents]))
     target = pool.gather(np.zeros(3, dtype=int), np.array([2, 7, 11]), J)
