@@ -9,6 +9,8 @@ composes its nodes.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import attrs
 import numpy as np
 
@@ -16,7 +18,7 @@ from .. import rigid
 from .._arrays import readonly_float, readonly_int
 from ..errors import ValidationError
 
-__all__ = ["Pose", "Skeleton", "SkeletalClip", "Event", "read_clips", "stream_times", "unit_quaternions"]
+__all__ = ["Pose", "Skeleton", "SkeletalClip", "Event", "read_clips", "stream_times"]
 
 # Quaternions whose length is this close to 1 are normalized (file formats store float32 and
 # round); farther ones are refused, since they are not rotations somebody meant.
@@ -351,10 +353,6 @@ class SkeletalClip:
         """The stored pose of frame `frame` (J, ...)."""
         return Pose._adopt(self.rotations[frame], self.translations[frame])
 
-    def events_between(self, start: float, stop: float) -> list[Event]:
-        """Events at times in [start, stop) seconds of the clip's own timeline."""
-        return [e for e in self.events if start <= e.time < stop]
-
 
 def read_clips(path, *, fps=None) -> dict[str, SkeletalClip]:
     """Every skeletal clip in a file: glTF (.gltf, .glb: every animation of each skin) or BVH
@@ -378,8 +376,6 @@ def read_clips(path, *, fps=None) -> dict[str, SkeletalClip]:
     FileNotFoundError, FileFormatError (a malformed or truncated file, naming it and where),
     ValidationError (no skin, no animation, an unknown suffix, a bad `fps`).
     """
-    from pathlib import Path
-
     from .. import _bvh, _gltf
 
     path = Path(path)
