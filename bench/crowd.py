@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from timing import timed  # bench/timing.py: the scripts run from bench/
 
 import flockkit
 from flockkit.crowd import Crowd, Stream, StreamPool, equation_4, equation_5
@@ -57,13 +58,9 @@ def build(n_agents: int, n_streams: int, seed: int = 0):
     return pool, clusters, bones, histories, stopped
 
 
-def ms(function, repeat=5):
-    best = float("inf")
-    for _ in range(repeat):
-        start = time.perf_counter()
-        function()
-        best = min(best, time.perf_counter() - start)
-    return best * 1000
+def ms(function, repeat=5) -> float:
+    """The best of `repeat` calls, in milliseconds."""
+    return timed(function, repeat=repeat)[1] * 1000
 
 
 def gpu(args, movers, celebrations):

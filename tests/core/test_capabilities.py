@@ -23,10 +23,11 @@ from ..testing.fakes import (
     RandomVelocity,
     RandomWalk,
     Retime,
+    Walker,
 )
 
 ROOT = Path(__file__).resolve().parents[2]
-BUILTIN_PLUGINS = "boids,icp,kovar,walks,objectives,proposals,ica,windowed"
+BUILTIN_PLUGINS = "boids,icp,kovar,walks,objectives,proposals,ica,windowed,controllers"
 
 
 pytestmark = pytest.mark.usefixtures("fresh_registry")
@@ -204,6 +205,7 @@ def test_with_every_builtin_blocked_the_kit_checks_third_party_components_given_
         ("walk", RandomWalk(), None),
         ("proposal", Retime(), {"behavior": behavior}),
         ("objective", ComTerm(), None),
+        ("controller", Walker(), None),
     ):
         assert check_plugin(kind, component, partners=partners).passed
     with pytest.raises(ValidationError, match=r"the builder checks need a metric: pass partners=\{'metric': \.\.\.\}"):
