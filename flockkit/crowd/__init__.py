@@ -1,5 +1,6 @@
 """Massive crowds (paper 003): skeletons and clips, shared streams of poses, the crowd runtime."""
 
+from .drive import Driver, State, StateMachine, foot_sliding, ground_speed
 from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
 from .runtime import INSTANCE, Crowd, CrowdEvent
 from .skeleton import Event, Pose, SkeletalClip, Skeleton, read_clips, stream_times
@@ -19,4 +20,9 @@ __all__ = [
     "Crowd",
     "CrowdEvent",
     "INSTANCE",
+    "State",
+    "StateMachine",
+    "Driver",
+    "ground_speed",
+    "foot_sliding",
 ]

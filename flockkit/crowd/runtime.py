@@ -209,6 +209,14 @@ class Crowd:
             self._rate[ids, c] = (history - 1) / (max(seconds, 1e-9) * self.pool.fps)
         self._start_blend(ids, c, STREAMED, k, offsets, blend_time)
 
+    def assign(self, agents, cluster, stream) -> None:
+        """Put `agents`' part `cluster` on `stream` at once, without a blend (setting a crowd up,
+        not animating it): at random offsets within what a Running stream holds, or at 0 with
+        the default time dilation on a Stopped one."""
+        ids, c = self._parts(agents, cluster)
+        self.transition_to_streamed(ids, cluster, stream, blend_time=1.0)
+        self._land(ids, c)
+
     def transition_to_unique(self, agents, cluster, slot, blend_time) -> None:
         """Blend `agents`' part `cluster` over `blend_time` seconds to unique slot `slot`, which
         they read at its current pose."""

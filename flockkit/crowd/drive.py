@@ -1,0 +1,286 @@
+"""Crowds driven by trajectories: every agent's root on its path, facing where it goes, its body
+playing the stream a speed state machine picks (paper 003 fed by papers 000 and 004).
+
+A Motion says where each agent is; a ``StateMachine`` says which streams its body plays at which
+speeds (idle below one speed, walk, run above another, with hysteresis so that an agent near a
+threshold does not flicker); ``Driver`` steps a Crowd along the Motion, switching streams with a
+blend. Within a state, several streams may play one clip at different rates: each agent takes the
+one whose ground speed (how fast the clip's feet push back, times its rate) is nearest its own,
+so that feet do not slide.
+"""
+
+from __future__ import annotations
+
+import math
+
+import attrs
+import numpy as np
+
+from .. import rigid, validate
+from ..errors import ValidationError
+from ..motion import Motion
+from .runtime import Crowd
+from .skeleton import Pose, SkeletalClip
+
+__all__ = ["State", "StateMachine", "Driver", "ground_speed", "foot_sliding", "AXES"]
+
+AXES = {"x": 0, "y": 1, "z": 2}
+
+
+def _streams(value) -> tuple:
+    streams = tuple(int(v) for v in np.atleast_1d(np.asarray(value)))
+    if not streams:
+        raise ValidationError("State.streams must name at least one stream")
+    return streams
+
+
+@attrs.frozen(kw_only=True)
+class State:
+    """A state of the speed machine: the agent speeds it covers, [low, high), and its streams.
+
+    Parameters
+    ----------
+    name : str
+    streams : int or sequence of int
+        Stream ids of the crowd's pool.
+    speeds : sequence of float, optional
+        The ground speed each stream plays without sliding (world units per second; see
+        ``ground_speed``): an agent takes the stream nearest its speed. None: the first stream.
+    low, high : float
+        The agent speeds of this state; the states of a machine tile [0, inf).
+    """
+
+    name: str = attrs.field()
+    streams: tuple = attrs.field(converter=_streams)
+    speeds: tuple | None = attrs.field(default=None, converter=lambda v: None if v is None else tuple(map(float, v)))
+    low: float = attrs.field(default=0.0, converter=float)
+    high: float = attrs.field(default=math.inf, converter=float)
+
+    def __attrs_post_init__(self):
+        if not isinstance(self.name, str) or not self.name:
+            raise ValidationError(f"State.name must be a non-empty string; got {self.name!r}")
+        if not (0 <= self.low < self.high):
+            raise ValidationError(f"state {self.name!r}: needs 0 <= low < high; got low {self.low}, high {self.high}")
+        if self.speeds is not None and len(self.speeds) != len(self.streams):
+            raise ValidationError(
+                f"state {self.name!r}: {len(self.speeds)} speeds for {len(self.streams)} streams (one each)"
+            )
+
+
+class StateMachine:
+    """States on agent speed, tiling [0, inf) in order, with `hysteresis` (world units per
+    second): an agent leaves its state only when its speed passes the state's bounds by more than
+    that, so that one near a threshold does not flicker. Switches blend over `blend_time` s."""
+
+    def __init__(self, states, *, hysteresis: float = 0.05, blend_time: float = 0.3):
+        self.states = tuple(sorted(states, key=lambda s: s.low))
+        if not self.states or not all(isinstance(s, State) for s in self.states):
+            raise ValidationError("StateMachine needs a non-empty sequence of flockkit.crowd.State")
+        names = [s.name for s in self.states]
+        if len(set(names)) != len(names):
+            raise ValidationError(f"StateMachine: state names repeat: {names}")
+        if self.states[0].low != 0:
+            raise ValidationError(f"StateMachine: no state covers speeds below {self.states[0].low} (unreachable gap)")
+        for a, b in zip(self.states[:-1], self.states[1:]):
+            if a.high > b.low:
+                raise ValidationError(f"StateMachine: states {a.name!r} and {b.name!r} overlap ({b.low} < {a.high})")
+            if a.high < b.low:
+                raise ValidationError(
+                    f"StateMachine: no state covers speeds {a.high}..{b.low} between {a.name!r} and {b.name!r}"
+                )
+        if math.isfinite(self.states[-1].high):
+            raise ValidationError(f"StateMachine: no state covers speeds above {self.states[-1].high}")
+        self.hysteresis = validate.number(hysteresis, "StateMachine.hysteresis", minimum=0)
+        self.blend_time = validate.number(blend_time, "StateMachine.blend_time", minimum=0, strict=True)
+        self._lows = np.array([s.low for s in self.states])
+        self._highs = np.array([s.high for s in self.states])
+
+    def choose(self, speeds: np.ndarray, current: np.ndarray | None = None) -> np.ndarray:
+        """The state of each agent at `speeds`, staying in `current` (state indices, -1 none)
+        while its speed is within its bounds widened by the hysteresis."""
+        fresh = np.searchsorted(self._lows, speeds, side="right") - 1
+        if current is None:
+            return fresh
+        keep = (current >= 0) & (speeds >= self._lows[current] - self.hysteresis)
+        keep &= speeds < self._highs[current] + self.hysteresis
+        return np.where(keep, current, fresh)
+
+    def check(self, crowd: Crowd, cluster) -> None:
+        """Every state's streams exist in `crowd`'s pool with `cluster`'s skeleton."""
+        c = crowd.cluster_index(cluster)
+        for state in self.states:
+            for s in state.streams:
+                if not 0 <= s < len(crowd.pool.streams):
+                    raise ValidationError(
+                        f"state {state.name!r} names stream {s}; the pool has streams 0..{len(crowd.pool.streams) - 1}"
+                    )
+                if not crowd.pool.streams[s].skeleton.matches(crowd.skeletons[c]):
+                    raise ValidationError(f"state {state.name!r}: stream {s}'s skeleton is not cluster {cluster!r}'s")
+
+
+def _axis(name: str, field: str) -> int:
+    if name not in AXES:
+        raise ValidationError(f"{field} must be 'x', 'y' or 'z'; got {name!r}")
+    return AXES[name]
+
+
+def character_frame(up: str, forward: str) -> np.ndarray:
+    """The rotation (3, 3) taking a character's axes (`up`, `forward`) to flockkit's world (z up,
+    facing +x at heading 0): its rows are forward, up x forward and up."""
+    u, f = np.eye(3)[_axis(up, "up")], np.eye(3)[_axis(forward, "forward")]
+    if u @ f:
+        raise ValidationError("up and forward must be different axes")
+    return np.stack([f, np.cross(u, f), u])
+
+
+def ground_speed(clip: SkeletalClip, feet, *, up: str = "y", forward: str = "z", scale: float = 1.0) -> float:
+    """How fast `clip` (played in place at rate 1) pushes its lowest foot backwards, in world units
+    per second (times `scale`): the speed at which an agent playing it does not slide. `feet` are
+    joint names; the median over the frames of the lowest foot's backward speed, each foot's
+    height counted from its own lowest (a paw's joint sits higher above the ground than a toe's)."""
+    positions = clip.skeleton.positions(Pose._adopt(clip.rotations, clip.translations))
+    index = [clip.skeleton.index(f) for f in feet]
+    u, f = _axis(up, "up"), _axis(forward, "forward")
+    heights = positions[:, index, u]
+    lowest = np.asarray(index)[np.argmin(heights - heights.min(axis=0), axis=1)]
+    along = np.gradient(positions[:, :, f], 1.0 / clip.fps, axis=0)
+    return float(-np.median(along[np.arange(len(lowest)), lowest]) * scale)
+
+
+def foot_sliding(joints: np.ndarray, feet, *, dt: float) -> float:
+    """The mean horizontal speed (world units per second, z up) of the lowest of `feet` (joint
+    indices; each foot's height counted from its own lowest) over frames and agents, from world
+    joint positions (F, N, J, 3): zero for feet that stay put while they carry the body."""
+    feet = np.asarray(feet)
+    heights = joints[:, :, feet, 2]
+    lowest = np.argmin(heights - heights.min(axis=0, keepdims=True), axis=2)  # (F, N)
+    chosen = np.take_along_axis(joints[:, :, feet, :2], lowest[..., None, None], axis=2)[:, :, 0]
+    speed = np.linalg.norm(np.diff(chosen, axis=0), axis=-1) / dt
+    same = lowest[1:] == lowest[:-1]  # a change of foot is not a slide
+    return float(speed[same].mean()) if same.any() else 0.0
+
+
+class Driver:
+    """Step a Crowd along a Motion: root transforms on the trajectories, facing the velocity, and
+    streams from a StateMachine on speed.
+
+    Parameters
+    ----------
+    crowd : Crowd
+    motion : Motion
+        Trajectories (2D on the ground, or 3D with z up) of at least ``crowd.n_agents`` agents;
+        agent k of the crowd follows agent k. Sampled at the crowd's frames by linear
+        interpolation; held after its end.
+    machine : StateMachine
+    cluster : str, optional
+        The cluster the machine drives (default the crowd's first).
+    up, forward : str
+        The character's up and forward axes (glTF characters: "y", "z").
+    scale : float
+        World units per character unit (0.01 for a character modelled in centimetres on a
+        trajectory in metres).
+    turn_time : float
+        Seconds over which the facing follows the velocity (an exponential smoothing); an agent
+        slower than `still` keeps its facing.
+    """
+
+    def __init__(self, crowd: Crowd, motion: Motion, machine: StateMachine, *, cluster=None, up="y", forward="z",
+                 scale: float = 1.0, turn_time: float = 0.25, still: float = 1e-3):  # fmt: skip
+        if not isinstance(crowd, Crowd):
+            raise ValidationError(f"Driver needs a flockkit.Crowd; got {type(crowd).__name__}")
+        if not isinstance(motion, Motion):
+            raise ValidationError(f"Driver needs trajectories as a flockkit.Motion; got {type(motion).__name__}")
+        if motion.n_agents < crowd.n_agents:
+            raise ValidationError(
+                f"the trajectories have {motion.n_agents} agents; the crowd has {crowd.n_agents} (one each)"
+            )
+        if not isinstance(machine, StateMachine):
+            raise ValidationError(f"Driver needs a flockkit.crowd.StateMachine; got {type(machine).__name__}")
+        self.crowd, self.motion, self.machine = crowd, motion, machine
+        self.cluster = crowd.clusters[0] if cluster is None else cluster
+        machine.check(crowd, self.cluster)
+        self.scale = validate.number(scale, "Driver.scale", minimum=0, strict=True)
+        self.turn_time = validate.number(turn_time, "Driver.turn_time", minimum=0)
+        self.still = validate.number(still, "Driver.still", minimum=0)
+        self.frame_to_world = character_frame(up, forward) * self.scale
+        n = crowd.n_agents
+        positions = np.zeros((motion.n_frames, n, 3))
+        positions[..., : motion.dims] = motion.positions[:, :n]
+        self._positions = positions
+        self._velocities = (
+            np.gradient(positions, motion.dt, axis=0) if motion.n_frames > 1 else np.zeros_like(positions)
+        )
+        self.state = np.full(n, -1)
+        self.stream = np.full(n, -1)
+        self.heading = np.zeros(n)
+        self.roots = np.tile(np.eye(4), (n, 1, 1))
+        self.switches = 0
+        self._place(first=True)
+
+    def _sample(self, array: np.ndarray, t: float) -> np.ndarray:
+        f = min(max(t / self.motion.dt, 0.0), self.motion.n_frames - 1)
+        k = min(int(f), self.motion.n_frames - 2) if self.motion.n_frames > 1 else 0
+        u = f - k if self.motion.n_frames > 1 else 0.0
+        return array[k] if self.motion.n_frames == 1 else (1 - u) * array[k] + u * array[k + 1]
+
+    def _place(self, *, first: bool = False) -> None:
+        t = self.crowd.time
+        position, velocity = self._sample(self._positions, t), self._sample(self._velocities, t)
+        speed = np.linalg.norm(velocity[:, :2], axis=1)
+        moving = speed > self.still
+        target = np.arctan2(velocity[:, 1], velocity[:, 0])
+        if first:
+            self.heading = np.where(moving, target, 0.0)
+        else:
+            share = 1.0 if self.turn_time == 0 else 1 - math.exp(-(1 / self.crowd.pool.fps) / self.turn_time)
+            turn = (target - self.heading + np.pi) % (2 * np.pi) - np.pi
+            self.heading = np.where(moving, self.heading + share * turn, self.heading)
+        half = self.heading / 2
+        zero = np.zeros_like(half)
+        yaw = rigid.quaternion_matrix(np.stack([zero, zero, np.sin(half), np.cos(half)], axis=1))
+        self.roots[:, :3, :3] = yaw @ self.frame_to_world
+        self.roots[:, :3, 3] = position
+        self._choose(speed, first=first)
+
+    def _choose(self, speed: np.ndarray, *, first: bool) -> None:
+        state = self.machine.choose(speed, None if first else self.state)
+        stream = np.empty_like(self.stream)
+        for k, s in enumerate(self.machine.states):
+            mine = np.flatnonzero(state == k)
+            if s.speeds is None:
+                stream[mine] = s.streams[0]
+            else:
+                nearest = np.argmin(np.abs(speed[mine, None] - np.asarray(s.speeds)[None]), axis=1)
+                chosen = np.asarray(s.streams)[nearest]
+                # keep the current stream of the state while its speed is nearly as good
+                current = self.stream[mine]
+                kept = np.isin(current, s.streams) & (state[mine] == self.state[mine])
+                if kept.any():
+                    speeds = dict(zip(s.streams, s.speeds))
+                    now = np.array([speeds.get(int(c), np.inf) for c in current])
+                    best = np.asarray(s.speeds)[nearest]
+                    kept &= np.abs(speed[mine] - now) <= np.abs(speed[mine] - best) + self.machine.hysteresis
+                stream[mine] = np.where(kept, current, chosen)
+        if first:
+            for s in np.unique(stream):
+                self.crowd.assign(np.flatnonzero(stream == s), self.cluster, int(s))
+        else:
+            for s in np.unique(stream):
+                group = np.flatnonzero((stream == s) & (stream != self.stream))
+                if len(group):
+                    self.crowd.transition_to_streamed(group, self.cluster, int(s), blend_time=self.machine.blend_time)
+                    self.switches += len(group)
+        self.state, self.stream = state, stream
+
+    def step(self) -> list:
+        """One frame: the crowd updates, then roots and streams follow the trajectories at the
+        crowd's new time. Returns the crowd's events."""
+        events = self.crowd.update()
+        self._place()
+        return events
+
+    def world(self, agents=None) -> np.ndarray:
+        """World joint matrices (n, J, 4, 4) of `agents` (default all): each root times its pose."""
+        ids = np.arange(self.crowd.n_agents) if agents is None else np.asarray(agents)
+        poses = self.crowd.poses(ids, self.cluster, space="world").astype(np.float64)
+        return self.roots[ids][:, None] @ poses

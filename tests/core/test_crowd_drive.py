@@ -1,0 +1,98 @@
+"""Crowds driven by trajectories (issue 17, part 1): roots on the paths, facing, speed states."""
+
+import math
+
+import numpy as np
+import pytest
+
+import flockkit
+from flockkit.crowd import Crowd, Stream, StreamPool
+from flockkit.crowd.drive import Driver, State, StateMachine, character_frame
+from flockkit.errors import ValidationError
+from flockkit.testing import inputs
+
+WALKER = inputs.walker()
+
+
+def machine(**params):
+    return StateMachine(
+        [State(name="idle", streams=0, high=0.3), State(name="walk", streams=[1, 2], speeds=[0.8, 1.4], low=0.3)],
+        **params,
+    )
+
+
+def crowd_of(n):
+    play = lambda **k: flockkit.get("controller", "clip", clip=WALKER, **k)  # noqa: E731
+    pool = StreamPool([Stream(controller=play(rate=0.2), history=20), Stream(controller=play(), history=20),
+                       Stream(controller=play(rate=1.7), history=20)], fps=30)  # fmt: skip
+    return Crowd(pool, n_agents=n, clusters={"body": 0}, seed=0)
+
+
+def test_the_state_machine_tiles_speeds_and_holds_near_thresholds():
+    m = machine(hysteresis=0.05)
+    np.testing.assert_array_equal(m.choose(np.array([0.0, 0.29, 0.3, 5.0])), [0, 0, 1, 1])
+    # near the threshold an agent keeps its state until it is 0.05 past it
+    np.testing.assert_array_equal(m.choose(np.array([0.33, 0.33, 0.27, 0.24]), np.array([0, 0, 1, 1])), [0, 0, 1, 0])
+    for states, message in [
+        ([State(name="a", streams=0, low=0.1)], "below 0.1"),
+        ([State(name="a", streams=0, high=1.0), State(name="b", streams=1, low=0.5)], "overlap"),
+        ([State(name="a", streams=0, high=1.0), State(name="b", streams=1, low=2.0)], "1.0..2.0"),
+        ([State(name="a", streams=0, high=1.0)], "above 1.0"),
+        ([State(name="a", streams=0, high=1.0), State(name="a", streams=1, low=1.0)], "repeat"),
+    ]:
+        with pytest.raises(ValidationError, match=message):
+            StateMachine(states)
+    with pytest.raises(ValidationError, match="2 speeds for 1 streams"):
+        State(name="walk", streams=1, speeds=[1.0, 2.0])
+
+
+def test_roots_follow_the_trajectories_and_face_their_velocity():
+    t = np.arange(0, 6, 0.1)[:, None]
+    speeds = np.array([[0.1, 1.0, 1.5]])  # idle, slow walk, fast walk
+    turn = 0.3  # radians per second: arcs of circles at constant speeds
+    positions = np.stack([speeds / turn * np.sin(turn * t), speeds / turn * (1 - np.cos(turn * t))], axis=2)
+    motion = flockkit.Motion(positions=positions, dt=0.1)
+    crowd = crowd_of(3)
+    driver = Driver(crowd, motion, machine(), up="z", forward="y", turn_time=0.1)
+    switches = []
+
+    def heading_to():
+        buffer = crowd.instance_buffer()
+        return np.where(buffer["blend_time"][:, 0] > 0, buffer["target"][:, 0], buffer["stream"][:, 0])
+
+    for _ in range(90):
+        before = heading_to()
+        driver.step()
+        buffer = crowd.instance_buffer()
+        changed = heading_to() != before
+        switches.append(changed.any())
+        # no stream switch without a blend: a part reading a new stream got there by blending
+        assert np.all(buffer["blend_time"][changed, 0] > 0) or not changed.any()
+        expected = np.array(
+            [np.interp(crowd.time, np.arange(len(t)) * 0.1, positions[:, k, d]) for k in range(3) for d in range(2)]
+        )
+        np.testing.assert_allclose(driver.roots[:, :2, 3].ravel(), expected, atol=1e-12)  # exactly on the path
+    # facing: the character's forward (+y) points along the velocity, within 5 degrees after turn_time
+    velocity = np.gradient(positions, 0.1, axis=0)[int(round(crowd.time / 0.1))]
+    forward = driver.roots[:, :3, :3] @ np.array([0.0, 1.0, 0.0])
+    cosine = np.sum(forward[:, :2] * velocity, axis=1) / np.linalg.norm(velocity, axis=1)
+    assert np.all(cosine > math.cos(math.radians(5)))
+    np.testing.assert_allclose(
+        driver.roots[:, :3, :3] @ [0, 0, 1.0], np.tile([0, 0, 1.0], (3, 1)), atol=1e-12
+    )  # upright
+    assert driver.state.tolist() == [0, 1, 1] and driver.stream.tolist() == [0, 1, 2]  # idle, nearest walking speeds
+    assert not any(switches[1:])  # steady speeds: no flicker
+
+
+def test_driving_refuses_what_does_not_fit():
+    crowd = crowd_of(4)
+    short = flockkit.Motion(positions=np.zeros((5, 3, 2)), dt=0.1)
+    with pytest.raises(ValidationError, match="the trajectories have 3 agents; the crowd has 4"):
+        Driver(crowd, short, machine())
+    motion = flockkit.Motion(positions=np.zeros((5, 4, 2)), dt=0.1)
+    with pytest.raises(ValidationError, match="state 'walk' names stream 7"):
+        Driver(
+            crowd, motion, StateMachine([State(name="idle", streams=0, high=1), State(name="walk", streams=7, low=1)])
+        )
+    with pytest.raises(ValidationError, match="different axes"):
+        character_frame("y", "y")
