@@ -1,6 +1,6 @@
 """Massive crowds (paper 003): skeletons and clips, shared streams of poses, the crowd runtime."""
 
-from .drive import Driver, State, StateMachine, foot_sliding, ground_speed
+from .drive import Cue, Driver, State, StateMachine, foot_sliding, ground_speed
 from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
 from .runtime import INSTANCE, Crowd, CrowdEvent
 from .skeleton import Event, Pose, SkeletalClip, Skeleton, read_clips, stream_times
@@ -22,6 +22,7 @@ __all__ = [
     "INSTANCE",
     "State",
     "StateMachine",
+    "Cue",
     "Driver",
     "ground_speed",
     "foot_sliding",

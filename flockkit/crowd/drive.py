@@ -22,7 +22,7 @@ from ..motion import Motion
 from .runtime import Crowd
 from .skeleton import Pose, SkeletalClip
 
-__all__ = ["State", "StateMachine", "Driver", "ground_speed", "foot_sliding", "AXES"]
+__all__ = ["State", "StateMachine", "Cue", "Driver", "ground_speed", "foot_sliding", "AXES"]
 
 AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -118,6 +118,29 @@ class StateMachine:
                     raise ValidationError(f"state {state.name!r}: stream {s}'s skeleton is not cluster {cluster!r}'s")
 
 
+@attrs.frozen(kw_only=True)
+class Cue:
+    """A scene event: at `time` seconds, `agents` switch to `stream` (blending over `blend_time`;
+    into a Stopped stream with time dilation over `time_to_dilate`), for `duration` seconds (None:
+    to the end), then go back to what the state machine picks ("goal at 12 s: the home
+    supporters cheer for 4 s")."""
+
+    time: float = attrs.field(converter=float)
+    agents: np.ndarray = attrs.field(converter=lambda v: np.atleast_1d(np.asarray(v)))
+    stream: int = attrs.field(converter=int)
+    duration: float | None = attrs.field(default=None)
+    blend_time: float = attrs.field(default=0.3, converter=float)
+    time_to_dilate: float | None = attrs.field(default=None)
+    name: str = attrs.field(default="cue")
+
+    def __attrs_post_init__(self):
+        if not math.isfinite(self.time) or self.time < 0:
+            raise ValidationError(f"cue {self.name!r}: time must be a time >= 0 in seconds; got {self.time}")
+        if self.duration is not None:
+            validate.number(self.duration, f"cue {self.name!r}: duration", minimum=0, strict=True)
+        validate.number(self.blend_time, f"cue {self.name!r}: blend_time", minimum=0, strict=True)
+
+
 def _axis(name: str, field: str) -> int:
     if name not in AXES:
         raise ValidationError(f"{field} must be 'x', 'y' or 'z'; got {name!r}")
@@ -182,10 +205,12 @@ class Driver:
     turn_time : float
         Seconds over which the facing follows the velocity (an exponential smoothing); an agent
         slower than `still` keeps its facing.
+    cues : sequence of Cue
+        Scene events; each must fall within the trajectories' time.
     """
 
     def __init__(self, crowd: Crowd, motion: Motion, machine: StateMachine, *, cluster=None, up="y", forward="z",
-                 scale: float = 1.0, turn_time: float = 0.25, still: float = 1e-3):  # fmt: skip
+                 scale: float = 1.0, turn_time: float = 0.25, still: float = 1e-3, cues=()):  # fmt: skip
         if not isinstance(crowd, Crowd):
             raise ValidationError(f"Driver needs a flockkit.Crowd; got {type(crowd).__name__}")
         if not isinstance(motion, Motion):
@@ -215,6 +240,22 @@ class Driver:
         self.heading = np.zeros(n)
         self.roots = np.tile(np.eye(4), (n, 1, 1))
         self.switches = 0
+        self.cues = tuple(cues)
+        for cue in self.cues:
+            if not isinstance(cue, Cue):
+                raise ValidationError(f"Driver cues must be flockkit.crowd.Cue; got {type(cue).__name__}")
+            if cue.time > motion.duration:
+                raise ValidationError(
+                    f"cue {cue.name!r} at {cue.time} s is past the trajectories' end ({motion.duration:.6g} s)"
+                )
+            crowd.pool.check_streams(cue.stream, field=f"cue {cue.name!r}")
+            if not crowd.pool.streams[cue.stream].skeleton.matches(crowd.skeletons[crowd.cluster_index(self.cluster)]):
+                raise ValidationError(
+                    f"cue {cue.name!r}: stream {cue.stream}'s skeleton is not cluster {self.cluster!r}'s"
+                )
+            if cue.agents.dtype.kind not in "iu" or cue.agents.min() < 0 or cue.agents.max() >= n:
+                raise ValidationError(f"cue {cue.name!r}: agents must be ids in 0..{n - 1}")
+        self.pinned = np.full(n, -1)  # the cue each agent follows, -1: the state machine
         self._place(first=True)
 
     def _sample(self, array: np.ndarray, t: float) -> np.ndarray:
@@ -265,6 +306,9 @@ class Driver:
             for s in np.unique(stream):
                 self.crowd.assign(np.flatnonzero(stream == s), self.cluster, int(s))
         else:
+            free = self.pinned < 0
+            stream = np.where(free, stream, self.stream)
+            state = np.where(free, state, self.state)
             for s in np.unique(stream):
                 group = np.flatnonzero((stream == s) & (stream != self.stream))
                 if len(group):
@@ -274,10 +318,22 @@ class Driver:
 
     def step(self) -> list:
         """One frame: the crowd updates, then roots and streams follow the trajectories at the
-        crowd's new time. Returns the crowd's events."""
+        crowd's new time, and cues start or end. Returns the crowd's events."""
         events = self.crowd.update()
         self._place()
+        self._cue()
         return events
+
+    def _cue(self) -> None:
+        now, half = self.crowd.time, 0.5 / self.crowd.pool.fps
+        for k, cue in enumerate(self.cues):
+            if abs(now - cue.time) <= half:
+                self.crowd.transition_to_streamed(cue.agents, self.cluster, cue.stream, cue.blend_time,
+                                                  time_to_dilate=cue.time_to_dilate)  # fmt: skip
+                self.pinned[cue.agents] = k
+                self.stream[cue.agents] = cue.stream
+            elif cue.duration is not None and abs(now - cue.time - cue.duration) <= half:
+                self.pinned[cue.agents[self.pinned[cue.agents] == k]] = -1
 
     def world(self, agents=None) -> np.ndarray:
         """World joint matrices (n, J, 4, 4) of `agents` (default all): each root times its pose."""

@@ -17,7 +17,7 @@ from ..errors import ValidationError
 from .pool import StreamPool, UniquePool, blend_entries, entries_pose
 from .skeleton import Event, Pose
 
-__all__ = ["Crowd", "CrowdEvent", "INSTANCE", "NONE", "STREAMED", "UNIQUE", "DILATION_RATE"]
+__all__ = ["Crowd", "CrowdEvent", "INSTANCE", "NONE", "STREAMED", "UNIQUE", "DILATION_RATE", "MAX_DILATION_RATE"]
 
 NONE, STREAMED, UNIQUE = 0, 1, 2  # what an agent part reads (kind, target_kind)
 INSTANCE = np.dtype(
@@ -36,6 +36,9 @@ INSTANCE = np.dtype(
 # The default time dilation moves an offset a quarter frame per frame (changeRate 0.25): parts
 # play at three quarters speed while they spread out, slow enough not to look frozen.
 DILATION_RATE = 0.25
+# A part that dilates plays at (1 - changeRate) speed: at most this rate, it never falls below half
+# speed (a rate of 1 would freeze it, above 1 play it backwards).
+MAX_DILATION_RATE = 0.5
 
 
 @attrs.frozen
@@ -166,9 +169,11 @@ class Crowd:
 
         Into a Running stream, each part blends to a random offset within the history written.
         Into a Stopped stream (which starts now), every part starts at offset 0, the head, and
-        time dilation (Listing 2) moves each offset to a random target in [0, history - 1] at
-        changeRate = (M_new - M) / (time_to_dilate * fps) frames per frame (default: DILATION_RATE),
-        M = 0. `time_to_dilate` given for a Running stream applies the same from offset 0.
+        time dilation (Listing 2) moves each offset to a random target in [0, M_new] at
+        changeRate = (M_new - M) / (time_to_dilate * fps) frames per frame, M = 0. With
+        `time_to_dilate`, M_new is as far as parts get in that time at MAX_DILATION_RATE (they
+        never drop below half speed), at most history - 1; without, M_new = history - 1 at
+        DILATION_RATE. `time_to_dilate` given for a Running stream applies the same from offset 0.
         `offsets` (one per agent, or one for all) chooses the target offsets in a Running stream
         instead. A part already blending first lands on its blend's target. Refused calls change
         nothing.
@@ -204,9 +209,14 @@ class Crowd:
             self._dilate_to[ids, c] = np.nan
         else:
             offsets = np.zeros(len(ids), dtype=np.float32)
-            self._dilate_to[ids, c] = self.rng.integers(0, history, size=len(ids))
-            seconds = time_to_dilate if time_to_dilate is not None else (history - 1) / (DILATION_RATE * self.pool.fps)
-            self._rate[ids, c] = (history - 1) / (max(seconds, 1e-9) * self.pool.fps)
+            if time_to_dilate is None:
+                spread, rate = history - 1, DILATION_RATE
+            else:  # as far as parts get in time_to_dilate without dropping below half speed
+                frames = time_to_dilate * self.pool.fps
+                spread = min(history - 1, int(MAX_DILATION_RATE * frames))
+                rate = spread / frames
+            self._dilate_to[ids, c] = self.rng.integers(0, spread + 1, size=len(ids))
+            self._rate[ids, c] = rate
         self._start_blend(ids, c, STREAMED, k, offsets, blend_time)
 
     def assign(self, agents, cluster, stream) -> None:
@@ -314,6 +324,24 @@ class Crowd:
         kind = np.where(blending, record["target_kind"], record["kind"])
         values = np.where(blending, record["target_offset"], record["offset"]).astype(np.float64)
         return np.where(kind == STREAMED, values, np.nan)
+
+    def synchrony(self, cluster, agents=None) -> float:
+        """The share of pairs of `agents`' parts (default all) in `cluster` that read one stream
+        at one offset (to the nearest frame), among the pairs that read one stream: 1 when all
+        move alike (a Stopped stream just started), about 1 / history once offsets are spread."""
+        offsets = self.offsets(cluster)
+        ids = np.arange(self.n_agents) if agents is None else _agent_ids(agents, self.n_agents)
+        record = self._buffer[ids, self.cluster_index(cluster)]
+        blending = record["blend_time"] > 0
+        stream = np.where(blending, record["target"], record["stream"])[~np.isnan(offsets[ids])]
+        frame = np.rint(offsets[ids][~np.isnan(offsets[ids])]).astype(np.int64)
+
+        def pairs(*keys):
+            counts = np.unique(np.stack(keys, axis=1), axis=0, return_counts=True)[1] if len(keys[0]) else np.zeros(0)
+            return float(np.sum(counts * (counts - 1) / 2))
+
+        together = pairs(stream)
+        return pairs(stream, frame) / together if together else 0.0
 
     def dilation_targets(self, cluster) -> np.ndarray:
         """Each agent's time-dilation target offset in `cluster` (N,); NaN where not dilating."""

@@ -96,3 +96,33 @@ def test_driving_refuses_what_does_not_fit():
         )
     with pytest.raises(ValidationError, match="different axes"):
         character_frame("y", "y")
+
+
+def test_a_cheer_cue_starts_a_stopped_stream_spreads_the_cheering_and_ends():
+    from flockkit.crowd.drive import Cue
+
+    n = 200
+    play = lambda **k: flockkit.get("controller", "clip", clip=WALKER, **k)  # noqa: E731
+    pool = StreamPool([Stream(controller=play(rate=0.2), history=20), Stream(controller=play(), history=20),
+                       Stream(controller=play(rate=1.7), history=20),
+                       Stream(controller=play(rate=2.5), history=90, default="Stopped")], fps=30)  # fmt: skip
+    crowd = Crowd(pool, n_agents=n, clusters={"body": 0}, seed=0)
+    rng = np.random.default_rng(1)
+    start = rng.uniform(-20, 20, (n, 2))
+    heading = rng.uniform(0, 2 * np.pi, n)
+    t = np.arange(0, 8, 0.1)[:, None, None]
+    motion = flockkit.Motion(positions=start + t * np.stack([np.cos(heading), np.sin(heading)], axis=1), dt=0.1)
+    home = np.arange(0, n, 2)
+    cheer = Cue(time=1.0, agents=home, stream=3, duration=4.0, time_to_dilate=2.0, name="goal")
+    driver = Driver(crowd, motion, machine(), up="z", forward="y", cues=[cheer])
+    synchrony = {}
+    for _ in range(int(6.5 * 30)):
+        driver.step()
+        synchrony[round(crowd.time, 2)] = crowd.synchrony("body", home)
+    assert synchrony[1.0] == 1.0  # all cheer from the stream's head
+    assert synchrony[3.0] < 0.05  # within the dilation time, under 5% of pairs move alike
+    assert not pool.is_running(3) and np.all(driver.stream[home] != 3)  # the cheer ended: back to walking
+    with pytest.raises(ValidationError, match="past the trajectories' end"):
+        Driver(crowd_of(n), motion, machine(), cues=[Cue(time=9.0, agents=home, stream=3)])
+    with pytest.raises(ValidationError, match="unknown stream id 9"):
+        Driver(crowd_of(n), motion, machine(), cues=[Cue(time=1.0, agents=home, stream=9)])
