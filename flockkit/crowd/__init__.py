@@ -2,6 +2,7 @@
 
 from .drive import Cue, Driver, State, StateMachine, foot_sliding, ground_speed
 from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
+from .record import CrowdRecording, record
 from .runtime import INSTANCE, Crowd, CrowdEvent
 from .skeleton import Event, Pose, SkeletalClip, Skeleton, read_clips, stream_times
 
@@ -23,6 +24,8 @@ __all__ = [
     "State",
     "StateMachine",
     "Cue",
+    "CrowdRecording",
+    "record",
     "Driver",
     "ground_speed",
     "foot_sliding",

@@ -126,3 +126,34 @@ def test_a_cheer_cue_starts_a_stopped_stream_spreads_the_cheering_and_ends():
         Driver(crowd_of(n), motion, machine(), cues=[Cue(time=9.0, agents=home, stream=3)])
     with pytest.raises(ValidationError, match="unknown stream id 9"):
         Driver(crowd_of(n), motion, machine(), cues=[Cue(time=1.0, agents=home, stream=9)])
+
+
+def test_a_recorded_driven_crowd_exports_to_usd_skeletons_that_usd_reads_back(tmp_path):
+    pytest.importorskip("pxr", reason="USD export needs usd-core (pip install 'flockkit[usd]')")
+    from pxr import Usd, UsdGeom, UsdSkel
+
+    from flockkit.crowd.record import record
+
+    t = np.arange(0, 3, 0.1)[:, None, None]
+    positions = np.array([[0.0, 0.0], [2.0, 1.0], [-1.0, 3.0]]) + t * np.array([[1.0, 0.2], [0.4, -1.0], [0.0, 1.3]])
+    crowd = crowd_of(3)
+    driver = Driver(crowd, flockkit.Motion(positions=positions, dt=0.1), machine(), up="z", forward="y")
+    recording = record(driver, 1.0)
+    assert recording.n_frames == 30 and recording.n_agents == 3
+    # the last recorded frame is the crowd's current one
+    np.testing.assert_allclose(recording.world()[-1], driver.world(), atol=1e-5)
+    path = tmp_path / "crowd.usdc"
+    recording.export_usd(path)
+    stage = Usd.Stage.Open(str(path))
+    assert UsdGeom.GetStageUpAxis(stage) == "Z" and stage.GetFramesPerSecond() == 30
+    cache = UsdSkel.Cache()
+    world = recording.world()
+    for agent in range(3):
+        root = stage.GetPrimAtPath(f"/Crowd/Agent_{agent}")
+        query = cache.GetSkelQuery(UsdSkel.Skeleton(root.GetChild("Skeleton")))
+        for frame in (0, 13, 29):
+            skel = np.array(query.ComputeJointSkelTransforms(frame)).transpose(0, 2, 1)
+            placed = np.array(UsdGeom.Xformable(root).ComputeLocalToWorldTransform(frame)).T
+            np.testing.assert_allclose(placed @ skel, world[frame, agent], atol=1e-5)  # float32 precision
+    with pytest.raises(ValidationError, match="seconds"):
+        record(driver, 0)

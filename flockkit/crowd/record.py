@@ -1,0 +1,149 @@
+"""A crowd run kept frame by frame, and its export for animation tools (issue 17, part 1): per
+agent, its root transform and its cluster's local joint poses, written to USD as one UsdSkel
+skeleton and animation per agent (for small crowds; instancing shared streams is still to come).
+"""
+
+from __future__ import annotations
+
+import attrs
+import numpy as np
+
+from .. import validate
+from ..errors import ValidationError
+from .skeleton import Skeleton
+
+__all__ = ["CrowdRecording", "record"]
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class CrowdRecording:
+    """Frames of a crowd: `roots` (F, N, 4, 4) world transforms of each agent's root (identity
+    for a crowd not driven by trajectories), `rotations` (F, N, J, 4) and `translations`
+    (F, N, J, 3) the local joint poses of `cluster` (float32, as the store holds them), the
+    `streams` (F, N) each agent reads or blends to, at `fps`."""
+
+    skeleton: Skeleton
+    fps: float
+    cluster: str
+    roots: np.ndarray
+    rotations: np.ndarray
+    translations: np.ndarray
+    streams: np.ndarray
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.roots)
+
+    @property
+    def n_agents(self) -> int:
+        return self.roots.shape[1]
+
+    def world(self) -> np.ndarray:
+        """World joint matrices (F, N, J, 4, 4): each agent's root times its pose's forward kinematics."""
+        from .skeleton import Pose
+
+        local = self.skeleton.world(
+            Pose._adopt(self.rotations.astype(np.float64), self.translations.astype(np.float64))
+        )
+        return self.roots[:, :, None] @ local
+
+    def export_usd(self, path, *, meters_per_unit: float = 1.0) -> None:
+        """A USD stage (.usda/.usdc): /Crowd/Agent_k a UsdSkel.Root whose transform is the agent's
+        root at each frame, holding a Skeleton (the joints as paths, rest and bind transforms)
+        bound to a SkelAnimation with the agent's local joint rotations, translations and scales
+        at each frame. Up axis z, `meters_per_unit`, frames per second the recording's; saved
+        atomically. usd-core (extra ``usd``) is needed."""
+        from ..io import _usd_modules, _usd_stage
+
+        Gf, _, _, Vt = _usd_modules()  # names the extra when usd-core is missing
+        from pxr import UsdSkel
+
+        joints = _joint_paths(self.skeleton)
+        rest = self.skeleton.world(self.skeleton.rest)  # model-space rest: the bind transforms
+        local_rest = _local_matrices(self.skeleton)
+        scales = Vt.Vec3hArray.FromNumpy(self.skeleton.scales.astype(np.float16))
+        with _usd_stage(path, "/Crowd", dt=1.0 / self.fps, n_frames=self.n_frames, fps=self.fps,
+                        meters_per_unit=meters_per_unit) as (stage, times):  # fmt: skip
+            for agent in range(self.n_agents):
+                root = UsdSkel.Root.Define(stage, f"/Crowd/Agent_{agent}")
+                transform = root.AddTransformOp()
+                skeleton = UsdSkel.Skeleton.Define(stage, f"/Crowd/Agent_{agent}/Skeleton")
+                skeleton.CreateJointsAttr(joints)
+                skeleton.CreateBindTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(m.T.tolist()) for m in rest]))
+                skeleton.CreateRestTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(m.T.tolist()) for m in local_rest]))
+                animation = UsdSkel.Animation.Define(stage, f"/Crowd/Agent_{agent}/Skeleton/Animation")
+                animation.CreateJointsAttr(joints)
+                animation.CreateScalesAttr(scales)
+                rotations, translations = animation.CreateRotationsAttr(), animation.CreateTranslationsAttr()
+                UsdSkel.BindingAPI.Apply(skeleton.GetPrim()).CreateAnimationSourceRel().SetTargets(
+                    [animation.GetPath()]
+                )
+                for frame, when in enumerate(times):
+                    transform.Set(Gf.Matrix4d(self.roots[frame, agent].T.tolist()), when)
+                    rotations.Set(Vt.QuatfArray.FromNumpy(np.ascontiguousarray(self.rotations[frame, agent])), when)
+                    translations.Set(
+                        Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(self.translations[frame, agent])), when
+                    )
+
+
+def _joint_paths(skeleton: Skeleton) -> list[str]:
+    """UsdSkel joint paths ("hips/spine/head"): each name made a valid path element, under its parent's path."""
+    import re
+
+    names = [re.sub(r"[^A-Za-z0-9_]", "_", n) for n in skeleton.names]
+    names = [n if n and not n[0].isdigit() else f"j_{n}" for n in names]
+    paths: list[str] = []
+    for j, parent in enumerate(skeleton.parents):
+        paths.append(names[j] if parent < 0 else f"{paths[parent]}/{names[j]}")
+    return paths
+
+
+def _local_matrices(skeleton: Skeleton) -> np.ndarray:
+    """The rest pose's local T R S matrices (J, 4, 4)."""
+    from .. import rigid
+
+    m = np.tile(np.eye(4), (skeleton.n_joints, 1, 1))
+    m[:, :3, :3] = rigid.quaternion_matrix(skeleton.rest.rotations) * skeleton.scales[:, None, :]
+    m[:, :3, 3] = skeleton.rest.translations
+    return m
+
+
+def record(source, seconds: float, *, agents=None, on_frame=None) -> CrowdRecording:
+    """Run `source` (a ``flockkit.Crowd``, or a ``flockkit.crowd.Driver`` that moves one) for
+    `seconds` and keep, each frame after its update, the roots, local poses and streams of
+    `agents` (default all) in the driver's (or the crowd's first) cluster. ``on_frame(crowd,
+    frame)`` is called before each update (to start transitions)."""
+    from .drive import Driver
+    from .runtime import Crowd
+
+    driver = source if isinstance(source, Driver) else None
+    crowd = driver.crowd if driver is not None else source
+    if not isinstance(crowd, Crowd):
+        raise ValidationError(f"record needs a flockkit.Crowd or a crowd Driver; got {type(source).__name__}")
+    seconds = validate.number(seconds, "record: seconds", minimum=0, strict=True)
+    cluster = driver.cluster if driver is not None else crowd.clusters[0]
+    c = crowd.cluster_index(cluster)
+    ids = np.arange(crowd.n_agents) if agents is None else np.asarray(agents)
+    roots, rotations, translations, streams = [], [], [], []
+    for frame in range(int(round(seconds * crowd.pool.fps))):
+        if on_frame is not None:
+            on_frame(crowd, frame)
+        if driver is not None:
+            driver.step()
+        else:
+            crowd.update()
+        pose = crowd.poses(ids, cluster)
+        rotations.append(np.asarray(pose.rotations))
+        translations.append(np.asarray(pose.translations))
+        roots.append(driver.roots[ids].copy() if driver is not None else np.tile(np.eye(4), (len(ids), 1, 1)))
+        record = crowd.instance_buffer()[ids, c]
+        streams.append(np.where(record["blend_time"] > 0, record["target"], record["stream"]))
+    return CrowdRecording(
+        skeleton=crowd.skeletons[c],
+        fps=crowd.pool.fps,
+        cluster=cluster,
+        roots=np.array(roots),
+        rotations=np.array(rotations),
+        translations=np.array(translations),
+        streams=np.array(streams),
+    )
