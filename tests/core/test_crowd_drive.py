@@ -1,6 +1,9 @@
 """Crowds driven by trajectories (issue 17, part 1): roots on the paths, facing, speed states."""
 
+import json
 import math
+import os
+import subprocess
 
 import numpy as np
 import pytest
@@ -157,3 +160,46 @@ def test_a_recorded_driven_crowd_exports_to_usd_skeletons_that_usd_reads_back(tm
             np.testing.assert_allclose(placed @ skel, world[frame, agent], atol=1e-5)  # float32 precision
     with pytest.raises(ValidationError, match="seconds"):
         record(driver, 0)
+
+
+BLENDER_PYTHON = os.environ.get("FLOCKKIT_BPY_PYTHON")  # a Python with Blender's bpy module (pip install bpy)
+BLENDER_CROWD = """
+import json, sys
+import bpy
+path, frames = sys.argv[1], [int(f) for f in sys.argv[2:]]
+bpy.ops.wm.read_factory_settings(use_empty=True)
+bpy.ops.wm.usd_import(filepath=path)
+scene = bpy.context.scene
+armatures = sorted([o for o in scene.objects if o.type == "ARMATURE"], key=lambda o: o.name)
+found = {}
+for frame in frames:
+    scene.frame_set(frame)
+    found[frame] = [[list(a.matrix_world @ bone.head) for bone in a.pose.bones] for a in armatures]
+print("RESULT" + json.dumps({"fps": scene.render.fps / scene.render.fps_base, "armatures": len(armatures),
+                             "frames": found}))
+"""
+
+
+@pytest.mark.skipif(
+    not BLENDER_PYTHON, reason="set FLOCKKIT_BPY_PYTHON to a Python with bpy (pip install bpy) to import in Blender"
+)
+def test_blender_imports_a_driven_crowd_as_armatures_with_every_joint_in_place(tmp_path):
+    from flockkit.crowd.record import record
+
+    t = np.arange(0, 3, 0.1)[:, None, None]
+    positions = np.array([[0.0, 0.0], [2.0, 1.0], [-1.0, 3.0]]) + t * np.array([[1.0, 0.2], [0.4, -1.0], [0.0, 1.3]])
+    play = lambda **k: flockkit.get("controller", "clip", clip=WALKER, **k)  # noqa: E731
+    pool = StreamPool([Stream(controller=play(rate=0.2), history=20), Stream(controller=play(), history=20),
+                       Stream(controller=play(rate=1.7), history=20)], fps=24)  # fmt: skip
+    crowd = Crowd(pool, n_agents=3, clusters={"body": 0}, seed=0)
+    driver = Driver(crowd, flockkit.Motion(positions=positions, dt=0.1), machine(), up="z", forward="y")
+    recording = record(driver, 1.0)
+    recording.export_usd(tmp_path / "crowd.usdc")
+    frames = [0, 12, 23]
+    done = subprocess.run([BLENDER_PYTHON, "-c", BLENDER_CROWD, str(tmp_path / "crowd.usdc"), *map(str, frames)],
+                          capture_output=True, text=True, timeout=300)  # fmt: skip
+    found = json.loads(done.stdout.split("RESULT", 1)[1])
+    assert found["fps"] == 24 and found["armatures"] == 3
+    joints = recording.world()[..., :3, 3]
+    for frame in frames:
+        np.testing.assert_allclose(found["frames"][str(frame)], joints[frame], atol=1e-5)
