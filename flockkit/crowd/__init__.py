@@ -2,7 +2,7 @@
 
 from .drive import Cue, Driver, State, StateMachine, foot_sliding, ground_speed
 from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
-from .record import CrowdRecording, record
+from .record import CrowdRecording, record, write_engine_buffers
 from .runtime import INSTANCE, Crowd, CrowdEvent
 from .skeleton import Event, Pose, SkeletalClip, Skeleton, read_clips, stream_times
 
@@ -26,6 +26,7 @@ __all__ = [
     "Cue",
     "CrowdRecording",
     "record",
+    "write_engine_buffers",
     "Driver",
     "ground_speed",
     "foot_sliding",

@@ -12,7 +12,7 @@ from .. import validate
 from ..errors import ValidationError
 from .skeleton import Skeleton
 
-__all__ = ["CrowdRecording", "record"]
+__all__ = ["CrowdRecording", "record", "write_engine_buffers"]
 
 
 @attrs.frozen(kw_only=True, eq=False)
@@ -147,3 +147,85 @@ def record(source, seconds: float, *, agents=None, on_frame=None) -> CrowdRecord
         translations=np.array(translations),
         streams=np.array(streams),
     )
+
+
+ENGINE_FORMAT_VERSION = 1
+
+
+def write_engine_buffers(source, path, seconds: float, *, on_frame=None) -> None:
+    """Run `source` (a Crowd or a Driver) for `seconds` and write what a custom skinning shader
+    reads to one .npz (flockkit's container: plain arrays and a JSON entry; read it with
+    ``numpy.load(path)``), atomically. The layout (also in the file's metadata):
+
+    - ``store`` (float32): the pose store before the first frame; ``lookup`` (S, M) int64: the
+      float offset of (stream, ring slot), -1 past a stream's history; ``history`` (S,),
+      ``bones`` (S,). Entry layout: 12 float32 per joint, rotation x, y, z, w, translation x, y,
+      z, scale x, y, z, two reserved.
+    - ``heads`` (F, S) int64: each stream's head slot after frame f (an agent part at offset k
+      reads slot (head - k) mod history); ``written`` (F, S) int64: where in ``entries`` frame f's
+      new head pose of stream s starts (-1: the stream did not run), ``entries`` float32 the new
+      head poses, to copy into the store at ``lookup[s, heads[f, s]]`` before drawing frame f.
+    - ``instance_<field>`` (F, N, C) for each field of ``flockkit.crowd.INSTANCE`` (stream,
+      offset, target, target_offset, blend_start, blend_time, kind, target_kind, mask) and
+      ``time`` (F,): α = clamp((time - blend_start) / blend_time, 0, 1) where blend_time > 0.
+    - ``roots`` (F, N, 4, 4) float32 when driven: each agent's root (column vectors: a joint's
+      world matrix is root @ its model-space matrix).
+    """
+    from .. import _npzfile
+    from .drive import Driver
+    from .runtime import INSTANCE, Crowd
+
+    driver = source if isinstance(source, Driver) else None
+    crowd = driver.crowd if driver is not None else source
+    if not isinstance(crowd, Crowd):
+        raise ValidationError(
+            f"write_engine_buffers needs a flockkit.Crowd or a crowd Driver; got {type(source).__name__}"
+        )
+    if crowd.pool.xp is not np:
+        raise ValidationError("write_engine_buffers reads the store with numpy: use a pool without xp")
+    seconds = validate.number(seconds, "write_engine_buffers: seconds", minimum=0, strict=True)
+    pool = crowd.pool
+    store = pool.store.copy()
+    heads, written, entries, instances, times, roots = [], [], [], [], [], []
+    size = 0
+    for frame in range(int(round(seconds * pool.fps))):
+        if on_frame is not None:
+            on_frame(crowd, frame)
+        if driver is not None:
+            driver.step()
+        else:
+            crowd.update()
+        starts = np.full(len(pool.streams), -1, dtype=np.int64)
+        for s in np.flatnonzero(pool.running):
+            row, width = int(pool.lookup[s, pool.head[s]]), int(pool.bones[s]) * 12
+            starts[s] = size
+            entries.append(pool.store[row : row + width].copy())
+            size += width
+        heads.append(pool.head.copy())
+        written.append(starts)
+        instances.append(crowd.instance_buffer().copy())
+        times.append(crowd.time)
+        if driver is not None:
+            roots.append(driver.roots.astype(np.float32))
+    instances = np.array(instances)
+    arrays = {
+        "store": store,
+        "lookup": pool.lookup,
+        "history": pool.history,
+        "bones": pool.bones,
+        "heads": np.array(heads),
+        "written": np.array(written),
+        "entries": np.concatenate(entries) if entries else np.zeros(0, np.float32),
+        "time": np.array(times),
+        **{f"instance_{name}": np.ascontiguousarray(instances[name]) for name in INSTANCE.names},
+    }
+    if roots:
+        arrays["roots"] = np.array(roots)
+    layout = {
+        "entry": ["rotation x", "y", "z", "w", "translation x", "y", "z", "scale x", "y", "z", "reserved", "reserved"],
+        "clusters": list(crowd.clusters),
+        "streams": [s.name for s in pool.streams],
+        "fps": pool.fps,
+        "kinds": {"none": 0, "streamed": 1, "unique": 2},
+    }
+    _npzfile.write(path, kind="crowd-engine-buffers", version=ENGINE_FORMAT_VERSION, arrays=arrays, metadata=layout)

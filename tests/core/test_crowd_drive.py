@@ -203,3 +203,61 @@ def test_blender_imports_a_driven_crowd_as_armatures_with_every_joint_in_place(t
     joints = recording.world()[..., :3, 3]
     for frame in frames:
         np.testing.assert_allclose(found["frames"][str(frame)], joints[frame], atol=1e-5)
+
+
+def test_engine_buffers_replayed_by_a_small_shader_give_the_crowds_poses(tmp_path):
+    """Replaying the .npz as a shader would (copy each frame's new heads into the store, find each
+    part's rows from the heads and offsets, mix source and target by α) gives Crowd.entries."""
+    from flockkit.crowd.record import write_engine_buffers
+
+    def make():
+        play = lambda **k: flockkit.get("controller", "clip", clip=WALKER, **k)  # noqa: E731
+        pool = StreamPool([Stream(controller=play(), history=12), Stream(controller=play(rate=1.6), history=20),
+                           Stream(controller=play(rate=0.5), history=16, default="Stopped")], fps=30)  # fmt: skip
+        return Crowd(pool, n_agents=8, clusters={"body": np.arange(8) % 2}, seed=3)
+
+    def script(crowd, frame):
+        if frame == 3:
+            crowd.transition_to_streamed([0, 1, 2, 3], "body", 2, blend_time=0.2, time_to_dilate=0.5)
+
+    write_engine_buffers(make(), tmp_path / "buffers.npz", 1.0, on_frame=script)
+    twin, expected = make(), []
+    for frame in range(30):
+        script(twin, frame)
+        twin.update()
+        expected.append(twin.entries(cluster="body"))
+    with np.load(tmp_path / "buffers.npz", allow_pickle=False) as data:
+        files = {name: data[name] for name in data.files}
+    store = files["store"].copy()
+    joints = WALKER.skeleton.n_joints
+
+    def read(frame, kind, stream, offset):
+        assert np.all(kind == 1)
+        slots = (files["heads"][frame, stream] - np.rint(offset).astype(int)) % files["history"][stream]
+        rows = files["lookup"][stream, slots]
+        return np.stack([store[r : r + joints * 12].reshape(joints, 12) for r in rows])
+
+    for frame in range(30):
+        for s in np.flatnonzero(files["written"][frame] >= 0):
+            start, row = files["written"][frame, s], files["lookup"][s, files["heads"][frame, s]]
+            store[row : row + joints * 12] = files["entries"][start : start + joints * 12]
+        field = {name: files[f"instance_{name}"][frame, :, 0] for name in flockkit.crowd.INSTANCE.names}
+        source = read(frame, field["kind"], field["stream"], field["offset"])
+        blending = field["blend_time"] > 0
+        if blending.any():
+            target = read(frame, field["target_kind"][blending], field["target"][blending],
+                          field["target_offset"][blending])  # fmt: skip
+            alpha = np.clip(
+                (files["time"][frame] - field["blend_start"][blending]) / field["blend_time"][blending], 0, 1
+            )
+            a, b = source[blending], target
+            b = np.where(
+                (np.sum(a[..., :4] * b[..., :4], axis=-1) < 0)[..., None],
+                np.concatenate([-b[..., :4], b[..., 4:]], -1),
+                b,
+            )
+            mixed = a + alpha[:, None, None] * (b - a)
+            mixed[..., :4] /= np.linalg.norm(mixed[..., :4], axis=-1, keepdims=True)
+            source[blending] = np.where((alpha == 1)[:, None, None], target, mixed)
+        np.testing.assert_allclose(source, expected[frame], atol=1e-6)
+    assert np.any(files["instance_blend_time"] > 0)  # the replay went through blends
