@@ -47,7 +47,8 @@ class State:
         The ground speed each stream plays without sliding (world units per second; see
         ``ground_speed``): an agent takes the stream nearest its speed. None: the first stream.
     low, high : float
-        The agent speeds of this state; the states of a machine tile [0, inf).
+        The values of this state (agent speeds, or climb rates for a machine on ``climb``); the
+        states of a machine tile [0, inf) for speeds, (-inf, inf) for climb rates.
     """
 
     name: str = attrs.field()
@@ -59,8 +60,8 @@ class State:
     def __attrs_post_init__(self):
         if not isinstance(self.name, str) or not self.name:
             raise ValidationError(f"State.name must be a non-empty string; got {self.name!r}")
-        if not (0 <= self.low < self.high):
-            raise ValidationError(f"state {self.name!r}: needs 0 <= low < high; got low {self.low}, high {self.high}")
+        if not self.low < self.high:
+            raise ValidationError(f"state {self.name!r}: needs low < high; got low {self.low}, high {self.high}")
         if self.speeds is not None and len(self.speeds) != len(self.streams):
             raise ValidationError(
                 f"state {self.name!r}: {len(self.speeds)} speeds for {len(self.streams)} streams (one each)"
@@ -68,19 +69,24 @@ class State:
 
 
 class StateMachine:
-    """States on agent speed, tiling [0, inf) in order, with `hysteresis` (world units per
-    second): an agent leaves its state only when its speed passes the state's bounds by more than
+    """States on a measure of each agent's motion, `on` "speed" (horizontal, tiling [0, inf)) or
+    "climb" (vertical speed, z up, tiling (-inf, inf)), with `hysteresis` (world units per
+    second): an agent leaves its state only when its value passes the state's bounds by more than
     that, so that one near a threshold does not flicker. Switches blend over `blend_time` s."""
 
-    def __init__(self, states, *, hysteresis: float = 0.05, blend_time: float = 0.3):
+    def __init__(self, states, *, on: str = "speed", hysteresis: float = 0.05, blend_time: float = 0.3):
+        if on not in ("speed", "climb"):
+            raise ValidationError(f"StateMachine on must be 'speed' or 'climb'; got {on!r}")
+        self.on = on
         self.states = tuple(sorted(states, key=lambda s: s.low))
         if not self.states or not all(isinstance(s, State) for s in self.states):
             raise ValidationError("StateMachine needs a non-empty sequence of flockkit.crowd.State")
         names = [s.name for s in self.states]
         if len(set(names)) != len(names):
             raise ValidationError(f"StateMachine: state names repeat: {names}")
-        if self.states[0].low != 0:
-            raise ValidationError(f"StateMachine: no state covers speeds below {self.states[0].low} (unreachable gap)")
+        bottom = 0.0 if on == "speed" else -math.inf
+        if self.states[0].low > bottom:
+            raise ValidationError(f"StateMachine: no state covers values below {self.states[0].low} (a gap)")
         for a, b in zip(self.states[:-1], self.states[1:]):
             if a.high > b.low:
                 raise ValidationError(f"StateMachine: states {a.name!r} and {b.name!r} overlap ({b.low} < {a.high})")
@@ -269,6 +275,7 @@ class Driver:
         position, velocity = self._sample(self._positions, t), self._sample(self._velocities, t)
         speed = np.linalg.norm(velocity[:, :2], axis=1)
         moving = speed > self.still
+        measure = speed if self.machine.on == "speed" else velocity[:, 2]
         target = np.arctan2(velocity[:, 1], velocity[:, 0])
         if first:
             self.heading = np.where(moving, target, 0.0)
@@ -281,26 +288,26 @@ class Driver:
         yaw = rigid.quaternion_matrix(np.stack([zero, zero, np.sin(half), np.cos(half)], axis=1))
         self.roots[:, :3, :3] = yaw @ self.frame_to_world
         self.roots[:, :3, 3] = position
-        self._choose(speed, first=first)
+        self._choose(measure, first=first)
 
-    def _choose(self, speed: np.ndarray, *, first: bool) -> None:
-        state = self.machine.choose(speed, None if first else self.state)
+    def _choose(self, value: np.ndarray, *, first: bool) -> None:
+        state = self.machine.choose(value, None if first else self.state)
         stream = np.empty_like(self.stream)
         for k, s in enumerate(self.machine.states):
             mine = np.flatnonzero(state == k)
             if s.speeds is None:
                 stream[mine] = s.streams[0]
             else:
-                nearest = np.argmin(np.abs(speed[mine, None] - np.asarray(s.speeds)[None]), axis=1)
+                nearest = np.argmin(np.abs(value[mine, None] - np.asarray(s.speeds)[None]), axis=1)
                 chosen = np.asarray(s.streams)[nearest]
-                # keep the current stream of the state while its speed is nearly as good
+                # keep the current stream of the state while its value is nearly as good
                 current = self.stream[mine]
                 kept = np.isin(current, s.streams) & (state[mine] == self.state[mine])
                 if kept.any():
-                    speeds = dict(zip(s.streams, s.speeds))
-                    now = np.array([speeds.get(int(c), np.inf) for c in current])
+                    values = dict(zip(s.streams, s.speeds))
+                    now = np.array([values.get(int(c), np.inf) for c in current])
                     best = np.asarray(s.speeds)[nearest]
-                    kept &= np.abs(speed[mine] - now) <= np.abs(speed[mine] - best) + self.machine.hysteresis
+                    kept &= np.abs(value[mine] - now) <= np.abs(value[mine] - best) + self.machine.hysteresis
                 stream[mine] = np.where(kept, current, chosen)
         if first:
             for s in np.unique(stream):

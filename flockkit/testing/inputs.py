@@ -15,7 +15,7 @@ from .. import rigid
 from ..graph import MotionGraph
 from ..motion import Alignment, Motion
 
-__all__ = ["recording", "graph", "parts", "plants", "walker", "random_clip", "WOBBLE_PERIOD"]
+__all__ = ["recording", "graph", "parts", "plants", "walker", "bird", "random_clip", "WOBBLE_PERIOD"]
 
 # The group circles the origin once every LAP seconds while its members wobble about their places
 # every WOBBLE_PERIOD seconds. The two periods are incommensurate, so a configuration recurs up
@@ -174,6 +174,29 @@ def walker(*, fps: float = 30.0, seconds: float = 2.0, swing: float = 30.0):
     return SkeletalClip(
         skeleton=skeleton, fps=fps, rotations=rotations, translations=hips, events=events, name="walker"
     )
+
+
+def bird(*, flapping: bool = True, fps: float = 30.0, seconds: float = 0.5):
+    """A bird's skeletal clip in closed form (z up, facing y): a body with a head, a tail and two
+    two-joint wings that beat 50 degrees each way (`flapping`, 2 beats a second at the default
+    length) or hold a shallow glide with a slow sway; first frame equal to the last (it loops)."""
+    from ..crowd.skeleton import Pose, SkeletalClip, Skeleton
+
+    names = ["body", "head", "tail", "wing.L", "tip.L", "wing.R", "tip.R"]
+    parents = [-1, 0, 0, 0, 3, 0, 5]
+    offsets = [[0, 0, 0], [0, 0.12, 0.02], [0, -0.15, 0], [-0.05, 0, 0], [-0.25, 0, 0], [0.05, 0, 0], [0.25, 0, 0]]
+    skeleton = Skeleton(
+        names=names, parents=parents, rest=Pose(rotations=np.tile([0.0, 0, 0, 1], (7, 1)), translations=offsets)
+    )
+    phase = 2 * np.pi * np.arange(int(round(seconds * fps)) + 1) / (seconds * fps)
+    beat = np.radians(50.0) * np.sin(phase) if flapping else np.radians(8.0) + np.radians(3.0) * np.sin(phase)
+    bend = 0.4 * beat if flapping else 0.0 * beat
+    rotations = np.tile([0.0, 0.0, 0.0, 1.0], (len(phase), 7, 1))
+    for joint, angle in ((3, -beat), (4, -bend), (5, beat), (6, bend)):  # wings turn about the body's y axis
+        rotations[:, joint, 1] = np.sin(angle / 2)
+        rotations[:, joint, 3] = np.cos(angle / 2)
+    return SkeletalClip(skeleton=skeleton, fps=fps, rotations=rotations, translations=np.zeros((len(phase), 3)),
+                        name="flap" if flapping else "glide")  # fmt: skip
 
 
 def random_clip(joints: int, *, frames: int = 60, fps: float = 30.0, seed: int = 0):

@@ -261,3 +261,35 @@ def test_engine_buffers_replayed_by_a_small_shader_give_the_crowds_poses(tmp_pat
             source[blending] = np.where((alpha == 1)[:, None, None], target, mixed)
         np.testing.assert_allclose(source, expected[frame], atol=1e-6)
     assert np.any(files["instance_blend_time"] > 0)  # the replay went through blends
+
+
+def test_a_sky_of_flocks_flaps_on_the_climbs_and_glides_on_the_descents():
+    """Many flocks in one call (synthesize_many from one graph), each bird an agent whose body
+    plays one of two shared streams, flapping or gliding, chosen by its vertical speed: two
+    streams serve every bird, at the birds' own offsets."""
+    graph = inputs.graph(dims=3)
+    walks = [flockkit.walk(graph, duration=6.0, seed=k) for k in range(20)]
+    sky = flockkit.synthesize_many(graph, walks)  # 20 flocks of 6 birds
+    pool = StreamPool(
+        [
+            Stream(controller=flockkit.get("controller", "clip", clip=inputs.bird(flapping=True)), history=15),
+            Stream(controller=flockkit.get("controller", "clip", clip=inputs.bird(flapping=False)), history=15),
+        ],
+        fps=10,
+    )
+    crowd = Crowd(pool, n_agents=sky.n_agents, clusters={"body": 0}, seed=2)
+    wings = StateMachine(
+        [State(name="glide", streams=1, low=-math.inf, high=0.02), State(name="flap", streams=0, low=0.02)],
+        on="climb",
+        hysteresis=0.01,
+    )
+    driver = Driver(crowd, sky, wings, up="z", forward="y")
+    for _ in range(40):
+        driver.step()
+        climb = driver._sample(driver._velocities, crowd.time)[:, 2]
+        clear = np.abs(climb - 0.02) > 0.01  # beyond the hysteresis band, the state follows the climb
+        assert np.all((driver.stream == 0)[clear] == (climb > 0.02)[clear])
+    assert len(pool.streams) == 2 and {0, 1} <= set(driver.stream.tolist())
+    assert crowd.synchrony("body") < 0.2  # birds on one stream differ by their offsets
+    with pytest.raises(ValidationError, match="on must be 'speed' or 'climb'"):
+        StateMachine([State(name="all", streams=0)], on="height")
