@@ -23,6 +23,7 @@ __all__ = [
     "plot_graph",
     "plot_trace",
     "animate_crowd",
+    "animate_recording",
     "plot_offsets",
     "PICTURE_SUFFIXES",
     "ANIMATION_SUFFIXES",
@@ -670,28 +671,14 @@ def animate_crowd(crowd, path, *, seconds: float = 3.0, cluster=None, agents=Non
     coloured by the stream the part reads (while blending, by the stream it blends to, drawn
     thicker). The crowd advances, as a game loop would advance it; ``on_frame(crowd, frame)`` is
     called before each update, to start transitions. Returns the path."""
+    from .crowd.record import record
+
     path = _check_movie_path(path)
+    pick = _crowd_axes(axes)
     seconds = number(seconds, "animate_crowd: seconds", minimum=0, strict=True)
-    if len(axes) != 2 or any(a not in "xyz" for a in axes):
-        raise ValidationError(f"animate_crowd: axes must be two of 'x', 'y', 'z' (horizontal, vertical); got {axes!r}")
-    cluster = crowd.clusters[0] if cluster is None else cluster
     agents = np.arange(min(crowd.n_agents, 48)) if agents is None else np.asarray(agents)
-    c = crowd.cluster_index(cluster)
-    parents = crowd.skeletons[c].parents
-    pick = ["xyz".index(a) for a in axes]
-    n_frames = int(round(seconds * crowd.pool.fps))
-    joints, streams, blending = [], [], []
-    for frame in range(n_frames):
-        if on_frame is not None:
-            on_frame(crowd, frame)
-        crowd.update()
-        joints.append(crowd.poses(agents, cluster, space="world")[..., :3, 3][..., pick])
-        record = crowd.instance_buffer()[agents, c]
-        moving = record["blend_time"] > 0
-        streams.append(np.where(moving, record["target"], record["stream"]) + np.where(
-            np.where(moving, record["target_kind"], record["kind"]) == 2, 1000, 0))  # fmt: skip
-        blending.append(moving)
-    joints = np.array(joints)  # (frames, agents, J, 2)
+    recording = record(crowd, seconds, agents=agents, cluster=cluster, on_frame=on_frame)
+    joints = recording.world()[..., :3, 3][..., pick]  # (frames, agents, J, 2)
     extent = np.ptp(joints.reshape(-1, 2), axis=0).max() if joints.size else 1.0
     spacing = 0.8 * max(float(np.ptp(joints[..., 0], axis=-1).max()), 1e-9) + 0.4 * extent / max(len(agents), 1) ** 0.5
     height = max(float(np.ptp(joints[..., 1], axis=-1).max()), 1e-9) * 1.4
@@ -699,7 +686,28 @@ def animate_crowd(crowd, path, *, seconds: float = 3.0, cluster=None, agents=Non
     grid = np.stack([np.arange(len(agents)) % columns, -(np.arange(len(agents)) // columns)], axis=1)
     centers = joints.mean(axis=(0, 2))  # each agent's mean joint position: figures stay in their cells
     placed = joints - centers[None, :, None] + (grid * [spacing, height])[None, :, None]
-    frames, rate = _timeline(1.0 / crowd.pool.fps, n_frames, fps, None, "animate_crowd")
+    return _animate_skeletons(recording, placed, path, fps=fps, size=size, progress=progress, ticks=False)
+
+
+def animate_recording(recording, path, *, axes="xy", fps=None, size=None, progress=False):
+    """A recorded crowd (``flockkit.crowd.record``) where it is in the world, seen along `axes`
+    (default from above): each agent a stick figure coloured by its stream, blending ones
+    thicker. Returns the path."""
+    path = _check_movie_path(path)
+    placed = recording.world()[..., :3, 3][..., _crowd_axes(axes)]
+    return _animate_skeletons(recording, placed, path, fps=fps, size=size, progress=progress, ticks=True)
+
+
+def _crowd_axes(axes) -> list[int]:
+    if not isinstance(axes, str) or len(axes) != 2 or any(a not in "xyz" for a in axes) or axes[0] == axes[1]:
+        raise ValidationError(f"axes must be two of 'x', 'y', 'z' (horizontal, vertical); got {axes!r}")
+    return ["xyz".index(a) for a in axes]
+
+
+def _animate_skeletons(recording, placed, path, *, fps, size, progress, ticks: bool):
+    """Draw `placed` (frames, agents, J, 2) joint positions of `recording` as stick figures."""
+    parents = recording.skeleton.parents
+    frames, rate = _timeline(1.0 / recording.fps, recording.n_frames, fps, None, "animate_crowd")
     plt = _pyplot()
     from matplotlib import animation as movies
     from matplotlib.collections import LineCollection
@@ -707,8 +715,9 @@ def animate_crowd(crowd, path, *, seconds: float = 3.0, cluster=None, agents=Non
     low, high = placed.reshape(-1, 2).min(axis=0), placed.reshape(-1, 2).max(axis=0)
     figure, ax = _scene_figure(plt, low, high, size, keyed=False, longer=640)
     _fit_view(ax, low, high)
-    ax.set_xticks([])
-    ax.set_yticks([])
+    if not ticks:
+        ax.set_xticks([])
+        ax.set_yticks([])
     bones = np.flatnonzero(parents >= 0)
     palette = plt.get_cmap("tab10")
     lines = LineCollection([], zorder=3)
@@ -718,12 +727,10 @@ def animate_crowd(crowd, path, *, seconds: float = 3.0, cluster=None, agents=Non
     def draw(index):
         frame = frames[index]
         segments = np.stack([placed[frame][:, bones], placed[frame][:, parents[bones]]], axis=2).reshape(-1, 2, 2)
-        colours = [palette(int(s) % 10) for s in streams[frame] for _ in bones]
-        widths = [2.2 if b else 1.0 for b in blending[frame] for _ in bones]
         lines.set_segments(segments)
-        lines.set_color(colours)
-        lines.set_linewidth(widths)
-        label.set_text(f"{len(agents)} agents coloured by stream, t = {(frame + 1) / crowd.pool.fps:.1f} s")
+        lines.set_color([palette(int(s) % 10) for s in recording.streams[frame] for _ in bones])
+        lines.set_linewidth([2.2 if b else 1.0 for b in recording.blending[frame] for _ in bones])
+        label.set_text(f"{recording.n_agents} agents coloured by stream, t = {(frame + 1) / recording.fps:.1f} s")
         return [lines, label]
 
     try:

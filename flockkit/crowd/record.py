@@ -20,7 +20,8 @@ class CrowdRecording:
     """Frames of a crowd: `roots` (F, N, 4, 4) world transforms of each agent's root (identity
     for a crowd not driven by trajectories), `rotations` (F, N, J, 4) and `translations`
     (F, N, J, 3) the local joint poses of `cluster` (float32, as the store holds them), the
-    `streams` (F, N) each agent reads or blends to, at `fps`."""
+    `streams` (F, N) each agent reads or blends to (unique slots as 1000 + slot), whether it is
+    `blending` (F, N), at `fps`."""
 
     skeleton: Skeleton
     fps: float
@@ -29,6 +30,7 @@ class CrowdRecording:
     rotations: np.ndarray
     translations: np.ndarray
     streams: np.ndarray
+    blending: np.ndarray
 
     @property
     def n_frames(self) -> int:
@@ -108,11 +110,11 @@ def _local_matrices(skeleton: Skeleton) -> np.ndarray:
     return m
 
 
-def record(source, seconds: float, *, agents=None, on_frame=None) -> CrowdRecording:
+def record(source, seconds: float, *, agents=None, cluster=None, on_frame=None) -> CrowdRecording:
     """Run `source` (a ``flockkit.Crowd``, or a ``flockkit.crowd.Driver`` that moves one) for
     `seconds` and keep, each frame after its update, the roots, local poses and streams of
-    `agents` (default all) in the driver's (or the crowd's first) cluster. ``on_frame(crowd,
-    frame)`` is called before each update (to start transitions)."""
+    `agents` (default all) in `cluster` (default the driver's, or the crowd's first).
+    ``on_frame(crowd, frame)`` is called before each update (to start transitions)."""
     from .drive import Driver
     from .runtime import Crowd
 
@@ -121,10 +123,11 @@ def record(source, seconds: float, *, agents=None, on_frame=None) -> CrowdRecord
     if not isinstance(crowd, Crowd):
         raise ValidationError(f"record needs a flockkit.Crowd or a crowd Driver; got {type(source).__name__}")
     seconds = validate.number(seconds, "record: seconds", minimum=0, strict=True)
-    cluster = driver.cluster if driver is not None else crowd.clusters[0]
+    if cluster is None:
+        cluster = driver.cluster if driver is not None else crowd.clusters[0]
     c = crowd.cluster_index(cluster)
     ids = np.arange(crowd.n_agents) if agents is None else np.asarray(agents)
-    roots, rotations, translations, streams = [], [], [], []
+    roots, rotations, translations, streams, blending = [], [], [], [], []
     for frame in range(int(round(seconds * crowd.pool.fps))):
         if on_frame is not None:
             on_frame(crowd, frame)
@@ -136,8 +139,11 @@ def record(source, seconds: float, *, agents=None, on_frame=None) -> CrowdRecord
         rotations.append(np.asarray(pose.rotations))
         translations.append(np.asarray(pose.translations))
         roots.append(driver.roots[ids].copy() if driver is not None else np.tile(np.eye(4), (len(ids), 1, 1)))
-        record = crowd.instance_buffer()[ids, c]
-        streams.append(np.where(record["blend_time"] > 0, record["target"], record["stream"]))
+        entry = crowd.instance_buffer()[ids, c]
+        moving = entry["blend_time"] > 0
+        unique = np.where(moving, entry["target_kind"], entry["kind"]) == 2
+        streams.append(np.where(moving, entry["target"], entry["stream"]) + np.where(unique, 1000, 0))
+        blending.append(moving)
     return CrowdRecording(
         skeleton=crowd.skeletons[c],
         fps=crowd.pool.fps,
@@ -146,6 +152,7 @@ def record(source, seconds: float, *, agents=None, on_frame=None) -> CrowdRecord
         rotations=np.array(rotations),
         translations=np.array(translations),
         streams=np.array(streams),
+        blending=np.array(blending),
     )
 
 
