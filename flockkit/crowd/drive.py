@@ -92,10 +92,10 @@ class StateMachine:
                 raise ValidationError(f"StateMachine: states {a.name!r} and {b.name!r} overlap ({b.low} < {a.high})")
             if a.high < b.low:
                 raise ValidationError(
-                    f"StateMachine: no state covers speeds {a.high}..{b.low} between {a.name!r} and {b.name!r}"
+                    f"StateMachine: no state covers values {a.high}..{b.low} between {a.name!r} and {b.name!r}"
                 )
         if math.isfinite(self.states[-1].high):
-            raise ValidationError(f"StateMachine: no state covers speeds above {self.states[-1].high}")
+            raise ValidationError(f"StateMachine: no state covers values above {self.states[-1].high}")
         self.hysteresis = validate.number(hysteresis, "StateMachine.hysteresis", minimum=0)
         self.blend_time = validate.number(blend_time, "StateMachine.blend_time", minimum=0, strict=True)
         self._lows = np.array([s.low for s in self.states])

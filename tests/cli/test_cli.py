@@ -460,3 +460,90 @@ def test_bad_scenes_are_named_in_one_line_and_nothing_is_written(capsys, plants_
     code, _, err = run(capsys, "scene", str(folder / "bad.toml"), "-o", str(folder / "bad"), "--quiet")
     assert code == 1 and message in err and len(err.strip().splitlines()) == 1, err
     assert not (folder / "bad").exists()
+
+
+CROWD = """
+seconds = 3
+fps = 24
+seed = 1
+record = 12
+
+[trajectories]
+simulate = { agents = 40, seed = 1 }
+
+[character]
+clips = "FOX"
+scale = 0.01
+feet = ["b_LeftFoot02_018", "b_RightFoot02_022", "b_RightHand_08", "b_LeftHand_011"]
+
+[[streams]]
+name = "idle"
+clip = "Survey"
+
+[[streams]]
+name = "walk"
+clip = "Walk"
+
+[[streams]]
+name = "cheer"
+clip = "Run"
+default = "Stopped"
+
+[[states]]
+name = "idle"
+streams = ["idle"]
+high = 0.2
+
+[[states]]
+name = "walk"
+streams = ["walk"]
+low = 0.2
+match = true
+
+[[cues]]
+name = "goal"
+time = 1
+stream = "cheer"
+agents = "half"
+duration = 1
+time_to_dilate = 0.5
+"""
+
+
+def test_crowd_drives_foxes_along_a_flock_and_writes_usd_an_animation_and_a_summary(capsys, tmp_path, shared_data):
+    scene = tmp_path / "crowd.toml"
+    scene.write_text(CROWD.replace("FOX", str(shared_data / "fox-gltf" / "Fox.glb")))
+    code, out, err = run(capsys, "crowd", str(scene), "-o", str(tmp_path / "out"), "--quiet")
+    assert code == 0, err
+    assert "40 agents, 72 frames" in out
+    summary = json.loads((tmp_path / "out" / "crowd.json").read_text())
+    assert summary["recorded"] == 12 and summary["streams"] == ["idle", "walk", "cheer"]
+    assert summary["stream switches"] >= 20  # half went to the cheer and came back
+    from pxr import Usd
+
+    stage = Usd.Stage.Open(str(tmp_path / "out" / "crowd.usdc"))
+    assert len(stage.GetPseudoRoot().GetChild("Crowd").GetChildren()) == 12 and stage.GetFramesPerSecond() == 24
+    from PIL import Image
+
+    assert Image.open(tmp_path / "out" / "crowd.gif").n_frames == 72
+
+
+@pytest.mark.parametrize(
+    ("edit", "message"),
+    [
+        (lambda t: t.replace('streams = ["walk"]', 'streams = ["trot"]'), "[[states]] 1: no stream 'trot'"),
+        (lambda t: t.replace("time = 1\n", "time = 9\n"), "[[cues]] 0: time 9 is outside the run (0..3 s)"),
+        (lambda t: t.replace("high = 0.2", "high = 0.5"), "overlap"),
+        (lambda t: t.replace("low = 0.2", "low = 0.4"), "no state covers values 0.2..0.4"),
+        (lambda t: t.replace('clip = "Run"', 'clip = "Gallop"'), "no clip 'Gallop'"),
+        (lambda t: t.replace("simulate = { agents = 40, seed = 1 }", ""), "exactly one of simulate, motion, walk"),
+        (lambda t: "colour = 'red'\n" + t, "unknown key 'colour'"),
+        (lambda t: t.replace("FOX", "nothere.glb"), "nothere.glb"),
+    ],
+)
+def test_bad_crowd_scenes_are_named_in_one_line_and_nothing_is_written(capsys, tmp_path, shared_data, edit, message):
+    scene = tmp_path / "bad.toml"
+    scene.write_text(edit(CROWD).replace("FOX", str(shared_data / "fox-gltf" / "Fox.glb")))
+    code, _, err = run(capsys, "crowd", str(scene), "-o", str(tmp_path / "out"), "--quiet")
+    assert code == 1 and message in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "out").exists()

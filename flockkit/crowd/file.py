@@ -1,0 +1,208 @@
+"""Crowd scene files (TOML): what ``flockkit crowd`` reads.
+
+::
+
+    seconds = 20                 # how long to run
+    fps = 24                     # the animation system's frame rate
+    seed = 1
+    record = 64                  # optional: agents kept for the USD file and the picture
+
+    [trajectories]               # exactly one of simulate, motion, walk
+    simulate = { agents = 300, seed = 1 }          # a boids flock (2D)
+    # motion = "flock.npz"                         # a flockkit motion file (a solution, a walk)
+    # walk = { graph = "graph.npz", flocks = 10, seed = 2 }   # flocks walked from one graph
+
+    [character]                  # where the clips come from, and how they sit in the world
+    clips = "../shared/data/fox-gltf/Fox.glb"      # glTF or BVH, relative to this file
+    up = "y"
+    forward = "z"
+    scale = 0.01                 # world units per character unit
+    feet = ["b_LeftFoot02_018", "b_RightFoot02_022"]   # for states that match speeds
+
+    [[streams]]                  # name, clip; optional rate (1), history (60), default ("Running")
+    name = "walk"
+    clip = "Walk"
+
+    [machine]                    # optional: on ("speed" or "climb"), hysteresis, blend_time
+    hysteresis = 0.05
+
+    [[states]]                   # name, streams (names); optional low, high, match (speeds from feet)
+    name = "walk"
+    streams = ["walk"]
+
+    [[cues]]                     # name, time, stream; agents ("all", "half" or ids); duration,
+    name = "goal"                # blend_time, time_to_dilate optional
+    time = 10
+    stream = "walk"
+    agents = "half"
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import attrs
+import numpy as np
+
+from .. import _tomlfile
+from ..errors import FlockkitError, ValidationError
+from ..motion import Motion
+from ..registry import get
+from .drive import Cue, Driver, State, StateMachine, ground_speed
+from .pool import Stream, StreamPool
+from .runtime import Crowd
+from .skeleton import read_clips
+
+__all__ = ["CrowdScene", "read_crowd_scene"]
+
+_KEYS = {"seconds", "fps", "seed", "record", "trajectories", "character", "streams", "machine", "states", "cues"}
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class CrowdScene:
+    """What a crowd scene file describes: trajectories, streams, a state machine and cues, ready
+    to run (``driver()``) for `seconds`, keeping `record` agents for pictures and files."""
+
+    motion: Motion
+    streams: tuple
+    machine: StateMachine
+    cues: tuple
+    seconds: float
+    fps: float
+    seed: int
+    record: int
+    up: str
+    forward: str
+    scale: float
+
+    def driver(self) -> Driver:
+        """A fresh crowd on the streams, every agent on a trajectory, driven by the machine."""
+        pool = StreamPool(self.streams, fps=self.fps)
+        first = self.machine.states[0].streams[0]
+        crowd = Crowd(pool, n_agents=self.motion.n_agents, clusters={"body": first}, seed=self.seed)
+        return Driver(crowd, self.motion, self.machine, up=self.up, forward=self.forward, scale=self.scale,
+                      cues=self.cues)  # fmt: skip
+
+
+def _table(data, key: str, keys: set, required: set, where: str) -> dict:
+    entry = data.get(key, {}) if key else data
+    if not isinstance(entry, dict):
+        raise ValidationError(f"{where} must be a table")
+    unknown = sorted(set(entry) - keys)
+    if unknown:
+        raise ValidationError(f"{where}: unknown key {unknown[0]!r}; expected {', '.join(sorted(keys))}")
+    missing = sorted(required - set(entry))
+    if missing:
+        raise ValidationError(f"{where}: missing {missing[0]!r}")
+    return entry
+
+
+def _trajectories(path: Path, entry: dict, fps: float, seconds: float) -> Motion:
+    from ..convenience import simulate, walk
+    from ..graph import MotionGraph
+    from ..synthesis import synthesize_many
+
+    sources = [k for k in ("simulate", "motion", "walk") if k in entry]
+    if len(sources) != 1:
+        raise ValidationError("[trajectories] needs exactly one of simulate, motion, walk")
+    if "simulate" in entry:
+        spec = _table(entry, "simulate", {"agents", "seed", "dims"}, {"agents"}, "[trajectories] simulate")
+        steps = int(math.ceil(seconds * fps))
+        return simulate(n_agents=spec["agents"], steps=steps, dt=1.0 / fps, seed=spec.get("seed", 0),
+                        dims=spec.get("dims", 2))  # fmt: skip
+    if "motion" in entry:
+        return Motion.load(path.parent / entry["motion"])
+    spec = _table(entry, "walk", {"graph", "flocks", "seed"}, {"graph", "flocks"}, "[trajectories] walk")
+    graph = MotionGraph.load(path.parent / spec["graph"])
+    seed = spec.get("seed", 0)
+    return synthesize_many(graph, [walk(graph, duration=seconds, seed=seed + k) for k in range(spec["flocks"])])
+
+
+def read_crowd_scene(path) -> CrowdScene:
+    """The CrowdScene a TOML crowd scene file describes; errors name the file and the entry."""
+    path = Path(path)
+    data = _tomlfile.read(path, "crowd scene")
+    try:
+        _table(data, "", _KEYS, {"seconds", "trajectories", "character", "streams", "states"}, "the file")
+        seconds, fps = float(data["seconds"]), float(data.get("fps", 30.0))
+        if not (seconds > 0 and fps > 0):
+            raise ValidationError("seconds and fps must be positive")
+        sources = _table(data, "trajectories", {"simulate", "motion", "walk"}, set(), "[trajectories]")
+        motion = _trajectories(path, sources, fps, seconds)
+        character = _table(data, "character", {"clips", "up", "forward", "scale", "feet"}, {"clips"}, "[character]")
+        clips = read_clips(path.parent / character["clips"])
+        up, forward = character.get("up", "y"), character.get("forward", "z")
+        scale = float(character.get("scale", 1.0))
+        streams, names, rates = [], {}, []
+        for k, spec in enumerate(data["streams"]):
+            where = f"[[streams]] {k}"
+            spec = _table(spec, "", {"name", "clip", "rate", "history", "default"}, {"name", "clip"}, where)
+            if spec["clip"] not in clips:
+                raise ValidationError(f"{where}: no clip {spec['clip']!r}; the file has {', '.join(map(repr, clips))}")
+            if spec["name"] in names:
+                raise ValidationError(f"{where}: the name {spec['name']!r} is taken")
+            controller_rate = float(spec.get("rate", 1.0))
+            controller = get("controller", "clip", clip=clips[spec["clip"]], rate=controller_rate)
+            names[spec["name"]] = len(streams)
+            rates.append((spec["clip"], controller_rate))
+            streams.append(Stream(controller=controller, history=spec.get("history", 60),
+                                  default=spec.get("default", "Running"), name=spec["name"]))  # fmt: skip
+
+        def stream_ids(listed, where):
+            unknown = [s for s in listed if s not in names]
+            if unknown:
+                raise ValidationError(
+                    f"{where}: no stream {unknown[0]!r}; the streams are {', '.join(map(repr, names))}"
+                )
+            return [names[s] for s in listed]
+
+        states = []
+        bottom = -math.inf if data.get("machine", {}).get("on") == "climb" else 0.0
+        for k, spec in enumerate(data["states"]):
+            where = f"[[states]] {k}"
+            spec = _table(spec, "", {"name", "streams", "low", "high", "match"}, {"name", "streams"}, where)
+            ids = stream_ids(spec["streams"], where)
+            speeds = None
+            if spec.get("match", False):
+                if "feet" not in character:
+                    raise ValidationError(f"{where}: match needs [character] feet")
+                speeds = [ground_speed(clips[rates[i][0]], character["feet"], up=up, forward=forward, scale=scale)
+                          * rates[i][1] for i in ids]  # fmt: skip
+            low = spec.get("low", bottom)
+            states.append(
+                State(name=spec["name"], streams=ids, speeds=speeds, low=low, high=spec.get("high", math.inf))
+            )
+        machine = StateMachine(
+            states, **_table(data, "machine", {"on", "hysteresis", "blend_time"}, set(), "[machine]")
+        )
+        cues = []
+        n = motion.n_agents
+        for k, spec in enumerate(data.get("cues", [])):
+            where = f"[[cues]] {k}"
+            keys = {"name", "time", "stream", "agents", "duration", "blend_time", "time_to_dilate"}
+            spec = _table(spec, "", keys, {"name", "time", "stream"}, where)
+            if not 0 <= spec["time"] <= seconds:
+                raise ValidationError(f"{where}: time {spec['time']} is outside the run (0..{seconds:g} s)")
+            chosen = spec.get("agents", "all")
+            agents = (
+                {"all": np.arange(n), "half": np.arange(0, n, 2)}.get(chosen) if isinstance(chosen, str) else chosen
+            )
+            if agents is None:
+                raise ValidationError(f"{where}: agents must be 'all', 'half' or a list of agent ids; got {chosen!r}")
+            (stream,) = stream_ids([spec["stream"]], where)
+            cues.append(Cue(time=spec["time"], agents=agents, stream=stream, duration=spec.get("duration"),
+                            blend_time=spec.get("blend_time", 0.3), time_to_dilate=spec.get("time_to_dilate"),
+                            name=spec["name"]))  # fmt: skip
+        record = int(data.get("record", 64))
+        if record < 1:
+            raise ValidationError(f"record must be at least 1; got {record}")
+        return CrowdScene(motion=motion, streams=tuple(streams), machine=machine, cues=tuple(cues), seconds=seconds,
+                          fps=fps, seed=int(data.get("seed", 0)), record=min(record, n), up=up, forward=forward,
+                          scale=scale)  # fmt: skip
+    except FileNotFoundError as exc:
+        raise FileNotFoundError(f"{path}: {exc}") from None
+    except (TypeError, KeyError) as exc:
+        raise ValidationError(f"{path}: {exc}") from None
+    except FlockkitError as exc:
+        raise type(exc)(f"{path}: {exc}") from None
