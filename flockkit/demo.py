@@ -13,7 +13,11 @@
    spreads their offsets; at 3.5 s they walk again and the cheer stream stops;
 7. with the shared captures present, build a graph from the five sticklebacks (pixels of a
    1280 x 720 video, read with y up) and walk it for a minute with the school's center kept one
-   group radius inside the video frame.
+   group radius inside the video frame;
+8. with the shared data present, 2 000 Foxes driven by a 2 000-agent boids flock for 10 s: idle,
+   or walking at the stream whose playback speed matches theirs, and at 4 s half of them run for
+   3 s (a cue into a Stopped stream, dilated over 2 s); 64 of them written to USD (with usd-core)
+   and drawn from above.
 """
 
 from __future__ import annotations
@@ -28,7 +32,7 @@ import numpy as np
 from .constraints import Box, ComConstraint, PointConstraint, Problem
 from .constraints import fence as arena
 from .convenience import build_graph, simulate, walk
-from .errors import ValidationError
+from .errors import MissingDependencyError, ValidationError
 from .synthesis import synthesize
 
 STICKLEBACKS = Path("sticklebacks-5") / "ground_truth.csv"
@@ -116,8 +120,10 @@ def run_demo(out, *, data=None, progress=False, report=print) -> dict:
     folder = shared_data_folder(data)
     if folder is None:
         summary["sticklebacks"] = "skipped: ../shared/data/sticklebacks-5 not found (use --data)"
+        summary["foxes"] = "skipped: ../shared/data/fox-gltf not found (use --data)"
     else:
         summary["sticklebacks"] = _sticklebacks(tour, folder)
+        summary["foxes"] = _foxes(tour, folder)
     summary["seconds"] = tour.timings
     tour.path("summary.json").write_text(json.dumps(summary, indent=2, default=float))
     for path in tour.written:
@@ -242,6 +248,63 @@ def _crowd(tour: _Tour) -> dict:
             int(len(np.unique(offsets[0]))),
             int(len(np.unique(np.rint(offsets[-1])))),
         ],
+    }
+
+
+FOX = Path("fox-gltf") / "Fox.glb"
+FOX_FEET = ["b_LeftFoot02_018", "b_RightFoot02_022", "b_RightHand_08", "b_LeftHand_011"]
+
+
+def _foxes(tour: _Tour, folder: Path) -> dict:
+    """Paper 003 driven by paper 004's model: a few thousand Foxes follow a boids flock."""
+    from . import viz
+    from .convenience import simulate
+    from .crowd import Crowd, Cue, Driver, State, StateMachine, Stream, StreamPool, ground_speed, record
+    from .io import read_clips
+    from .registry import get
+
+    fps, seconds, n = 24.0, 10.0, 2000
+    clips = read_clips(folder / FOX)
+    scale = 0.01  # the Fox is modelled in centimetres; the flock moves in metres
+    natural = ground_speed(clips["Walk"], FOX_FEET, scale=scale)
+    rates = (0.8, 1.0, 1.25)
+    streams = [Stream(controller=get("controller", "clip", clip=clips["Survey"]), history=60, name="idle")]
+    streams += [Stream(controller=get("controller", "clip", clip=clips["Walk"], rate=r), history=40, name=f"walk x{r}")
+                for r in rates]  # fmt: skip
+    streams.append(Stream(controller=get("controller", "clip", clip=clips["Run"]), history=48, default="Stopped",
+                          name="run"))  # fmt: skip
+    walking = State(name="walk", streams=[1, 2, 3], speeds=[natural * r for r in rates], low=0.2)
+    machine = StateMachine([State(name="idle", streams=0, high=0.2), walking])
+    runners = np.arange(0, n, 2)
+    cue = Cue(time=4.0, agents=runners, stream=4, duration=3.0, time_to_dilate=2.0, name="run")
+    with tour.step("2 000 Foxes driven by a boids flock for 10 s"):
+        flock = simulate(n_agents=n, steps=int(seconds * fps), dt=1 / fps, seed=3)
+        crowd = Crowd(StreamPool(streams, fps=fps), n_agents=n, clusters={"body": 1}, seed=4)
+        driver = Driver(crowd, flock, machine, scale=scale, cues=[cue])
+        synchrony = {}
+
+        def watch(crowd, frame):
+            if frame in (int(4.0 * fps) + 1, int(6.0 * fps) + 1):
+                synchrony[frame / fps] = crowd.synchrony("body", runners)
+
+        shown = record(driver, seconds, agents=np.arange(64), on_frame=watch)
+    usd = "skipped: usd-core is not installed (pip install 'flockkit[usd]')"
+    try:
+        shown.export_usd(tour.path("foxes.usdc"))
+        usd = "foxes.usdc"
+    except MissingDependencyError:
+        tour.written.pop()
+    viz.animate_recording(shown, tour.path("foxes.gif"), progress=tour.progress)
+    root = driver.roots[:, :2, 3]
+    return {
+        "agents": n,
+        "frames": shown.n_frames,
+        "streams": [s.name for s in streams],
+        "stream switches": driver.switches,
+        "runners in step with another (just after the cue, 2 s later)": [round(v, 3) for v in synchrony.values()],
+        "roots on their trajectories": bool(np.allclose(root, flock.positions[-1, :, :2], atol=1e-9)),
+        "usd": usd,
+        "memory (bytes)": crowd.pool.memory(),
     }
 
 

@@ -286,6 +286,8 @@ def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data
         "scene.gif",
         "crowd.gif",
         "crowd-offsets.png",
+        "foxes.gif",
+        "foxes.usdc",
         "summary.json",
     }
     summary = json.loads((tmp_path / "demo" / "summary.json").read_text())
@@ -300,6 +302,10 @@ def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data
     assert crowd["cheer stream running (at the cheer, at the end)"] == [True, False]
     start, spread = crowd["distinct offsets among the cheering half (at the start, at 3.5 s)"]
     assert start == 1 and spread >= 12  # all at the head, then spread out by time dilation
+    foxes = summary["foxes"]
+    assert foxes["agents"] == 2000 and foxes["roots on their trajectories"] and foxes["usd"] == "foxes.usdc"
+    just_after, later = foxes["runners in step with another (just after the cue, 2 s later)"]
+    assert just_after == 1.0 and later < 0.05  # the cue's dilation spreads the runners within its 2 s
     assert max(summary["come-from-behind"]["residuals"]) <= 0.3 and summary["sticklebacks"]["transitions"] >= 3
     assert str((tmp_path / "demo").resolve()) in out
 
