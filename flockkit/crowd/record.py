@@ -110,31 +110,43 @@ def _local_matrices(skeleton: Skeleton) -> np.ndarray:
     return m
 
 
-def record(source, seconds: float, *, agents=None, cluster=None, on_frame=None) -> CrowdRecording:
-    """Run `source` (a ``flockkit.Crowd``, or a ``flockkit.crowd.Driver`` that moves one) for
-    `seconds` and keep, each frame after its update, the roots, local poses and streams of
-    `agents` (default all) in `cluster` (default the driver's, or the crowd's first).
-    ``on_frame(crowd, frame)`` is called before each update (to start transitions)."""
+def _run(source, seconds, on_frame, what: str):
+    """(crowd, driver or None, a generator that steps `source` frame by frame for `seconds`,
+    calling ``on_frame(crowd, frame)`` before each update)."""
     from .drive import Driver
     from .runtime import Crowd
 
     driver = source if isinstance(source, Driver) else None
     crowd = driver.crowd if driver is not None else source
     if not isinstance(crowd, Crowd):
-        raise ValidationError(f"record needs a flockkit.Crowd or a crowd Driver; got {type(source).__name__}")
-    seconds = validate.number(seconds, "record: seconds", minimum=0, strict=True)
+        raise ValidationError(f"{what} needs a flockkit.Crowd or a crowd Driver; got {type(source).__name__}")
+    seconds = validate.number(seconds, f"{what}: seconds", minimum=0, strict=True)
+
+    def frames():
+        for frame in range(int(round(seconds * crowd.pool.fps))):
+            if on_frame is not None:
+                on_frame(crowd, frame)
+            if driver is not None:
+                driver.step()
+            else:
+                crowd.update()
+            yield frame
+
+    return crowd, driver, frames()
+
+
+def record(source, seconds: float, *, agents=None, cluster=None, on_frame=None) -> CrowdRecording:
+    """Run `source` (a ``flockkit.Crowd``, or a ``flockkit.crowd.Driver`` that moves one) for
+    `seconds` and keep, each frame after its update, the roots, local poses and streams of
+    `agents` (default all) in `cluster` (default the driver's, or the crowd's first).
+    ``on_frame(crowd, frame)`` is called before each update (to start transitions)."""
+    crowd, driver, frames = _run(source, seconds, on_frame, "record")
     if cluster is None:
         cluster = driver.cluster if driver is not None else crowd.clusters[0]
     c = crowd.cluster_index(cluster)
     ids = np.arange(crowd.n_agents) if agents is None else np.asarray(agents)
     roots, rotations, translations, streams, blending = [], [], [], [], []
-    for frame in range(int(round(seconds * crowd.pool.fps))):
-        if on_frame is not None:
-            on_frame(crowd, frame)
-        if driver is not None:
-            driver.step()
-        else:
-            crowd.update()
+    for _ in frames:
         pose = crowd.poses(ids, cluster)
         rotations.append(np.asarray(pose.rotations))
         translations.append(np.asarray(pose.translations))
