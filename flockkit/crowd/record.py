@@ -191,29 +191,16 @@ def write_engine_buffers(source, path, seconds: float, *, on_frame=None) -> None
       world matrix is root @ its model-space matrix).
     """
     from .. import _npzfile
-    from .drive import Driver
-    from .runtime import INSTANCE, Crowd
+    from .runtime import INSTANCE
 
-    driver = source if isinstance(source, Driver) else None
-    crowd = driver.crowd if driver is not None else source
-    if not isinstance(crowd, Crowd):
-        raise ValidationError(
-            f"write_engine_buffers needs a flockkit.Crowd or a crowd Driver; got {type(source).__name__}"
-        )
+    crowd, driver, frames = _run(source, seconds, on_frame, "write_engine_buffers")
     if crowd.pool.xp is not np:
         raise ValidationError("write_engine_buffers reads the store with numpy: use a pool without xp")
-    seconds = validate.number(seconds, "write_engine_buffers: seconds", minimum=0, strict=True)
     pool = crowd.pool
     store = pool.store.copy()
     heads, written, entries, instances, times, roots = [], [], [], [], [], []
     size = 0
-    for frame in range(int(round(seconds * pool.fps))):
-        if on_frame is not None:
-            on_frame(crowd, frame)
-        if driver is not None:
-            driver.step()
-        else:
-            crowd.update()
+    for _ in frames:
         starts = np.full(len(pool.streams), -1, dtype=np.int64)
         for s in np.flatnonzero(pool.running):
             row, width = int(pool.lookup[s, pool.head[s]]), int(pool.bones[s]) * 12
