@@ -553,3 +553,34 @@ def test_bad_crowd_scenes_are_named_in_one_line_and_nothing_is_written(capsys, t
     code, _, err = run(capsys, "crowd", str(scene), "-o", str(tmp_path / "out"), "--quiet")
     assert code == 1 and message in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "out").exists()
+
+
+def test_crowd_without_usd_core_names_the_extra_before_the_run(capsys, tmp_path, shared_data, monkeypatch):
+    import flockkit.io
+    from flockkit.errors import MissingDependencyError
+
+    def missing():
+        raise MissingDependencyError("USD export needs usd-core: pip install 'flockkit[usd]'")
+
+    monkeypatch.setattr(flockkit.io, "_usd_modules", missing)
+    scene = tmp_path / "crowd.toml"
+    scene.write_text(CROWD.replace("FOX", str(shared_data / "fox-gltf" / "Fox.glb")))
+    code, _, err = run(capsys, "crowd", str(scene), "-o", str(tmp_path / "out"), "--quiet")
+    assert code == 1 and "flockkit[usd]" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+    code, _, err = run(capsys, "crowd", str(scene), "-o", str(tmp_path / "out"), "--quiet", "--no-usd", "--no-pictures")
+    assert code == 0 and sorted(p.name for p in (tmp_path / "out").iterdir()) == ["crowd.json"]
+
+
+def test_crowd_exports_to_unwritable_places_are_refused_naming_them(tmp_path):
+    from flockkit.crowd import Crowd, Stream, StreamPool, record, write_engine_buffers
+    from flockkit.testing import inputs
+
+    pool = StreamPool([Stream(controller=flockkit.get("controller", "clip", clip=inputs.walker()), history=5)])
+    crowd = Crowd(pool, n_agents=2, clusters={"body": 0})
+    recording = record(crowd, 0.2)
+    with pytest.raises(FileNotFoundError, match="nothere"):
+        recording.export_usd(tmp_path / "nothere" / "crowd.usda")
+    with pytest.raises(FileNotFoundError, match="nothere"):
+        write_engine_buffers(crowd, tmp_path / "nothere" / "buffers.npz", 0.2)
+    assert list(tmp_path.iterdir()) == []
