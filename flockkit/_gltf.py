@@ -193,7 +193,7 @@ class Document:
     def pose(self, animation: dict, times: np.ndarray):
         """Local transforms (T, nodes, 4, 4) and morph weights {node: (T, W)} at `times`."""
         translation, rotation, scale, weights, matrices, fixed = self.trs(animation, times)
-        trs = _compose_trs(translation, rotation, scale)
+        trs = rigid.trs(translation, rotation / np.linalg.norm(rotation, axis=-1, keepdims=True), scale)
         matrices[:, ~fixed] = trs[:, ~fixed]
         return matrices, weights
 
@@ -300,16 +300,6 @@ def _sample(inputs, outputs, times, interpolation, path):
     if path == "rotation":
         result = result / np.linalg.norm(result, axis=1, keepdims=True)
     return result
-
-
-def _compose_trs(translation, rotation, scale):
-    """4x4 matrices T R S from (..., 3), (..., 4) quaternions (x, y, z, w) and (..., 3)."""
-    r = rigid.quaternion_matrix(rotation / np.linalg.norm(rotation, axis=-1, keepdims=True))
-    m = np.zeros(translation.shape[:-1] + (4, 4))
-    m[..., :3, :3] = r * scale[..., None, :]
-    m[..., :3, 3] = translation
-    m[..., 3, 3] = 1.0
-    return m
 
 
 def mesh_animation(path, clip, fps):

@@ -273,8 +273,10 @@ def _cmd_crowd(args) -> int:
     if folder.exists() and not folder.is_dir():
         raise ValidationError(f"-o must be a folder; {folder} is a file")
     scene = read_crowd_scene(args.scene)
-    if not args.no_usd:
-        _usd_modules_or_fail()
+    if not args.no_usd:  # fail before the run, not after it, when usd-core is missing
+        from .io import _usd_modules
+
+        _usd_modules()
     driver = scene.driver()
     recording = record(driver, scene.seconds, agents=range(scene.record))
     folder.mkdir(parents=True, exist_ok=True)
@@ -300,13 +302,6 @@ def _cmd_crowd(args) -> int:
     print(f"wrote {', '.join(str(p) for p in written)}: {summary['agents']} agents, {summary['frames']} frames, "
           f"{summary['stream switches']} stream switches")  # fmt: skip
     return 0
-
-
-def _usd_modules_or_fail() -> None:
-    """Fail before the run, not after it, when USD is asked for and usd-core is missing."""
-    from .io import _usd_modules
-
-    _usd_modules()
 
 
 def _cmd_segment(args) -> int:

@@ -26,6 +26,7 @@ __all__ = [
     "rotation",
     "quaternion_product",
     "quaternion_matrix",
+    "trs",
     "slerp",
     "nlerp",
 ]
@@ -163,6 +164,18 @@ def quaternion_matrix(q) -> np.ndarray:
         ],
         -2,
     )
+
+
+def trs(translations, rotations, scales, *, dtype=np.float64) -> np.ndarray:
+    """4 x 4 matrices T R S (..., 4, 4) from translations (..., 3), unit quaternions (..., 4) and
+    scales (..., 3), broadcast against each other: a node's or a joint's local transform."""
+    rotations = np.asarray(rotations).astype(dtype, copy=False)
+    linear = quaternion_matrix(rotations) * np.asarray(scales, dtype=dtype)[..., None, :]
+    m = np.zeros(linear.shape[:-2] + (4, 4), dtype=dtype)
+    m[..., :3, :3] = linear
+    m[..., :3, 3] = translations
+    m[..., 3, 3] = 1.0
+    return m
 
 
 def slerp(a, b, u) -> np.ndarray:

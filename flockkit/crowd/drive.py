@@ -113,15 +113,16 @@ class StateMachine:
 
     def check(self, crowd: Crowd, cluster) -> None:
         """Every state's streams exist in `crowd`'s pool with `cluster`'s skeleton."""
-        c = crowd.cluster_index(cluster)
         for state in self.states:
-            for s in state.streams:
-                if not 0 <= s < len(crowd.pool.streams):
-                    raise ValidationError(
-                        f"state {state.name!r} names stream {s}; the pool has streams 0..{len(crowd.pool.streams) - 1}"
-                    )
-                if not crowd.pool.streams[s].skeleton.matches(crowd.skeletons[c]):
-                    raise ValidationError(f"state {state.name!r}: stream {s}'s skeleton is not cluster {cluster!r}'s")
+            for stream in state.streams:
+                _check_stream(crowd, cluster, stream, f"state {state.name!r} names stream {stream}")
+
+
+def _check_stream(crowd: Crowd, cluster, stream, owner: str) -> None:
+    """`stream` is in `crowd`'s pool and has `cluster`'s skeleton; errors name `owner`."""
+    (k,) = crowd.pool.check_streams(stream, field=owner)
+    if not crowd.pool.streams[k].skeleton.matches(crowd.skeletons[crowd.cluster_index(cluster)]):
+        raise ValidationError(f"{owner}: stream {k}'s skeleton is not cluster {cluster!r}'s")
 
 
 @attrs.frozen(kw_only=True)
@@ -254,14 +255,17 @@ class Driver:
                 raise ValidationError(
                     f"cue {cue.name!r} at {cue.time} s is past the trajectories' end ({motion.duration:.6g} s)"
                 )
-            crowd.pool.check_streams(cue.stream, field=f"cue {cue.name!r}")
-            if not crowd.pool.streams[cue.stream].skeleton.matches(crowd.skeletons[crowd.cluster_index(self.cluster)]):
-                raise ValidationError(
-                    f"cue {cue.name!r}: stream {cue.stream}'s skeleton is not cluster {self.cluster!r}'s"
-                )
+            _check_stream(crowd, self.cluster, cue.stream, f"cue {cue.name!r}")
             if cue.agents.dtype.kind not in "iu" or cue.agents.min() < 0 or cue.agents.max() >= n:
                 raise ValidationError(f"cue {cue.name!r}: agents must be ids in 0..{n - 1}")
         self.pinned = np.full(n, -1)  # the cue each agent follows, -1: the state machine
+        # per state with speeds, each stream's ground speed (inf: not the state's), for lookups by stream id
+        self._ground = []
+        for state in machine.states:
+            ground = np.full(len(crowd.pool.streams), np.inf)
+            if state.speeds is not None:
+                ground[list(state.streams)] = state.speeds
+            self._ground.append(ground)
         self._place(first=True)
 
     def _sample(self, array: np.ndarray, t: float) -> np.ndarray:
@@ -302,12 +306,10 @@ class Driver:
                 chosen = np.asarray(s.streams)[nearest]
                 # keep the current stream of the state while its value is nearly as good
                 current = self.stream[mine]
-                kept = np.isin(current, s.streams) & (state[mine] == self.state[mine])
-                if kept.any():
-                    values = dict(zip(s.streams, s.speeds))
-                    now = np.array([values.get(int(c), np.inf) for c in current])
-                    best = np.asarray(s.speeds)[nearest]
-                    kept &= np.abs(value[mine] - now) <= np.abs(value[mine] - best) + self.machine.hysteresis
+                now = np.where(current >= 0, self._ground[k][current], np.inf)
+                best = np.asarray(s.speeds)[nearest]
+                kept = np.isfinite(now) & (state[mine] == self.state[mine])
+                kept &= np.abs(value[mine] - now) <= np.abs(value[mine] - best) + self.machine.hysteresis
                 stream[mine] = np.where(kept, current, chosen)
         if first:
             for s in np.unique(stream):

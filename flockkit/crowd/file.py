@@ -19,8 +19,8 @@
     scale = 0.01                 # world units per character unit
     feet = ["b_LeftFoot02_018", "b_RightFoot02_022"]   # for states that match speeds
 
-    [[streams]]                  # name, clip; optional rate (1), history (60), default ("Running")
-    name = "walk"
+    [[streams]]                  # name, clip; optional rate (1), history (60), default ("Running"),
+    name = "walk"                # controller (a name taking clip= and rate=; default "clip")
     clip = "Walk"
 
     [machine]                    # optional: on ("speed" or "climb"), hysteresis, blend_time
@@ -48,7 +48,7 @@ import numpy as np
 from .. import _tomlfile
 from ..errors import FlockkitError, ValidationError
 from ..motion import Motion
-from ..registry import get
+from ..registry import resolve
 from .drive import Cue, Driver, State, StateMachine, ground_speed
 from .pool import Stream, StreamPool
 from .runtime import Crowd
@@ -56,6 +56,9 @@ from .skeleton import read_clips
 
 __all__ = ["CrowdScene", "read_crowd_scene"]
 
+# The controller that plays one clip: a convenience default, as flockkit.build_graph's builder is;
+# a [[streams]] entry names another (any controller taking clip= and rate=).
+CLIP_CONTROLLER = "clip"
 _KEYS = {"seconds", "fps", "seed", "record", "trajectories", "character", "streams", "machine", "states", "cues"}
 
 
@@ -137,13 +140,15 @@ def read_crowd_scene(path) -> CrowdScene:
         streams, names, rates = [], {}, []
         for k, spec in enumerate(data["streams"]):
             where = f"[[streams]] {k}"
-            spec = _table(spec, "", {"name", "clip", "rate", "history", "default"}, {"name", "clip"}, where)
+            keys = {"name", "clip", "rate", "history", "default", "controller"}
+            spec = _table(spec, "", keys, {"name", "clip"}, where)
             if spec["clip"] not in clips:
                 raise ValidationError(f"{where}: no clip {spec['clip']!r}; the file has {', '.join(map(repr, clips))}")
             if spec["name"] in names:
                 raise ValidationError(f"{where}: the name {spec['name']!r} is taken")
             controller_rate = float(spec.get("rate", 1.0))
-            controller = get("controller", "clip", clip=clips[spec["clip"]], rate=controller_rate)
+            controller = resolve("controller", spec.get("controller", CLIP_CONTROLLER), clip=clips[spec["clip"]],
+                                 rate=controller_rate)  # fmt: skip
             names[spec["name"]] = len(streams)
             rates.append((spec["clip"], controller_rate))
             streams.append(Stream(controller=controller, history=spec.get("history", 60),

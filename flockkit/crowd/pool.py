@@ -221,12 +221,13 @@ class StreamPool:
         index = (rows[:, None] + np.arange(bones * ENTRY_FLOATS)).reshape(-1)
         return self.xp.reshape(self.xp.take(self.store, self.xp.asarray(index)), (-1, bones, ENTRY_FLOATS))
 
-    def windows(self, bones: int) -> np.ndarray:
+    def windows(self, bones: int, *, writeable: bool = False) -> np.ndarray:
         """The store seen as overlapping rows of `bones` entries, one starting at every float:
-        rows[k] is the pose block starting at store offset k (a view; fancy indexing copies)."""
+        rows[k] is the pose block starting at store offset k (a view; fancy indexing copies, and
+        assigns into the store when `writeable`)."""
         width = bones * ENTRY_FLOATS
         count = max(len(self.store) - width + 1, 0)
-        return np.lib.stride_tricks.as_strided(self.store, shape=(count, width), strides=(4, 4), writeable=False)
+        return np.lib.stride_tricks.as_strided(self.store, shape=(count, width), strides=(4, 4), writeable=writeable)
 
     # -- running --------------------------------------------------------------------------------
 
@@ -276,10 +277,7 @@ class StreamPool:
                 continue
             entries = self._ahead[bones][self._place[streams], self.clock[streams] - self._first[streams]]
             if self.xp is np:
-                width = bones * ENTRY_FLOATS
-                count = len(self.store) - width + 1
-                windows = np.lib.stride_tricks.as_strided(self.store, shape=(count, width), strides=(4, 4))
-                windows[rows[mine]] = entries.reshape(len(streams), width)
+                self.windows(bones, writeable=True)[rows[mine]] = entries.reshape(len(streams), -1)
             else:
                 for row, entry in zip(rows[mine].tolist(), entries):
                     self.store[row : row + entry.size] = self.xp.asarray(entry.ravel())

@@ -8,7 +8,7 @@ from __future__ import annotations
 import attrs
 import numpy as np
 
-from .. import validate
+from .. import rigid, validate
 from ..errors import ValidationError
 from .skeleton import Skeleton
 
@@ -62,7 +62,7 @@ class CrowdRecording:
 
         joints = _joint_paths(self.skeleton)
         rest = self.skeleton.world(self.skeleton.rest)  # model-space rest: the bind transforms
-        local_rest = _local_matrices(self.skeleton)
+        local_rest = rigid.trs(self.skeleton.rest.translations, self.skeleton.rest.rotations, self.skeleton.scales)
         scales = Vt.Vec3hArray.FromNumpy(self.skeleton.scales.astype(np.float16))
         with _usd_stage(path, "/Crowd", dt=1.0 / self.fps, n_frames=self.n_frames, fps=self.fps,
                         meters_per_unit=meters_per_unit) as (stage, times):  # fmt: skip
@@ -98,16 +98,6 @@ def _joint_paths(skeleton: Skeleton) -> list[str]:
     for j, parent in enumerate(skeleton.parents):
         paths.append(names[j] if parent < 0 else f"{paths[parent]}/{names[j]}")
     return paths
-
-
-def _local_matrices(skeleton: Skeleton) -> np.ndarray:
-    """The rest pose's local T R S matrices (J, 4, 4)."""
-    from .. import rigid
-
-    m = np.tile(np.eye(4), (skeleton.n_joints, 1, 1))
-    m[:, :3, :3] = rigid.quaternion_matrix(skeleton.rest.rotations) * skeleton.scales[:, None, :]
-    m[:, :3, 3] = skeleton.rest.translations
-    return m
 
 
 def _run(source, seconds, on_frame, what: str):

@@ -315,26 +315,29 @@ class Crowd:
 
     # -- reading --------------------------------------------------------------------------------
 
+    def _destination(self, cluster, ids=slice(None)):
+        """(kind, stream, offset) each part of `ids` in `cluster` heads for: what it blends to while
+        blending, else what it reads."""
+        record = self._buffer[ids, self.cluster_index(cluster)]
+        blending = record["blend_time"] > 0
+        kind = np.where(blending, record["target_kind"], record["kind"])
+        stream = np.where(blending, record["target"], record["stream"])
+        return kind, stream, np.where(blending, record["target_offset"], record["offset"]).astype(np.float64)
+
     def offsets(self, cluster) -> np.ndarray:
         """Each agent's offset in `cluster` (N,): of the stream it blends to while blending, else
         of the stream it reads; NaN where it has no such part or reads a unique slot."""
-        c = self.cluster_index(cluster)
-        record = self._buffer[:, c]
-        blending = record["blend_time"] > 0
-        kind = np.where(blending, record["target_kind"], record["kind"])
-        values = np.where(blending, record["target_offset"], record["offset"]).astype(np.float64)
-        return np.where(kind == STREAMED, values, np.nan)
+        kind, _, offset = self._destination(cluster)
+        return np.where(kind == STREAMED, offset, np.nan)
 
     def synchrony(self, cluster, agents=None) -> float:
         """The share of pairs of `agents`' parts (default all) in `cluster` that read one stream
         at one offset (to the nearest frame), among the pairs that read one stream: 1 when all
         move alike (a Stopped stream just started), about 1 / history once offsets are spread."""
-        offsets = self.offsets(cluster)
         ids = np.arange(self.n_agents) if agents is None else _agent_ids(agents, self.n_agents)
-        record = self._buffer[ids, self.cluster_index(cluster)]
-        blending = record["blend_time"] > 0
-        stream = np.where(blending, record["target"], record["stream"])[~np.isnan(offsets[ids])]
-        frame = np.rint(offsets[ids][~np.isnan(offsets[ids])]).astype(np.int64)
+        kind, stream, offset = self._destination(cluster, ids)
+        streamed = kind == STREAMED
+        stream, frame = stream[streamed], np.rint(offset[streamed]).astype(np.int64)
 
         def pairs(*keys):
             counts = np.unique(np.stack(keys, axis=1), axis=0, return_counts=True)[1] if len(keys[0]) else np.zeros(0)

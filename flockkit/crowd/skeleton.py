@@ -222,13 +222,7 @@ class Skeleton:
         """World (model-space) joint matrices (..., J, 4, 4) of `pose` (..., J): each joint's
         ``parent world @ T R S``, one vectorized step per depth of the tree."""
         self.check_pose(pose, field="pose")
-        linear = (
-            rigid.quaternion_matrix(pose.rotations.astype(dtype, copy=False)) * self.scales.astype(dtype)[:, None, :]
-        )
-        world = np.zeros(pose.shape + (self.n_joints, 4, 4), dtype=dtype)
-        world[..., :3, :3] = linear
-        world[..., :3, 3] = pose.translations
-        world[..., 3, 3] = 1.0
+        world = rigid.trs(pose.translations, pose.rotations, self.scales, dtype=dtype)
         for level in range(1, int(self.depth.max()) + 1):
             joints = np.flatnonzero(self.depth == level)
             world[..., joints, :, :] = world[..., self.parents[joints], :, :] @ world[..., joints, :, :]
