@@ -252,19 +252,25 @@ def _crowd(tour: _Tour) -> dict:
 
 
 FOX = Path("fox-gltf") / "Fox.glb"
-FOX_FEET = ["b_LeftFoot02_018", "b_RightFoot02_022", "b_RightHand_08", "b_LeftHand_011"]
+# the Fox's legs as (upper, middle, foot) joints, for planting its feet (flockkit.crowd.plant_feet)
+FOX_LEGS = [("b_LeftLeg01_015", "b_LeftLeg02_016", "b_LeftFoot02_018"),
+            ("b_RightLeg01_019", "b_RightLeg02_020", "b_RightFoot02_022"),
+            ("b_RightUpperArm_06", "b_RightForeArm_07", "b_RightHand_08"),
+            ("b_LeftUpperArm_09", "b_LeftForeArm_010", "b_LeftHand_011")]  # fmt: skip
+FOX_FEET = [foot for _, _, foot in FOX_LEGS]
 
 
 def _foxes(tour: _Tour, folder: Path) -> dict:
     """Paper 003 driven by paper 004's model: a few thousand Foxes follow a boids flock."""
     from . import viz
     from .convenience import simulate
-    from .crowd import Crowd, Cue, Driver, State, StateMachine, Stream, StreamPool, ground_speed, record
+    from .crowd import Crowd, Cue, Driver, State, StateMachine, Stream, StreamPool, ground_speed, plant_feet, record
     from .io import read_clips
     from .registry import get
 
     fps, seconds, n = 24.0, 10.0, 2000
     clips = read_clips(folder / FOX)
+    clips["Walk"] = plant_feet(clips["Walk"], FOX_LEGS)  # its paws otherwise slide at any rate
     scale = 0.01  # the Fox is modelled in centimetres; the flock moves in metres
     natural = ground_speed(clips["Walk"], FOX_FEET, scale=scale)
     rates = (0.8, 1.0, 1.25)

@@ -1,6 +1,7 @@
 """Massive crowds (paper 003): skeletons and clips, shared streams of poses, the crowd runtime."""
 
-from .drive import Cue, Driver, State, StateMachine, foot_sliding, ground_speed
+from .drive import Cue, Driver, State, StateMachine
+from .feet import foot_sliding, ground_speed, plant_feet
 from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
 from .record import CrowdRecording, record, write_engine_buffers
 from .runtime import INSTANCE, Crowd, CrowdEvent
@@ -30,4 +31,5 @@ __all__ = [
     "Driver",
     "ground_speed",
     "foot_sliding",
+    "plant_feet",
 ]

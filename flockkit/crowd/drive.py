@@ -20,9 +20,8 @@ from .. import rigid, validate
 from ..errors import ValidationError
 from ..motion import Motion
 from .runtime import Crowd
-from .skeleton import Pose, SkeletalClip
 
-__all__ = ["State", "StateMachine", "Cue", "Driver", "ground_speed", "foot_sliding", "AXES"]
+__all__ = ["State", "StateMachine", "Cue", "Driver", "character_frame", "AXES"]
 
 AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -163,33 +162,6 @@ def character_frame(up: str, forward: str) -> np.ndarray:
     return np.stack([f, np.cross(u, f), u])
 
 
-def ground_speed(clip: SkeletalClip, feet, *, up: str = "y", forward: str = "z", scale: float = 1.0) -> float:
-    """How fast `clip` (played in place at rate 1) pushes its lowest foot backwards, in world units
-    per second (times `scale`): the speed at which an agent playing it does not slide. `feet` are
-    joint names; the median over the frames of the lowest foot's backward speed, each foot's
-    height counted from its own lowest (a paw's joint sits higher above the ground than a toe's)."""
-    positions = clip.skeleton.positions(Pose._adopt(clip.rotations, clip.translations))
-    index = [clip.skeleton.index(f) for f in feet]
-    u, f = _axis(up, "up"), _axis(forward, "forward")
-    heights = positions[:, index, u]
-    lowest = np.asarray(index)[np.argmin(heights - heights.min(axis=0), axis=1)]
-    along = np.gradient(positions[:, :, f], 1.0 / clip.fps, axis=0)
-    return float(-np.median(along[np.arange(len(lowest)), lowest]) * scale)
-
-
-def foot_sliding(joints: np.ndarray, feet, *, dt: float) -> float:
-    """The mean horizontal speed (world units per second, z up) of the lowest of `feet` (joint
-    indices; each foot's height counted from its own lowest) over frames and agents, from world
-    joint positions (F, N, J, 3): zero for feet that stay put while they carry the body."""
-    feet = np.asarray(feet)
-    heights = joints[:, :, feet, 2]
-    lowest = np.argmin(heights - heights.min(axis=0, keepdims=True), axis=2)  # (F, N)
-    chosen = np.take_along_axis(joints[:, :, feet, :2], lowest[..., None, None], axis=2)[:, :, 0]
-    speed = np.linalg.norm(np.diff(chosen, axis=0), axis=-1) / dt
-    same = lowest[1:] == lowest[:-1]  # a change of foot is not a slide
-    return float(speed[same].mean()) if same.any() else 0.0
-
-
 class Driver:
     """Step a Crowd along a Motion: root transforms on the trajectories, facing the velocity, and
     streams from a StateMachine on speed.
@@ -320,9 +292,20 @@ class Driver:
             state = np.where(free, state, self.state)
             for s in np.unique(stream):
                 group = np.flatnonzero((stream == s) & (stream != self.stream))
-                if len(group):
-                    self.crowd.transition_to_streamed(group, self.cluster, int(s), blend_time=self.machine.blend_time)
-                    self.switches += len(group)
+                if not len(group):
+                    continue
+                # a switch of rate within a state keeps each agent's step; a change of state
+                # enters at random offsets (agents that look alike would all match one frame)
+                same = group[(state[group] == self.state[group]) & self.crowd.pool.running[s]]
+                if len(same):
+                    offsets = self.crowd.matching_offsets(same, self.cluster, int(s))
+                    self.crowd.transition_to_streamed(
+                        same, self.cluster, int(s), self.machine.blend_time, offsets=offsets
+                    )
+                other = np.setdiff1d(group, same)
+                if len(other):
+                    self.crowd.transition_to_streamed(other, self.cluster, int(s), self.machine.blend_time)
+                self.switches += len(group)
         self.state, self.stream = state, stream
 
     def step(self) -> list:

@@ -17,7 +17,10 @@
     up = "y"
     forward = "z"
     scale = 0.01                 # world units per character unit
-    feet = ["b_LeftFoot02_018", "b_RightFoot02_022"]   # for states that match speeds
+    feet = ["b_LeftFoot02_018", "b_RightFoot02_022"]   # for states that match speeds (default: the legs' feet)
+    legs = [["b_LeftLeg01_015", "b_LeftLeg02_016", "b_LeftFoot02_018"],   # optional: (upper, middle,
+            ["b_RightLeg01_019", "b_RightLeg02_020", "b_RightFoot02_022"]]  # foot) joints per leg
+    plant = ["Walk"]             # optional: clips whose feet to plant (flockkit.crowd.plant_feet; needs legs)
 
     [[streams]]                  # name, clip; optional rate (1), history (60), default ("Running"),
     name = "walk"                # controller (a name taking clip= and rate=; default "clip")
@@ -49,7 +52,8 @@ from .. import _tomlfile
 from ..errors import FlockkitError, ValidationError
 from ..motion import Motion
 from ..registry import resolve
-from .drive import Cue, Driver, State, StateMachine, ground_speed
+from .drive import Cue, Driver, State, StateMachine
+from .feet import ground_speed, plant_feet
 from .pool import Stream, StreamPool
 from .runtime import Crowd
 from .skeleton import read_clips
@@ -133,9 +137,20 @@ def read_crowd_scene(path) -> CrowdScene:
             raise ValidationError("seconds and fps must be positive")
         sources = _table(data, "trajectories", {"simulate", "motion", "walk"}, set(), "[trajectories]")
         motion = _trajectories(path, sources, fps, seconds)
-        character = _table(data, "character", {"clips", "up", "forward", "scale", "feet"}, {"clips"}, "[character]")
+        keys = {"clips", "up", "forward", "scale", "feet", "legs", "plant"}
+        character = _table(data, "character", keys, {"clips"}, "[character]")
         clips = read_clips(path.parent / character["clips"])
         up, forward = character.get("up", "y"), character.get("forward", "z")
+        if "legs" in character and "feet" not in character:
+            character["feet"] = [leg[-1] for leg in character["legs"]]
+        for name in character.get("plant", []):
+            if "legs" not in character:
+                raise ValidationError("[character] plant needs legs")
+            if name not in clips:
+                raise ValidationError(
+                    f"[character] plant: no clip {name!r}; the file has {', '.join(map(repr, clips))}"
+                )
+            clips[name] = plant_feet(clips[name], character["legs"], up=up, forward=forward)
         scale = float(character.get("scale", 1.0))
         streams, names, rates = [], {}, []
         for k, spec in enumerate(data["streams"]):

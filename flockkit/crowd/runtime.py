@@ -219,6 +219,28 @@ class Crowd:
             self._rate[ids, c] = rate
         self._start_blend(ids, c, STREAMED, k, offsets, blend_time)
 
+    def matching_offsets(self, agents, cluster, stream) -> np.ndarray:
+        """For each of `agents`' part `cluster`, the offset into Running `stream` whose stored
+        motion is nearest the part's: its pose now and a frame ago against the stream's at the
+        offset and a frame older (local rotations, the sum over joints of 1 - cos² of the angles
+        between them; two frames tell a leg swinging forward from one swinging back through the
+        same pose). Where a part switching to another rate of one motion enters, so that it keeps
+        its step and its own phase (and the crowd its desynchronisation)."""
+        ids, c = self._parts(agents, cluster)
+        (k,) = self.pool.check_streams(stream)
+        if not self.pool.running[k]:
+            raise ValidationError(f"stream {k} is Stopped: a part entering it starts at offset 0")
+        xp, bones = self.pool.xp, self.skeletons[c].n_joints
+        held = np.arange(self.pool.filled[k])
+        frames = self.pool.gather(np.full(len(held), k), held, bones)[..., :4]  # (H, J, 4), newest first
+        older = xp.concat([frames[1:], frames[-1:]])
+        score = 0
+        for stored, lag in ((frames, 0), (older, 1)):
+            mine = self._entries(ids, c, lag)[..., :4]  # (n, J, 4)
+            cosines = xp.sum(xp.astype(mine, xp.float64)[:, None] * xp.astype(stored, xp.float64)[None], axis=-1)
+            score = score + xp.sum(cosines * cosines, axis=-1)  # (n, H)
+        return np.asarray(xp.argmax(score, axis=1)).astype(np.int64)
+
     def assign(self, agents, cluster, stream) -> None:
         """Put `agents`' part `cluster` on `stream` at once, without a blend (setting a crowd up,
         not animating it): at random offsets within what a Running stream holds, or at 0 with
@@ -377,24 +399,37 @@ class Crowd:
         sphere), in the pool's array namespace. Agents without the cluster are refused."""
         c = self.cluster_index(cluster if cluster is not None else self.clusters[0])
         ids = np.arange(self.n_agents) if agents is None else _agent_ids(agents, self.n_agents)
+        return self._entries(ids, c)
+
+    def _entries(self, ids, c, lag: int = 0):
+        """`entries` of parts `ids` in cluster index `c`, as they were `lag` frames ago (offsets
+        `lag` frames older, up to the oldest frame held; α then)."""
         record = self._buffer[ids, c]
         if np.any(record["kind"] == NONE):
             raise ValidationError(f"agent {int(ids[record['kind'] == NONE][0])} has no {self.clusters[c]!r} cluster")
         bones = self.skeletons[c].n_joints
+
+        def read(kind, index, offset):
+            if lag:
+                held = np.where(kind == STREAMED, self.pool.filled[np.where(kind == STREAMED, index, 0)], 1)
+                offset = np.minimum(offset + lag, held - 1)
+            return self._read(kind, index, offset, bones)
+
         blending = np.flatnonzero(record["blend_time"] > 0)
         if not len(blending):
-            return self._read(record["kind"], record["stream"], record["offset"], bones)
+            return read(record["kind"], record["stream"], record["offset"])
         xp = self.pool.xp
         steady = np.flatnonzero(record["blend_time"] <= 0)
         r = record[blending]
-        source = self._read(r["kind"], r["stream"], r["offset"], bones)
-        target = self._read(r["target_kind"], r["target"], r["target_offset"], bones)
-        alpha = np.clip((self.time - r["blend_start"]) / r["blend_time"], 0, 1).astype(np.float32)
+        source = read(r["kind"], r["stream"], r["offset"])
+        target = read(r["target_kind"], r["target"], r["target_offset"])
+        then = self.time - lag / self.pool.fps
+        alpha = np.clip((then - r["blend_start"]) / r["blend_time"], 0, 1).astype(np.float32)
         mixed = blend_entries(source, target, xp.asarray(alpha))
         if not len(steady):
             return mixed
         s = record[steady]
-        return _merge(xp, self._read(s["kind"], s["stream"], s["offset"], bones), steady, mixed, blending)
+        return _merge(xp, read(s["kind"], s["stream"], s["offset"]), steady, mixed, blending)
 
     def poses(self, agents=None, cluster=None, *, space: str = "local"):
         """The poses of `agents` (default all) in `cluster`, vectorized: ``space="local"`` a

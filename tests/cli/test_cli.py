@@ -480,7 +480,11 @@ simulate = { agents = 40, seed = 1 }
 [character]
 clips = "FOX"
 scale = 0.01
-feet = ["b_LeftFoot02_018", "b_RightFoot02_022", "b_RightHand_08", "b_LeftHand_011"]
+legs = [["b_LeftLeg01_015", "b_LeftLeg02_016", "b_LeftFoot02_018"],
+        ["b_RightLeg01_019", "b_RightLeg02_020", "b_RightFoot02_022"],
+        ["b_RightUpperArm_06", "b_RightForeArm_07", "b_RightHand_08"],
+        ["b_LeftUpperArm_09", "b_LeftForeArm_010", "b_LeftHand_011"]]
+plant = ["Walk"]
 
 [[streams]]
 name = "idle"
@@ -545,6 +549,11 @@ def test_crowd_drives_foxes_along_a_flock_and_writes_usd_an_animation_and_a_summ
         (lambda t: t.replace("simulate = { agents = 40, seed = 1 }", ""), "exactly one of simulate, motion, walk"),
         (lambda t: "colour = 'red'\n" + t, "unknown key 'colour'"),
         (lambda t: t.replace("FOX", "nothere.glb"), "nothere.glb"),
+        (lambda t: t.replace('plant = ["Walk"]', 'plant = ["Trot"]'), "[character] plant: no clip 'Trot'"),
+        (
+            lambda t: t.replace('"b_LeftFoot02_018"],', '"b_LeftLeg01_015"],'),
+            "legs[0]: 'b_LeftLeg01_015' must be below",
+        ),
     ],
 )
 def test_bad_crowd_scenes_are_named_in_one_line_and_nothing_is_written(capsys, tmp_path, shared_data, edit, message):
