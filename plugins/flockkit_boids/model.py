@@ -63,7 +63,7 @@ def _non_negative(default):
 
 
 def _unit(vectors: np.ndarray) -> np.ndarray:
-    norms = np.sqrt(np.einsum("nd,nd->n", vectors, vectors))[:, None]
+    norms = np.sqrt(np.sum(vectors * vectors, axis=-1))[..., None]
     return np.divide(vectors, norms, out=np.zeros_like(vectors), where=norms > 0)
 
 
@@ -197,15 +197,12 @@ class Boids:
         first, last = max(start, 1), min(stop, motion.n_frames - 1)  # frames with an impulse
         if first >= last:
             return impulses
+        inferred = self._infer_wander(x, dt, first - 1 if first > 1 else first, last)  # frames .. last - 1
         if first == 1:
             channel = motion.channels.get(_WANDER)
             previous = channel[0] if channel is not None else np.zeros(x.shape[1:])
-        else:
-            previous = self._infer_wander(x, dt, first - 1)
-        for t in range(first, last):
-            current = self._infer_wander(x, dt, t)
-            impulses[t - start] = current - _unit(previous)
-            previous = current
+            inferred = np.concatenate([previous[None], inferred])
+        impulses[first - start : last - start] = inferred[1:] - _unit(inferred[:-1])
         return impulses
 
     # -- internals -------------------------------------------------------------------------
@@ -305,37 +302,45 @@ class Boids:
             )
         return positions, wander
 
-    def _infer_wander(self, x, dt, t) -> np.ndarray:
-        """The wander contribution at frame t (1 <= t <= T - 2) implied by frames t - 1, t, t + 1."""
-        before = (x[t] - x[t - 1]) / dt
-        after = (x[t + 1] - x[t]) / dt
+    def _infer_wander(self, x, dt, first, last) -> np.ndarray:
+        """The wander contributions at frames first..last-1 (1 <= t <= T - 2) implied by the
+        frames around each, (last - first, N, D)."""
+        before = (x[first:last] - x[first - 1 : last - 1]) / dt
+        after = (x[first + 1 : last + 1] - x[first:last]) / dt
         gain = self.acceleration * dt / self._weight_sum
-        return ((after - before) / gain - self._steering(x[t], before, 1.0)) / self.wander_weight
-
-    def _neighbor_pairs(self, x) -> _DensePairs | _SparsePairs:
-        """Candidate neighbors within perception_radius: every (i, j) of a dense N x N table for
-        small flocks, a cKDTree pair list (memory linear in N) above `kdtree_above` agents."""
-        if len(x) > self.kdtree_above:
-            return _SparsePairs(x, self.perception_radius)
-        return _DensePairs(x, self.perception_radius)
+        return ((after - before) / gain - self._steering(x[first:last], before, 1.0)) / self.wander_weight
 
     def _steering(self, x, v, perception: float) -> np.ndarray:
-        """Sum of weight * rule over every rule but wander, for positions x and headings v."""
-        n, d = x.shape
-        speed = np.sqrt(np.einsum("nd,nd->n", v, v))
-        heading = np.divide(v, speed[:, None], out=np.zeros_like(v), where=speed[:, None] > 0)
+        """Sum of weight * rule over every rule but wander, for positions x and headings v, (N, D)
+        or (F, N, D) for F frames at once: small flocks in blocks of frames (N x N tables per
+        frame), large ones frame by frame (a cKDTree pair list, memory linear in N)."""
+        if x.ndim == 2:
+            return self._steer(x, v, perception)
+        n = x.shape[1]
+        if not len(x):
+            return np.zeros_like(x)
+        if n > self.kdtree_above:
+            return np.stack([self._steer(a, b, perception) for a, b in zip(x, v)])
+        block = max(1, _PAIRS_PER_BLOCK // max(n * n, 1))
+        return np.concatenate([self._steer(x[k : k + block], v[k : k + block], perception)
+                               for k in range(0, len(x), block)])  # fmt: skip
+
+    def _steer(self, x, v, perception: float) -> np.ndarray:
+        n = x.shape[-2]
+        speed = np.sqrt(np.sum(v * v, axis=-1))
+        heading = np.divide(v, speed[..., None], out=np.zeros_like(v), where=speed[..., None] > 0)
         steer = np.zeros_like(x)
 
-        pairs = self._neighbor_pairs(x)
+        pairs = _SparsePairs(x, self.perception_radius) if x.ndim == 2 and n > self.kdtree_above else _DensePairs(x)
         offsets = pairs.offsets()  # per axis: x_j - x_i
         distance = np.sqrt(sum(o * o for o in offsets))
-        seen = pairs.within(distance)
+        seen = pairs.within(distance, self.perception_radius)
         if self.field_of_view < 360:
             cos_half = math.cos(math.radians(self.field_of_view) / 2)
-            ahead = perception * sum(o * pairs.rows(h) for o, h in zip(offsets, heading.T))
+            ahead = perception * sum(o * pairs.rows(heading[..., k]) for k, o in enumerate(offsets))
             seen &= ahead >= cos_half * distance * pairs.rows(speed > 0)
         count = pairs.total(seen)
-        share = np.divide(1.0, count, out=np.zeros(n), where=count > 0)
+        share = np.divide(1.0, count, out=np.zeros(count.shape), where=count > 0)
         # Per pair: cohesion pulls along the offset, separation pushes against it, alignment
         # averages neighbors' velocities: steer_i = sum_j W_ij (x_j - x_i) + sum_j A_ij v_j - ...
         push = np.where(
@@ -346,10 +351,10 @@ class Boids:
         pull = self.cohesion_weight / self.perception_radius * pairs.rows(share)
         w = np.where(seen, pull - self.separation_weight * push, 0.0)
         a = np.where(seen, (self.alignment_weight / self.target_speed) * pairs.rows(share), 0.0)
-        steer += pairs.weighted_sum(w, x) - pairs.total(w)[:, None] * x
-        steer += pairs.weighted_sum(a, v) - (self.alignment_weight / self.target_speed) * (count > 0)[:, None] * v
+        steer += pairs.weighted_sum(w, x) - pairs.total(w)[..., None] * x
+        steer += pairs.weighted_sum(a, v) - (self.alignment_weight / self.target_speed) * (count > 0)[..., None] * v
 
-        steer += (self.speed_weight / self.target_speed) * (self.target_speed - speed)[:, None] * heading
+        steer += (self.speed_weight / self.target_speed) * (self.target_speed - speed)[..., None] * heading
         for obstacle in self.obstacles:
             distance = obstacle.signed_distance(x)
             # Grows like 1 / distance near the surface so that no other rule can push an agent in;
@@ -357,32 +362,35 @@ class Boids:
             closeness = np.clip(self.avoid_distance / np.maximum(distance, 0.05 * self.avoid_distance) - 1.0, 0.0, 19.0)
             if closeness.any():
                 normal = obstacle.surface_normal(x)
-                along = np.einsum("nd,nd->n", normal, heading)
-                sideways = _unit(normal - along[:, None] * heading)  # steer round, not just brake
-                away = normal + np.maximum(0.0, -along)[:, None] * sideways
-                steer += self.avoidance_weight * closeness[:, None] * away
+                along = np.sum(normal * heading, axis=-1)
+                sideways = _unit(normal - along[..., None] * heading)  # steer round, not just brake
+                away = normal + np.maximum(0.0, -along)[..., None] * sideways
+                steer += self.avoidance_weight * closeness[..., None] * away
         return steer
 
 
-class _DensePairs:
-    """All (i, j) as N x N tables; `rows(a)` broadcasts a per-agent array along j."""
+# Pair-table entries per block of frames steered at once (an N x N table per frame): a few MB.
+_PAIRS_PER_BLOCK = 200_000
 
-    def __init__(self, x, radius):
-        self._x, self._radius = x, radius
+
+class _DensePairs:
+    """All (i, j) as N x N tables (F x N x N for F frames); `rows(a)` broadcasts a per-agent
+    array along j."""
+
+    def __init__(self, x):
+        self._x = x
 
     def offsets(self):
-        return [c[None, :] - c[:, None] for c in self._x.T]
+        return [c[..., None, :] - c[..., :, None] for c in np.moveaxis(self._x, -1, 0)]
 
-    def within(self, distance):
-        close = distance <= self._radius
-        np.fill_diagonal(close, False)
-        return close
+    def within(self, distance, radius):
+        return (distance <= radius) & ~np.eye(distance.shape[-1], dtype=bool)
 
     def rows(self, values):
-        return values[:, None]
+        return values[..., :, None]
 
     def total(self, values):
-        return values.sum(axis=1, dtype=np.float64)
+        return values.sum(axis=-1, dtype=np.float64)
 
     def weighted_sum(self, weights, y):
         return weights @ y
@@ -400,7 +408,7 @@ class _SparsePairs:
     def offsets(self):
         return [c[self._j] - c[self._i] for c in self._x.T]
 
-    def within(self, distance):
+    def within(self, distance, radius):
         return np.ones(distance.shape, dtype=bool)
 
     def rows(self, values):
