@@ -86,6 +86,12 @@ class Capabilities:
         Behavior: changing positions at frame f changes ``log_plausibility`` only at frames
         f - reach .. f + reach. The sampler then re-scores only those frames after a proposal;
         None (unknown) re-scores every frame.
+    residuals : bool
+        Behavior: it offers ``plausibility_residuals(motion, start=0, stop=None)``, an array
+        (stop - start, N, K) whose squares, summed over agents and components and halved, are
+        what ``log_plausibility`` subtracts from a constant per frame (for boids: each wander
+        impulse over its sigma). ``solve`` then improves its initial trajectories by least
+        squares on them before sampling (``flockkit.solve.refine``).
     progress : bool
         Behavior (``forward`` and ``backward``) and builder (``build``): the operation takes
         ``progress``, a callable ``progress(done, total, stage)`` it calls as work completes
@@ -101,6 +107,7 @@ class Capabilities:
     guide: bool = attrs.field(default=False, validator=_flag("guide"))
     obstacles: bool = attrs.field(default=False, validator=_flag("obstacles"))
     plausibility_reach: int | None = attrs.field(default=None, validator=_reach)
+    residuals: bool = attrs.field(default=False, validator=_flag("residuals"))
     progress: bool = attrs.field(default=False, validator=_flag("progress"))
     lower_bound: bool = attrs.field(default=False, validator=_flag("lower_bound"))
     pairs_within: bool = attrs.field(default=False, validator=_flag("pairs_within"))
@@ -118,7 +125,7 @@ class Capabilities:
 
 # kind -> the Capabilities fields (besides dims) that something reads for that kind
 KIND_FIELDS: dict[str, frozenset] = {
-    "behavior": frozenset({"guide", "obstacles", "plausibility_reach", "progress"}),
+    "behavior": frozenset({"guide", "obstacles", "plausibility_reach", "residuals", "progress"}),
     "metric": frozenset({"lower_bound", "pairs_within", "pairwise"}),
     "builder": frozenset({"progress"}),
     "walk": frozenset(),
@@ -169,7 +176,7 @@ class BehaviorModel(Protocol):
     bad arguments (negative steps, a window outside the motion, unsupported dimensions).
 
     Optional, declared in ``Capabilities`` (``guide``, ``obstacles``, ``plausibility_reach``,
-    ``progress``), never guessed from signatures.
+    ``residuals``, ``progress``), never guessed from signatures.
     """
 
     def forward(self, initial: State, steps: int, rng: np.random.Generator) -> Motion: ...
@@ -316,6 +323,10 @@ class _Guided(Protocol):
     def backward(self, final, steps, rng, *, guide=None): ...
 
 
+class _Residuals(Protocol):
+    def plausibility_residuals(self, motion, start=0, stop=None): ...
+
+
 class _SimulationProgress(Protocol):
     def forward(self, initial, steps, rng, *, progress=None): ...
 
@@ -341,6 +352,7 @@ class _Pairwise(Protocol):
 # Capabilities field -> kind -> the methods (and parameters) a component declaring it must offer
 OPTIONAL_PROTOCOLS: dict[str, dict[str, type]] = {
     "guide": {"behavior": _Guided},
+    "residuals": {"behavior": _Residuals},
     "progress": {"behavior": _SimulationProgress, "builder": _BuildProgress},
     "lower_bound": {"metric": _LowerBound},
     "pairs_within": {"metric": _PairsWithin},

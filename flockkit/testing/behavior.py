@@ -2,8 +2,8 @@
 
 Each check is ``check_<property>(name, model)`` and raises AssertionError saying what is wrong.
 They run on a few fixed flocks (one agent to a hundred) in the dimensions the model declares, so
-results are reproducible; the checks of ``guide``, ``progress`` and ``plausibility_reach`` run
-only for models that declare them.
+results are reproducible; the checks of ``guide``, ``progress``, ``plausibility_reach`` and
+``residuals`` run only for models that declare them.
 """
 
 from __future__ import annotations
@@ -272,6 +272,35 @@ def check_plausibility_reach(name, model):
         )
 
 
+@applies_when("residuals")
+def check_residuals(name, model):
+    """plausibility_residuals gives (stop - start, N, K) finite arrays, a window's rows equal
+    to the full evaluation's, and log_plausibility minus half their summed squares is the same
+    constant per frame for any two motions (the residuals are what plausibility scores)."""
+    state = _flock(model)
+    motion = _forward(model, state, steps=STEPS)
+    rng = np.random.default_rng(SEED)
+    moved = Motion(positions=motion.positions + rng.normal(0.0, 0.02, motion.positions.shape), dt=motion.dt,
+                   channels=motion.channels)  # fmt: skip
+    offsets = []
+    for m in (motion, moved):
+        residuals = np.asarray(model.plausibility_residuals(m))
+        assert residuals.ndim == 3 and residuals.shape[:2] == (m.n_frames, m.n_agents), (
+            f"{name}.plausibility_residuals must be (frames, agents, K); got shape {residuals.shape}"
+        )
+        assert np.all(np.isfinite(residuals)), f"{name}.plausibility_residuals returned non-finite values"
+        window = np.asarray(model.plausibility_residuals(m, 3, 8))
+        assert np.allclose(window, residuals[3:8], rtol=1e-9, atol=1e-9), (
+            f"{name}.plausibility_residuals(motion, 3, 8) differs from frames 3..7 of the full evaluation"
+        )
+        offsets.append(np.asarray(model.log_plausibility(m)) + 0.5 * np.sum(residuals**2, axis=(1, 2)))
+    assert np.allclose(offsets[0], offsets[1], rtol=1e-9, atol=1e-6), (
+        f"{name}: log_plausibility is not minus half the summed squares of plausibility_residuals plus a "
+        f"constant per frame (the difference changes with the motion at frame "
+        f"{int(np.argmax(np.abs(offsets[0] - offsets[1])))})"
+    )
+
+
 CHECKS = (
     check_forward_shape,
     check_backward_shape,
@@ -287,4 +316,5 @@ CHECKS = (
     check_guide,
     check_progress,
     check_plausibility_reach,
+    check_residuals,
 )

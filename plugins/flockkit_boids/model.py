@@ -116,7 +116,9 @@ class Boids:
 
     # A change at frame f alters the inferred impulses at frames f - 1 .. f + 2 (see
     # log_plausibility), so scores within 2 frames of a change.
-    capabilities = flockkit.Capabilities(guide=True, obstacles=True, plausibility_reach=2, progress=True)
+    capabilities = flockkit.Capabilities(
+        guide=True, obstacles=True, plausibility_reach=2, residuals=True, progress=True
+    )
 
     def __attrs_post_init__(self):
         if self.field_of_view > 360:
@@ -183,6 +185,11 @@ class Boids:
         values = -squared / (2 * self.wander_sigma**2) - log_norm
         frames = np.arange(start, stop)
         return np.where((frames >= 1) & (frames <= motion.n_frames - 2), values, 0.0)
+
+    def plausibility_residuals(self, motion: flockkit.Motion, start: int = 0, stop: int | None = None) -> np.ndarray:
+        """The wander impulses over wander_sigma (stop - start, N, D): log_plausibility is minus
+        half their summed squares, less the normalization."""
+        return self.wander_impulses(motion, start, stop) / self.wander_sigma
 
     def wander_impulses(self, motion: flockkit.Motion, start: int = 0, stop: int | None = None) -> np.ndarray:
         """The wander impulses (stop - start, N, D) a forward simulation would have drawn to produce

@@ -80,6 +80,7 @@ def test_capabilities_reads_the_declaration_or_gives_the_defaults():
         "guide": True,
         "obstacles": True,
         "plausibility_reach": 2,
+        "residuals": True,
         "progress": True,
     }
 
@@ -149,13 +150,14 @@ def test_declared_operations_are_checked_at_registration(kind, factory, problem)
 
 def test_the_kit_reports_undeclared_operations_as_skipped_with_the_reason():
     report = check_plugin("behavior", RandomVelocity())
-    assert set(report.skipped) == {"check_guide", "check_progress", "check_plausibility_reach"}
+    assert set(report.skipped) == {"check_guide", "check_progress", "check_plausibility_reach", "check_residuals"}
     assert all("does not declare Capabilities." in reason for reason in report.skipped.values())
     assert not set(report.passed) & set(report.skipped)
     assert {c.__name__ for c in checks_for("behavior", Declaring())} >= {
         "check_guide",
         "check_progress",
         "check_plausibility_reach",
+        "check_residuals",
     }
     assert skipped_checks("metric", IcpHungarian()) == {}
 

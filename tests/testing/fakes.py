@@ -63,9 +63,19 @@ class RandomVelocity:
 
 class Declaring(RandomVelocity):
     """RandomVelocity with every optional operation a behavior can declare, done right: guided
-    agents, progress reports, and its plausibility's reach (frame t reads frames t - 1 .. t + 1)."""
+    agents, progress reports, its plausibility's reach (frame t reads frames t - 1 .. t + 1) and
+    its residuals (the inferred noise)."""
 
-    capabilities = flockkit.Capabilities(guide=True, progress=True, plausibility_reach=1)
+    capabilities = flockkit.Capabilities(guide=True, progress=True, plausibility_reach=1, residuals=True)
+
+    def plausibility_residuals(self, motion, start=0, stop=None):
+        stop = motion.n_frames if stop is None else stop
+        if not 0 <= start <= stop <= motion.n_frames:
+            raise ValidationError(f"window {start}:{stop} outside 0..{motion.n_frames}")
+        noise = np.zeros((motion.n_frames, motion.n_agents, motion.dims))
+        velocities = np.diff(motion.positions, axis=0) / motion.dt
+        noise[1:-1] = (velocities[1:] - velocities[:-1]) / self.sigma
+        return noise[start:stop]
 
     def forward(self, initial, steps, rng, *, guide=None, progress=None):
         self._steps(steps)
@@ -183,6 +193,13 @@ class ReachTooShort(Declaring):
         return smeared[start:stop]
 
 
+class ResidualsOffScale(Declaring):
+    """Residuals that are the noise over twice sigma: their squares are not what it scores."""
+
+    def plausibility_residuals(self, motion, start=0, stop=None):
+        return super().plausibility_residuals(motion, start, stop) / 2
+
+
 # check name -> a fake that breaks exactly that check
 BROKEN = {
     "check_interface": MissingMethod,
@@ -200,6 +217,7 @@ BROKEN = {
     "check_guide": IgnoresGuide,
     "check_progress": SilentProgress,
     "check_plausibility_reach": ReachTooShort,
+    "check_residuals": ResidualsOffScale,
 }
 
 
