@@ -1,6 +1,7 @@
 """Constrained animation (paper 004): windows, initial trajectories, objective and sampler."""
 
 from .initial import initial_trajectories, regenerate
+from .refine import refine
 from .sampler import Proposal, ProposalContext, Solution, Trace, residuals, solve
 from .scenario import load_scenario
 from .windows import windows
@@ -9,6 +10,7 @@ __all__ = [
     "windows",
     "initial_trajectories",
     "regenerate",
+    "refine",
     "Proposal",
     "ProposalContext",
     "Solution",

@@ -2,7 +2,9 @@
 
 log g(A) = sum over frames of [log g_w (the behavior's log_plausibility) + the objective terms].
 Each iteration picks a proposal move at random (default bump 0.6, velocity 0.3, regenerate 0.1),
-and accepts its candidate with probability min(1, exp(log g(candidate) - log g(current))).
+and accepts its candidate with probability min(1, exp(log g(candidate) - log g(current))). Every
+ADAPT_EVERY proposals of a move, the scale it is given (``ProposalContext.scale``, at most 1)
+halves if fewer than a fifth were accepted and doubles if more than half were.
 Scoring is incremental: a proposal reports the frames and agents it changed, and only frames
 within the behavior's ``plausibility_reach`` of them are re-scored (all of them for a model that
 does not declare one); objective terms depend on their own frame only.
@@ -11,6 +13,7 @@ does not declare one); objective terms depend on their own frame only.
 from __future__ import annotations
 
 import math
+import warnings
 from collections import Counter
 from collections.abc import Mapping
 
@@ -20,13 +23,14 @@ import numpy as np
 from .. import parallel
 from .._progress import progress_bar
 from ..constraints import ComConstraint, PointConstraint, Problem
-from ..errors import ValidationError
+from ..errors import FlockkitWarning, ValidationError
 from ..interfaces import capabilities
 from ..motion import Motion
 from ..registry import get, label, require_dims, resolve
 from ..validate import allocation, integer, number
 from ..validate import seed as validate_seed
 from .initial import initial_trajectories
+from .refine import refine as refine_motion
 from .windows import windows
 
 DEFAULT_PROPOSALS = {"bump": 0.6, "velocity": 0.3, "regenerate": 0.1}
@@ -49,14 +53,17 @@ class Proposal:
 @attrs.frozen(kw_only=True, eq=False)
 class ProposalContext:
     """What a proposal move may read: the problem, the behavior model, the windows of the initial
-    trajectories, the current per-frame log g (`scores`) and the point-constrained agent-frames
-    (`pinned`, boolean (T, N)), which a move must leave exactly where they are."""
+    trajectories, the current per-frame log g (`scores`), the point-constrained agent-frames
+    (`pinned`, boolean (T, N)), which a move must leave exactly where they are, and `scale`, a
+    factor for the size of a move's changes that the sampler adapts to how often the move's
+    proposals are accepted (a motion near its most plausible takes only small changes)."""
 
     problem: Problem
     behavior: object
     windows: tuple
     scores: np.ndarray
     pinned: np.ndarray
+    scale: float = 1.0
 
     def free_agents(self, start: int, stop: int) -> np.ndarray:
         """Agents without a point constraint at frames start <= t < stop."""
@@ -170,6 +177,7 @@ class Scorer:
 
 
 STABLE_WINDOW = 100  # iterations per running mean for the `stable` stopping rule
+ADAPT_EVERY = 25  # proposals of a move between adaptations of its scale
 
 
 def run_chain(
@@ -198,11 +206,13 @@ def run_chain(
     total = float(scores.sum())
     best, best_total = current, total  # the initial trajectories meet every constraint
     log_g, tried, accepted = np.empty(iterations), [], np.zeros(iterations, dtype=bool)
+    scales, tries, takes = np.ones(len(moves)), np.zeros(len(moves), dtype=int), np.zeros(len(moves), dtype=int)
     for iteration in range(iterations):
         pick = int(rng.choice(len(moves), p=weights))
         context = ProposalContext(
-            problem=problem, behavior=behavior, windows=spans, scores=_readonly(scores), pinned=pinned
-        )
+            problem=problem, behavior=behavior, windows=spans, scores=_readonly(scores), pinned=pinned,
+            scale=float(scales[pick]),
+        )  # fmt: skip
         proposal = moves[pick][1].propose(current, context, rng)
         if proposal is not None:
             start, stop = scorer.affected(proposal, current.n_frames)
@@ -216,6 +226,11 @@ def run_chain(
                     best, best_total = current, total
         log_g[iteration] = total
         tried.append(names[pick])
+        tries[pick], takes[pick] = tries[pick] + 1, takes[pick] + accepted[iteration]
+        if tries[pick] == ADAPT_EVERY:  # aim each move's size at about a fifth to a half accepted
+            rate = takes[pick] / ADAPT_EVERY
+            scales[pick] = min(1.0, scales[pick] * (0.5 if rate < 0.2 else 2.0 if rate > 0.5 else 1.0))
+            tries[pick] = takes[pick] = 0
         if callback is not None:
             callback(iteration, total, bool(accepted[iteration]))
         if progress is not None:
@@ -235,6 +250,7 @@ def solve(
     behavior="boids",
     behavior_params: dict | None = None,
     iterations=1000,
+    refine=40,
     chains=1,
     seed=None,
     proposals=None,
@@ -255,7 +271,12 @@ def solve(
     behavior_params : dict, optional
         Parameters of a behavior made by name (``dt`` and ``obstacles`` come from the problem).
     iterations : int
-        Sampler iterations per chain (at most, with `stable`); 0 returns the initial trajectories.
+        Sampler iterations per chain (at most, with `stable`); 0 returns the starting motion.
+    refine : int
+        For a behavior declaring ``Capabilities(residuals=True)``: at most this many least-squares
+        steps (``flockkit.solve.refine``) improve each chain's initial trajectories before
+        sampling, so that the motion looks like the model made it; 0 samples from the initial
+        trajectories as they are (paper 004).
     stable : float, optional
         Stop a chain early once its running mean of log g stabilizes: the mean over the last 100
         iterations within this fraction of the mean over the 100 before.
@@ -279,6 +300,7 @@ def solve(
     if not isinstance(problem, Problem):
         raise ValidationError(f"solve: problem must be a flockkit.Problem; got {type(problem).__name__}")
     iterations = integer(iterations, "iterations", minimum=0)
+    refine = integer(refine, "refine", minimum=0)
     chains = integer(chains, "chains", minimum=1)
     n_jobs = parallel.jobs(n_jobs)
     if callback is not None and n_jobs != 1:
@@ -290,10 +312,11 @@ def solve(
     allocation(4 * chains * problem.n_frames * problem.n_agents * problem.dims, f"solve: {chains} chains of {size}")
     allocation(3 * chains * iterations, f"solve: the trace of {chains} chains of {iterations} iterations")
     model = _behavior(problem, behavior, behavior_params)
+    _warn_implausible(problem, model, seed)
     moves = _moves(problem, DEFAULT_PROPOSALS if proposals is None else proposals, iterations)
     terms = [_component("objective", spec, problem) for spec in objectives]
     seeds = np.random.SeedSequence(seed).spawn(chains)
-    arguments = (problem, model, moves, terms, iterations, stable)
+    arguments = (problem, model, moves, terms, iterations, refine, stable)
     if n_jobs == 1:
         results = _chains_here(arguments, seeds, iterations, callback, progress)
     else:
@@ -323,6 +346,45 @@ def _chains_here(arguments, seeds, iterations, callback, progress) -> list:
             chain_callback = None if callback is None else (lambda i, g, a, chain=index: callback(chain, i, g, a))
             results.append(_chain(*arguments, chain_seed, chain_callback, tick))
     return results
+
+
+# A constraint asking for more than this many times the fastest speeds (99th percentile) of an
+# unconstrained simulation is one no model-like motion meets.
+IMPLAUSIBLE_SPEED = 1.5
+
+
+def _warn_implausible(problem: Problem, model, seed) -> None:
+    """Warn (FlockkitWarning) about each constraint whose speed, given or implied by the one
+    before it on the same agent or subset, is far above what the model's agents do unconstrained:
+    the solve still meets it exactly, at the cost of motion that does not look like the model's."""
+    from ..convenience import random_flock
+
+    rng = np.random.default_rng(seed)
+    steps = max(problem.n_frames - 1, 2)
+    simulated = model.forward(random_flock(n_agents=problem.n_agents, dims=problem.dims, rng=rng), steps, rng)
+    fastest = float(np.percentile(np.linalg.norm(simulated.velocities()[steps // 2 :], axis=-1), 99))
+    index = {id(c): k for k, c in enumerate(problem.constraints)}
+    for track in problem.tracks:
+        for before, after in zip(track[:-1], track[1:]):
+            speed = np.linalg.norm(np.asarray(after.position) - before.position) / max(after.time - before.time, 1e-12)
+            if speed > IMPLAUSIBLE_SPEED * fastest:
+                warnings.warn(
+                    f"constraint {index[id(after)]} ({type(after).__name__} at t={after.time:g}) is "
+                    f"{speed:.3g} length units per second from constraint {index[id(before)]} at "
+                    f"t={before.time:g}; the model's agents move at up to {fastest:.3g} unconstrained, so the "
+                    "solution meets it with motion that does not look like the model's",
+                    FlockkitWarning,
+                    stacklevel=3,
+                )
+        for c in track[:1] if len(track) == 1 else ():  # a lone constraint's speed is its given velocity
+            speed = float(np.linalg.norm(c.velocity))
+            if speed > IMPLAUSIBLE_SPEED * fastest:
+                warnings.warn(
+                    f"constraint {index[id(c)]} ({type(c).__name__} at t={c.time:g}) asks for a speed of "
+                    f"{speed:.3g}; the model's agents move at up to {fastest:.3g} unconstrained",
+                    FlockkitWarning,
+                    stacklevel=3,
+                )
 
 
 def _behavior(problem: Problem, spec, params):
@@ -372,9 +434,13 @@ def _moves(problem: Problem, proposals, iterations) -> list:
     return moves
 
 
-def _chain(problem, behavior, moves, terms, iterations, stable, seed, callback, progress):
+def _chain(problem, behavior, moves, terms, iterations, refine, stable, seed, callback, progress):
     rng = np.random.default_rng(seed)
     initial = initial_trajectories(problem, behavior, rng)
+    if refine and capabilities(behavior).residuals:
+        refined = refine_motion(problem, behavior, initial, pinned_frames(problem), rng, iterations=refine)
+        if feasible(problem, refined):
+            initial = refined
     if not iterations:
         scores = Scorer(problem, behavior, terms).frames(initial)
         return initial, float(scores.sum()), Trace(log_g=np.empty(0), proposals=(), accepted=np.zeros(0, dtype=bool))

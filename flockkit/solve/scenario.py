@@ -6,7 +6,7 @@
     agents = 20          # required; dims = 2, dt = 0.1, flocks = 1, sigma_com, shape_weight,
     duration = 8.0       # flock_weight, visibility and follow are optional (defaults as in Problem)
 
-    [solve]              # optional: behavior, behavior_params = {...}, iterations, chains, seed, stable,
+    [solve]              # optional: behavior, behavior_params = {...}, iterations, refine, chains, seed, stable,
                          # proposals = {bump = 0.6, ...}, objectives = [...]
     iterations = 1000
 
@@ -42,7 +42,17 @@ _PROBLEM_KEYS = {
     "visibility": "visibility",
     "follow": "follow",
 }
-_SOLVE_KEYS = {"behavior", "behavior_params", "iterations", "chains", "seed", "proposals", "objectives", "stable"}
+_SOLVE_KEYS = {
+    "behavior",
+    "behavior_params",
+    "iterations",
+    "refine",
+    "chains",
+    "seed",
+    "proposals",
+    "objectives",
+    "stable",
+}
 _CONSTRAINT_KEYS = {
     "point": {"agent", "time", "position", "velocity"},
     "com": {"agents", "time", "position", "velocity"},
@@ -66,9 +76,9 @@ def load_scenario(path) -> tuple[Problem, dict]:
         _only(settings, _SOLVE_KEYS, f"{path}: [solve]")
         if "seed" in settings:
             validate.seed(settings["seed"], f"{path}: [solve] seed")
-        for key in ("iterations", "chains"):
+        for key in ("iterations", "refine", "chains"):
             if key in settings:
-                validate.integer(settings[key], f"{path}: [solve] {key}", minimum=0 if key == "iterations" else 1)
+                validate.integer(settings[key], f"{path}: [solve] {key}", minimum=1 if key == "chains" else 0)
         constraints = []
         for kind, build in (("point", _point), ("com", _com), ("shape", _shape)):
             for index, entry in enumerate(_array(data, kind, path)):

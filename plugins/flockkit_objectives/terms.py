@@ -74,15 +74,32 @@ class FlockTerm:
 
     def log_terms(self, motion, problem, start=0, stop=None) -> np.ndarray:
         start, stop = _window(motion, problem, start, stop)
-        counts = np.array(
-            [count_flocks(motion.positions[t], problem.visibility) for t in range(start, stop)], dtype=float
-        )
-        return -problem.flock_weight * np.abs(counts - problem.flocks)
+        counts = count_flocks(motion.positions[start:stop], problem.visibility)
+        return -problem.flock_weight * np.abs(np.atleast_1d(counts) - problem.flocks).astype(float)
 
 
-def count_flocks(positions: np.ndarray, visibility: float) -> int:
-    """Connected components of the graph joining agents closer than `visibility`."""
-    n = len(positions)
-    pairs = cKDTree(positions).query_pairs(visibility, output_type="ndarray")
-    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(n, n))
-    return int(connected_components(graph, directed=False)[0])
+# Agents per frame up to which frames are compared all pairs at once (N x N per frame).
+_DENSE_UP_TO = 256
+
+
+def count_flocks(positions: np.ndarray, visibility: float):
+    """Connected components of the graph joining agents closer than `visibility`: an int for one
+    configuration (N, D), an array (F,) for F frames (F, N, D), found in one pass over all frames
+    (each frame's agents a separate block of one graph)."""
+    frames = np.asarray(positions)
+    single = frames.ndim == 2
+    frames = frames[None] if single else frames
+    f, n = frames.shape[:2]
+    if not f or not n:
+        return 0 if single else np.zeros(f, dtype=int)
+    if n <= _DENSE_UP_TO:
+        squared = np.sum((frames[:, :, None] - frames[:, None]) ** 2, axis=-1)
+        frame, i, j = np.nonzero(np.triu(squared < visibility * visibility, k=1))
+        i, j = frame * n + i, frame * n + j
+    else:
+        pairs = [cKDTree(x).query_pairs(visibility, output_type="ndarray") + k * n for k, x in enumerate(frames)]
+        i, j = np.concatenate(pairs).T if pairs else (np.zeros(0, int), np.zeros(0, int))
+    graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(f * n, f * n))
+    labels = np.sort(connected_components(graph, directed=False)[1].reshape(f, n), axis=1)
+    counts = 1 + np.count_nonzero(np.diff(labels, axis=1), axis=1)
+    return int(counts[0]) if single else counts

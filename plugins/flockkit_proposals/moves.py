@@ -35,7 +35,7 @@ def _quartic(u):
 
 @attrs.frozen(kw_only=True)
 class Bump:
-    """Add 1 to `max_bumps` bumps d = 16 s (x^2 - 2x^3 + x^4), s ~ N(0, size), each to one free
+    """Add 1 to `max_bumps` bumps d = 16 s (x^2 - 2x^3 + x^4), s ~ N(0, size x context.scale), each to one free
     agent's trajectory in multi-resolution coordinates, so that the bump follows the trajectory
     and scales with its sample spacing. A bump reaching past the motion is applied to the
     trajectory extended along its end velocities, and the part outside is dropped."""
@@ -58,7 +58,7 @@ class Bump:
             if not len(free):
                 continue
             agent = int(rng.choice(free))
-            height = rng.normal(0.0, self.size)
+            height = rng.normal(0.0, self.size * context.scale)
             new = _add_bump(_extended(positions[:, agent], first, last), height, rng)
             positions[moved_first : moved_last + 1, agent] = new[moved_first - first : moved_last - first + 1]
             changed.add(agent)
@@ -73,7 +73,7 @@ class Bump:
 class Retime:
     """Re-time one free agent along its own path over a segment (chosen as for bumps, kept inside
     the motion): the arc length at each sample is offset by o = 16 s (u^2 - 2u^3 + u^4),
-    s ~ N(0, spread * r), r the segment's path length. Same path, same total distance, ends fixed;
+    s ~ N(0, spread * r * context.scale), r the segment's path length. Same path, same total distance, ends fixed;
     None when the offset would make the agent go backwards."""
 
     spread: float = validate.parameter("proposal", default=0.025, minimum=0, strict=True)
@@ -95,7 +95,7 @@ class Retime:
         if length <= 1e-12:
             return None
         u = np.linspace(0.0, 1.0, len(path))
-        target = travelled + _quartic(u) * rng.normal(0.0, self.spread * length)
+        target = travelled + _quartic(u) * rng.normal(0.0, self.spread * length * context.scale)
         if np.any(np.diff(target) < 0):
             return None
         target[0], target[-1] = 0.0, length

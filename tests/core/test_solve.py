@@ -1,9 +1,11 @@
+import warnings
+
 import numpy as np
 import pytest
 
 import flockkit
 from flockkit import ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
-from flockkit.errors import UnknownPluginError, ValidationError
+from flockkit.errors import FlockkitWarning, UnknownPluginError, ValidationError
 from flockkit.solve.sampler import Scorer
 
 
@@ -37,7 +39,7 @@ def test_initial_trajectories_meet_every_constraint_exactly():
 @pytest.mark.parametrize("seed", [0, 1])
 def test_incremental_scores_equal_a_full_rescore(seed):
     problem = small_problem()
-    solution = flockkit.solve(problem, iterations=120, seed=seed)
+    solution = flockkit.solve(problem, iterations=120, refine=0, seed=seed)  # unrefined: proposals get accepted
     assert solution.log_g[0] == pytest.approx(full_score(problem, solution.motion), rel=1e-9, abs=1e-9)
     assert np.count_nonzero(solution.trace[0].accepted) > 0
 
@@ -104,3 +106,49 @@ def test_follow_random_still_meets_the_constraints():
     assert max(flockkit.solve(problem, iterations=0, seed=4).residuals) <= 1e-9
     with pytest.raises(ValidationError, match="follow"):
         Problem(n_agents=10, duration=3.0, follow="leader")
+
+
+def per_agent_step(motion):
+    boids = flockkit.get("behavior", "boids")
+    return boids.log_plausibility(motion).sum() / (motion.n_agents * (motion.n_frames - 2))
+
+
+def test_refining_makes_the_flock_model_like_and_keeps_every_constraint():
+    problem = small_problem()
+    initial = flockkit.solve(problem, iterations=0, refine=0, seed=3).motion
+    refined = flockkit.solve(problem, iterations=0, seed=3)
+    assert max(refined.residuals) <= 1e-9  # points and COMs exactly, every shaped agent inside
+    assert per_agent_step(refined.motion) > per_agent_step(initial) + 1.0
+    # refining is a least-squares fit to residuals the model draws: the same seed, the same motion
+    again = flockkit.solve(problem, iterations=0, seed=3)
+    assert np.array_equal(again.motion.positions, refined.motion.positions)
+
+
+def test_refine_needs_a_model_that_declares_residuals():
+    from flockkit.solve import refine
+    from flockkit.solve.sampler import pinned_frames
+
+    problem = small_problem()
+    motion = flockkit.solve(problem, iterations=0, refine=0, seed=1).motion
+
+    class Undeclared:
+        capabilities = flockkit.Capabilities()
+
+    with pytest.raises(ValidationError, match=r"Capabilities\(residuals=True\)"):
+        refine(problem, Undeclared(), motion, pinned_frames(problem), np.random.default_rng(0))
+    with pytest.raises(ValidationError, match="refine"):
+        flockkit.solve(problem, refine=-1)
+
+
+def test_a_constraint_faster_than_the_model_warns_naming_it_and_is_still_met():
+    problem = Problem(
+        n_agents=8,
+        duration=3.0,
+        constraints=[PointConstraint(agent=0, time=t, position=[10.0 * t, 0.0]) for t in (1.0, 2.0)],
+    )
+    with pytest.warns(FlockkitWarning, match=r"constraint 1 \(PointConstraint at t=2\) is 10 length units per second"):
+        solution = flockkit.solve(problem, iterations=20, seed=1)
+    assert max(solution.residuals) <= 1e-9
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        flockkit.solve(small_problem(), iterations=0, refine=0, seed=1)

@@ -2,9 +2,13 @@ import math
 
 import numpy as np
 import pytest
+from flockkit_objectives.terms import count_flocks
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import flockkit
 from flockkit import Ball, ComConstraint, Motion, Polygon, Problem, ShapeConstraint
+from flockkit.testing import strategies
 
 
 def still(positions, frames=5):
@@ -57,3 +61,23 @@ def test_flock_term_counts_groups_that_cannot_see_each_other(preferred, expected
     problem = Problem(n_agents=5, duration=0.4, flocks=preferred, visibility=1.5)
     terms = flockkit.get("objective", "flocks").log_terms(motion, problem)
     np.testing.assert_array_equal(terms, np.full(5, expected))
+
+
+@settings(max_examples=40, deadline=None)
+@given(motion=strategies.motions(max_frames=6, max_agents=12, max_coordinate=5.0), visibility=st.floats(0.1, 4.0))
+def test_flocks_counted_over_many_frames_at_once_are_each_frames_own_count(motion, visibility):
+    """count_flocks over (F, N, D) in one graph equals, frame by frame, a union-find of its own."""
+    counts = count_flocks(motion.positions, visibility)
+    for frame, count in zip(motion.positions, counts):
+        parent = list(range(len(frame)))
+
+        def root(a, parent=parent):
+            while parent[a] != a:
+                a = parent[a]
+            return a
+
+        for a in range(len(frame)):
+            for b in range(a):
+                if np.linalg.norm(frame[a] - frame[b]) < visibility:
+                    parent[root(a)] = root(b)
+        assert count == len({root(a) for a in range(len(frame))}) == count_flocks(frame, visibility)

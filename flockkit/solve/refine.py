@@ -1,0 +1,202 @@
+"""Model-like solutions: least squares on the behavior model's residuals (issue 18).
+
+Paper 004's sampler starts from initial trajectories that meet the constraints but whose inferred
+random choices (for boids, wander impulses) are hundreds of times too large, and its local moves
+barely improve them. For a model that declares ``Capabilities(residuals=True)`` (log
+plausibility = a constant - |r|^2 / 2 per frame), ``refine`` moves every position that no point
+constraint holds so that the residuals r match targets eta: an agent-frame's own residual where
+it is already one the model draws (at most LIKELY standard deviations), else one drawn from the
+model itself (the residuals of a forward simulation of the same flock). That is perturb-and-MAP:
+the result is a sample that looks like the model made it, not the most regular motion, which no
+simulation produces. Every step keeps each constrained COM exactly where it is (the initial
+trajectories meet them) and each agent near its shape's boundary at its distance from it, as
+linear equalities; a step that takes an agent outside its shape is refused. What rounding leaves
+is removed at the end by moving the free agents of those frames.
+
+Each Levenberg-Marquardt step uses a sparse Jacobian made of per-agent blocks, measured by
+finite differences with all agents moved together: frames 2 reach + 1 apart never share a
+residual (``plausibility_reach``), so 2 reach + 1 evaluations per dimension measure every
+frame's block. Moving agents together leaves out how one agent's residuals follow another's
+position (cohesion, alignment); the iterations take care of that, judged on the exact cost.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from scipy.sparse import bmat, coo_matrix, diags
+from scipy.sparse.linalg import spsolve
+
+from ..constraints import ComConstraint, Problem, ShapeConstraint
+from ..errors import ValidationError
+from ..interfaces import capabilities
+from ..motion import Motion
+
+__all__ = ["refine"]
+
+LIKELY = 3.0  # residual lengths (in standard deviations) kept as their own targets
+BOUNDARY = 0.05  # agents this close to their shape's boundary move along it, not across
+_STEP = 1e-6  # finite-difference step, in the motion's length units
+
+
+def refine(problem: Problem, behavior, motion: Motion, pinned: np.ndarray, rng, *, iterations: int = 40) -> Motion:
+    """`motion` improved by least squares on `behavior`'s residuals (see the module docstring),
+    every agent-frame of `pinned` (T, N) and the first two frames (the state it starts from)
+    held where they are; at most `iterations` steps."""
+    if not capabilities(behavior).residuals:
+        raise ValidationError("refine needs a behavior model declaring Capabilities(residuals=True)")
+    return _Refinement(problem, behavior, motion, pinned, rng).run(iterations)
+
+
+class _Refinement:
+    def __init__(self, problem, behavior, motion, pinned, rng):
+        self.problem, self.behavior, self.motion = problem, behavior, motion
+        self.shape = motion.positions.shape
+        t, n, d = self.shape
+        held = pinned.copy()
+        held[:2] = True  # the starting state: its velocity carries no impulse, so nothing would bound it
+        self.free = np.repeat(~held[:, :, None], d, axis=2)
+        self.index = np.full(self.shape, -1)
+        self.index[self.free] = np.arange(int(self.free.sum()))
+        reach = capabilities(behavior).plausibility_reach
+        self.reach = t if reach is None else reach
+        # targets: each agent-frame's own residual where it is already one the model draws, else
+        # one drawn by a forward simulation of the same flock
+        simulated = np.asarray(behavior.plausibility_residuals(behavior.forward(motion.state(0), t - 1, rng)))
+        self.targets = np.asarray(behavior.plausibility_residuals(motion)).copy()
+        unlikely = np.linalg.norm(self.targets, axis=-1) > LIKELY
+        self.targets[unlikely] = simulated[unlikely]
+        self.coms = [(problem.frame(c.time), np.array(problem.agents_of(c)), np.asarray(c.position))
+                     for c in problem.constraints if isinstance(c, ComConstraint)]  # fmt: skip
+        self.shapes = [(problem.frame(c.time), np.array(problem.agents_of(c)), c.shape)
+                       for c in problem.constraints if isinstance(c, ShapeConstraint)]  # fmt: skip
+
+    def _motion(self, positions) -> Motion:
+        return Motion(positions=positions, dt=self.motion.dt, channels=dict(self.motion.channels))
+
+    def _model(self, positions) -> np.ndarray:
+        return np.asarray(self.behavior.plausibility_residuals(self._motion(positions))) - self.targets
+
+    def _cost(self, positions) -> tuple[float, np.ndarray]:
+        """Half the squared residuals; infinite where an agent has left its shape."""
+        model = self._model(positions)
+        for f, agents, shape in self.shapes:
+            if np.any(shape.signed_distance(positions[f, agents]) > 0):
+                return np.inf, model
+        return 0.5 * float(np.sum(model**2)), model
+
+    def _jacobian(self, positions, model):
+        """Sparse (residuals, free values) Jacobian: per-agent blocks of the model's residuals
+        (see the module docstring)."""
+        t, n, d = self.shape
+        k = model.shape[2]
+        spacing = 2 * self.reach + 1
+        rows, cols, values = [], [], []
+        for color in range(min(spacing, t)):
+            moved = np.arange(color, t, spacing)
+            for dim in range(d):
+                nudged = positions.copy()
+                nudged[moved, :, dim] += np.where(self.free[moved, :, dim], _STEP, 0.0)
+                change = (self._model(nudged) - model) / _STEP  # (T, N, K)
+                for offset in range(-self.reach, self.reach + 1):
+                    f = moved[(moved + offset >= 0) & (moved + offset < t)]
+                    # each agent's rows at frame f + offset against its own column at frame f
+                    row = ((f[:, None, None] + offset) * n + np.arange(n)[None, :, None]) * k + np.arange(k)
+                    column = np.broadcast_to(self.index[f, :, dim][:, :, None], row.shape)
+                    value = change[f + offset]
+                    keep = (column >= 0) & (value != 0)
+                    rows.append(row[keep])
+                    cols.append(column[keep])
+                    values.append(value[keep])
+        base = t * n * k
+        size = (base, int(self.free.sum()))
+        return coo_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))), shape=size).tocsr()
+
+    def _equalities(self, positions):
+        """Linear equalities (rows over the free values, right-hand sides) that every step meets:
+        each constrained COM stays where it is (the initial trajectories meet them), and each
+        agent within BOUNDARY of its shape's boundary keeps its distance to it (one outside
+        steps onto it), sliding along it at most."""
+        d = self.shape[2]
+        rows, cols, values, targets = [], [], [], []
+        for f, agents, _ in self.coms:
+            for dim in range(d):
+                column = self.index[f, agents, dim]
+                column = column[column >= 0]
+                if not len(column):  # every agent of it held at that frame: it stays as it is
+                    continue
+                rows.append(np.full(len(column), len(targets)))
+                cols.append(column)
+                values.append(np.ones(len(column)))
+                targets.append(0.0)
+        for f, agents, shape in self.shapes:
+            free = agents[self.free[f, agents, 0]]
+            depth = shape.signed_distance(positions[f, free])
+            near = depth > -BOUNDARY
+            for agent, normal, distance in zip(free[near], shape.surface_normal(positions[f, free[near]]), depth[near]):
+                rows.append(np.full(d, len(targets)))
+                cols.append(self.index[f, agent])
+                values.append(normal)
+                targets.append(min(0.0, -distance - 1e-6))
+        if not targets:
+            return None
+        matrix = coo_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(cols))),
+                            shape=(len(targets), int(self.free.sum())))  # fmt: skip
+        return matrix.tocsr(), np.array(targets)
+
+    def run(self, iterations: int) -> Motion:
+        positions = np.array(self.motion.positions)
+        cost, model = self._cost(positions)
+        damping = 1e-3
+        for _ in range(iterations):
+            jacobian = self._jacobian(positions, model)
+            gradient = jacobian.T @ model.ravel()
+            normal = (jacobian.T @ jacobian).tocsc()
+            scale = normal.diagonal()
+            equalities = self._equalities(positions)
+            for _ in range(10):
+                step = _step(normal + diags(damping * scale + 1e-12), gradient, equalities)
+                if not np.all(np.isfinite(step)):
+                    damping *= 4
+                    continue
+                trial = positions.copy()
+                trial[self.free] += step
+                trial_cost, trial_model = self._cost(trial)
+                if trial_cost < cost:
+                    break
+                damping *= 4
+            else:
+                break  # no step helps: a local optimum, or a kink the steps cannot pass
+            done = cost - trial_cost <= 1e-6 * cost
+            positions, cost, model = trial, trial_cost, trial_model
+            damping = max(damping / 3, 1e-9)
+            if done:
+                break
+        return self._motion(self._exact(positions))
+
+    def _exact(self, positions) -> np.ndarray:
+        """Remove what the steps left of COM errors (rounding) and of agents outside their
+        shapes, by moving the free agents of those frames."""
+        positions = positions.copy()
+        for f, agents, target in self.coms:
+            free = agents[self.free[f, agents, 0]]
+            if len(free):
+                positions[f, free] += (target - positions[f, agents].mean(axis=0)) * len(agents) / len(free)
+        for f, agents, shape in self.shapes:
+            free = agents[self.free[f, agents, 0]]
+            for _ in range(3):  # a step along the nearest boundary's normal; again at corners
+                depth = shape.signed_distance(positions[f, free])
+                out = depth > -1e-9
+                if not out.any():
+                    break
+                inward = (depth[out] + 1e-6)[:, None] * shape.surface_normal(positions[f, free[out]])
+                positions[f, free[out]] -= inward
+        return positions
+
+
+def _step(matrix, gradient, equalities) -> np.ndarray:
+    """The damped Gauss-Newton step meeting the linear equalities (a KKT system)."""
+    if equalities is None:
+        return spsolve(matrix, -gradient)
+    rows, targets = equalities
+    system = bmat([[matrix, rows.T], [rows, None]], format="csc")
+    return spsolve(system, np.concatenate([-gradient, targets]))[: matrix.shape[0]]
