@@ -25,34 +25,9 @@ from pathlib import Path
 import numpy as np
 
 import flockkit
-from flockkit.crowd import (
-    Crowd,
-    Driver,
-    State,
-    StateMachine,
-    Stream,
-    StreamPool,
-    foot_sliding,
-    ground_speed,
-    plant_feet,
-)
+from flockkit.crowd import driven_sliding, ground_speed, plant_feet
 from flockkit.demo import FOX_FEET as FEET
 from flockkit.demo import FOX_LEGS
-
-
-def sliding(flock, clips, rates, scale, seconds, fps):
-    walk, idle = clips["Walk"], clips["Survey"]
-    natural = ground_speed(walk, FEET, scale=scale)
-    streams = [Stream(controller=flockkit.get("controller", "clip", clip=idle), history=40)]
-    streams += [Stream(controller=flockkit.get("controller", "clip", clip=walk, rate=r), history=40) for r in rates]
-    crowd = Crowd(StreamPool(streams, fps=fps), n_agents=flock.n_agents, clusters={"body": 1}, seed=0)
-    walking = State(name="walk", streams=list(range(1, len(rates) + 1)), speeds=[natural * r for r in rates], low=0.2)
-    driver = Driver(crowd, flock, StateMachine([State(name="idle", streams=0, high=0.2), walking]), scale=scale)
-    joints = []
-    for _ in range(int(seconds * fps)):
-        driver.step()
-        joints.append(driver.world()[..., :3, 3])
-    return natural, foot_sliding(np.array(joints), [walk.skeleton.index(f) for f in FEET], dt=1 / fps)
 
 
 def floor(clip) -> float:
@@ -81,10 +56,10 @@ def main():
     print(f"{args.agents} Foxes on a boids flock ({low:.2f}..{high:.2f} m/s), {args.seconds:g} s at {fps:g} fps")
     print(f"{'Walk':>8} {'floor':>6} {'scale':>7} {'ground m/s':>10} {'fixed m/s':>9} {'matched m/s':>11} {'ratio':>6}")
     for name, walk in (("raw", raw["Walk"]), ("planted", plant_feet(raw["Walk"], FOX_LEGS))):
-        clips = dict(raw, Walk=walk)
         for scale in (0.0067, 0.01, 0.015):
-            natural, fixed = sliding(flock, clips, [1.0], scale, args.seconds, fps)
-            _, matched = sliding(flock, clips, list(np.geomspace(0.5, 3.0, 24)), scale, args.seconds, fps)
+            natural = ground_speed(walk, FEET, scale=scale)
+            fixed = driven_sliding(flock, walk, raw["Survey"], FEET, [1.0], scale=scale)
+            matched = driven_sliding(flock, walk, raw["Survey"], FEET, list(np.geomspace(0.5, 3.0, 24)), scale=scale)
             print(f"{name:>8} {floor(walk):>6.1%} {scale:>7} {natural:>10.3f} {fixed:>9.3f} {matched:>11.3f} "
                   f"{fixed / matched:>6.2f}")  # fmt: skip
 

@@ -1,7 +1,7 @@
 """Massive crowds (paper 003): skeletons and clips, shared streams of poses, the crowd runtime."""
 
 from .drive import Cue, Driver, State, StateMachine
-from .feet import foot_sliding, ground_speed, plant_feet
+from .feet import driven_sliding, foot_sliding, ground_speed, plant_feet
 from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
 from .record import CrowdRecording, record, write_engine_buffers
 from .runtime import INSTANCE, Crowd, CrowdEvent
@@ -31,5 +31,6 @@ __all__ = [
     "Driver",
     "ground_speed",
     "foot_sliding",
+    "driven_sliding",
     "plant_feet",
 ]

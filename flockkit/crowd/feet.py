@@ -20,7 +20,7 @@ from ..errors import ValidationError
 from .drive import _axis
 from .skeleton import Pose, SkeletalClip
 
-__all__ = ["ground_speed", "foot_sliding", "plant_feet"]
+__all__ = ["ground_speed", "foot_sliding", "driven_sliding", "plant_feet"]
 
 
 def ground_speed(clip: SkeletalClip, feet, *, up: str = "y", forward: str = "z", scale: float = 1.0) -> float:
@@ -48,6 +48,34 @@ def foot_sliding(joints: np.ndarray, feet, *, dt: float) -> float:
     speed = np.linalg.norm(np.diff(chosen, axis=0), axis=-1) / dt
     same = lowest[1:] == lowest[:-1]  # a change of foot is not a slide
     return float(speed[same].mean()) if same.any() else 0.0
+
+
+def driven_sliding(motion, walk: SkeletalClip, idle: SkeletalClip, feet, rates, *, scale: float = 1.0, up: str = "y",
+                   forward: str = "z", fps: float | None = None, idle_below: float = 0.2) -> float:  # fmt: skip
+    """The foot sliding (``foot_sliding``, world units per second) of a crowd that follows
+    `motion` (one agent each) idling below `idle_below` and walking above it on streams of
+    `walk` at `rates`, each agent on the one whose ground speed is nearest its own (one rate:
+    fixed-rate playback). A measure of how well a clip and its rates fit a group's speeds; at
+    `fps` (default the motion's)."""
+    from ..registry import get
+    from .drive import Driver, State, StateMachine
+    from .pool import Stream, StreamPool
+    from .runtime import Crowd
+
+    fps = 1.0 / motion.dt if fps is None else fps
+    natural = ground_speed(walk, feet, up=up, forward=forward, scale=scale)
+    streams = [Stream(controller=get("controller", "clip", clip=idle), history=40)]
+    streams += [Stream(controller=get("controller", "clip", clip=walk, rate=r), history=40) for r in rates]
+    crowd = Crowd(StreamPool(streams, fps=fps), n_agents=motion.n_agents, clusters={"body": 1}, seed=0)
+    walking = State(name="walk", streams=list(range(1, len(rates) + 1)), speeds=[natural * r for r in rates],
+                    low=idle_below)  # fmt: skip
+    machine = StateMachine([State(name="idle", streams=0, high=idle_below), walking])
+    driver = Driver(crowd, motion, machine, up=up, forward=forward, scale=scale)
+    joints = []
+    for _ in range(int(round(motion.duration * fps))):
+        driver.step()
+        joints.append(driver.world()[..., :3, 3])
+    return foot_sliding(np.array(joints), [walk.skeleton.index(f) for f in feet], dt=1 / fps)
 
 
 def plant_feet(clip: SkeletalClip, legs, *, up: str = "y", forward: str = "z", speed: float | None = None,

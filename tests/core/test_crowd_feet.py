@@ -5,17 +5,7 @@ import numpy as np
 import pytest
 
 import flockkit
-from flockkit.crowd import (
-    Crowd,
-    Driver,
-    State,
-    StateMachine,
-    Stream,
-    StreamPool,
-    foot_sliding,
-    ground_speed,
-    plant_feet,
-)
+from flockkit.crowd import Crowd, Stream, StreamPool, driven_sliding, ground_speed, plant_feet
 from flockkit.demo import FOX, FOX_FEET, FOX_LEGS
 from flockkit.errors import ValidationError
 from flockkit.testing import inputs
@@ -149,21 +139,6 @@ def test_a_switch_of_rate_enters_the_new_stream_at_the_agents_own_pose_and_direc
         crowd.matching_offsets([0, 1], "body", 1)
 
 
-def fox_sliding(flock, clips, rates, scale, fps):
-    walk, idle = clips["Walk"], clips["Survey"]
-    natural = ground_speed(walk, FOX_FEET, scale=scale)
-    streams = [Stream(controller=flockkit.get("controller", "clip", clip=idle), history=40)]
-    streams += [Stream(controller=flockkit.get("controller", "clip", clip=walk, rate=r), history=40) for r in rates]
-    crowd = Crowd(StreamPool(streams, fps=fps), n_agents=flock.n_agents, clusters={"body": 1}, seed=0)
-    walking = State(name="walk", streams=list(range(1, len(rates) + 1)), speeds=[natural * r for r in rates], low=0.2)
-    driver = Driver(crowd, flock, StateMachine([State(name="idle", streams=0, high=0.2), walking]), scale=scale)
-    joints = []
-    for _ in range(flock.n_frames - 1):
-        driver.step()
-        joints.append(driver.world()[..., :3, 3])
-    return foot_sliding(np.array(joints), [walk.skeleton.index(f) for f in FOX_FEET], dt=1 / fps)
-
-
 def test_foxes_on_a_boids_flock_slide_three_times_less_with_speed_matched_playback(shared_data):
     fps = 24.0
     clips = flockkit.io.read_clips(shared_data / FOX)
@@ -173,8 +148,8 @@ def test_foxes_on_a_boids_flock_slide_three_times_less_with_speed_matched_playba
     # the model's joints span 116 units from nose to tail tip: a fox 0.78 m long, and 1.16 m (a red
     # fox's size, whose natural walk is nearly the flock's speed, so that fixed-rate nearly fits)
     for scale in (0.0067, 0.01):
-        matched = fox_sliding(flock, clips, rates, scale, fps)
-        assert matched * 3 <= fox_sliding(flock, clips, [1.0], scale, fps)
+        matched = driven_sliding(flock, clips["Walk"], clips["Survey"], FOX_FEET, rates, scale=scale)
+        assert matched * 3 <= driven_sliding(flock, clips["Walk"], clips["Survey"], FOX_FEET, [1.0], scale=scale)
     # the clip as the file has it slides at any rate: planting is what makes matching pay
     raw = flockkit.io.read_clips(shared_data / FOX)
-    assert fox_sliding(flock, raw, rates, 0.01, fps) > 3 * matched
+    assert driven_sliding(flock, raw["Walk"], raw["Survey"], FOX_FEET, rates, scale=0.01) > 3 * matched
