@@ -360,7 +360,7 @@ def _warn_implausible(problem: Problem, model, seed) -> None:
     from ..convenience import random_flock
 
     rng = np.random.default_rng(seed)
-    steps = max(problem.n_frames - 1, 2)
+    steps = min(max(problem.n_frames - 1, 2), 60)  # long enough for a random flock to gather
     simulated = model.forward(random_flock(n_agents=problem.n_agents, dims=problem.dims, rng=rng), steps, rng)
     fastest = float(np.percentile(np.linalg.norm(simulated.velocities()[steps // 2 :], axis=-1), 99))
     index = {id(c): k for k, c in enumerate(problem.constraints)}
