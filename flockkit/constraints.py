@@ -113,7 +113,8 @@ class Region:
         lower, upper = self.bounds()
         points, drawn = [], 0
         while sum(len(p) for p in points) < count:
-            batch = rng.uniform(lower, upper, size=(4 * count + 16, self.dims))
+            # batches double, so that a sliver is refused after a few dozen batches, not thousands
+            batch = rng.uniform(lower, upper, size=(max(4 * count + 16, drawn), self.dims))
             points.append(batch[self.contains(batch)])
             drawn += len(batch)
             if drawn > 1_000_000 and not sum(len(p) for p in points):
