@@ -360,7 +360,7 @@ def _cmd_solve(args) -> int:
 
     output = _require_suffix(args.output, (".npz",), "-o")
     problem, settings = load_scenario(args.scenario)
-    for option in ("iterations", "chains", "seed"):
+    for option in ("iterations", "refine", "chains", "seed"):
         if getattr(args, option) is not None:
             settings[option] = getattr(args, option)
     from .solve.sampler import unmet
@@ -602,6 +602,9 @@ def _solve_arguments(parser) -> None:
     parser.add_argument("scenario", help="scenario file (.toml; see examples/scenarios)")
     _output(parser, "motion file to write (.npz)")
     parser.add_argument("--iterations", type=int, help="sampler iterations (default: the scenario's, else 1000)")
+    parser.add_argument(
+        "--refine", type=int, help="least-squares steps before sampling (default: the scenario's, else 40)"
+    )
     parser.add_argument("--chains", type=int, help="independent chains")
     parser.add_argument("--seed", type=int, help="random seed")
     _scale_out(parser)

@@ -197,6 +197,13 @@ def test_solve_writes_the_solution(capsys, tmp_path):
     assert code == 0, err
     motion = flockkit.Motion.load(out_file)
     assert motion.n_frames == 21 and abs(motion.positions[5, 0]).max() <= 1e-9 and "residual" in out
+    # --refine 0 samples from the initial trajectories as they are: another motion, same constraints
+    unrefined = tmp_path / "unrefined.npz"
+    code, _, err = run(capsys, "solve", str(scenario), "--iterations", "20", "--refine", "0", "-o", str(unrefined),
+                       "--quiet")  # fmt: skip
+    assert code == 0, err
+    other = flockkit.Motion.load(unrefined)
+    assert abs(other.positions[5, 0]).max() <= 1e-9 and not np.array_equal(other.positions, motion.positions)
 
 
 @pytest.mark.parametrize(
