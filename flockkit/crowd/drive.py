@@ -25,6 +25,11 @@ __all__ = ["State", "StateMachine", "Cue", "Driver", "character_frame", "AXES"]
 
 AXES = {"x": 0, "y": 1, "z": 2}
 
+# The controller that plays one clip: a convenience default, as flockkit.build_graph's builder is;
+# a crowd scene's [[streams]] entry, or driven_sliding's `controller`, names another (any
+# controller taking clip= and rate=).
+CLIP_CONTROLLER = "clip"
+
 
 def _streams(value) -> tuple:
     streams = tuple(int(v) for v in np.atleast_1d(np.asarray(value)))

@@ -17,7 +17,7 @@ from scipy.spatial.transform import Rotation
 
 from .. import validate
 from ..errors import ValidationError
-from .drive import _axis
+from .drive import CLIP_CONTROLLER, _axis
 from .skeleton import Pose, SkeletalClip
 
 __all__ = ["ground_speed", "foot_sliding", "driven_sliding", "plant_feet"]
@@ -51,21 +51,23 @@ def foot_sliding(joints: np.ndarray, feet, *, dt: float) -> float:
 
 
 def driven_sliding(motion, walk: SkeletalClip, idle: SkeletalClip, feet, rates, *, scale: float = 1.0, up: str = "y",
-                   forward: str = "z", fps: float | None = None, idle_below: float = 0.2) -> float:  # fmt: skip
+                   forward: str = "z", fps: float | None = None, idle_below: float = 0.2,
+                   controller=CLIP_CONTROLLER) -> float:  # fmt: skip
     """The foot sliding (``foot_sliding``, world units per second) of a crowd that follows
     `motion` (one agent each) idling below `idle_below` and walking above it on streams of
     `walk` at `rates`, each agent on the one whose ground speed is nearest its own (one rate:
     fixed-rate playback). A measure of how well a clip and its rates fit a group's speeds; at
-    `fps` (default the motion's)."""
-    from ..registry import get
+    `fps` (default the motion's). `controller` plays a clip (a name or factory taking clip= and
+    rate=)."""
+    from ..registry import resolve
     from .drive import Driver, State, StateMachine
     from .pool import Stream, StreamPool
     from .runtime import Crowd
 
     fps = 1.0 / motion.dt if fps is None else fps
     natural = ground_speed(walk, feet, up=up, forward=forward, scale=scale)
-    streams = [Stream(controller=get("controller", "clip", clip=idle), history=40)]
-    streams += [Stream(controller=get("controller", "clip", clip=walk, rate=r), history=40) for r in rates]
+    streams = [Stream(controller=resolve("controller", controller, clip=clip, rate=r), history=40)
+               for clip, r in [(idle, 1.0), *((walk, r) for r in rates)]]  # fmt: skip
     crowd = Crowd(StreamPool(streams, fps=fps), n_agents=motion.n_agents, clusters={"body": 1}, seed=0)
     walking = State(name="walk", streams=list(range(1, len(rates) + 1)), speeds=[natural * r for r in rates],
                     low=idle_below)  # fmt: skip
@@ -119,7 +121,8 @@ def plant_feet(clip: SkeletalClip, legs, *, up: str = "y", forward: str = "z", s
     chains = _legs(skeleton, legs)
     u, f = _axis(up, "up"), _axis(forward, "forward")
     period = clip.n_frames - 1  # frames of one loop; frame `period` is frame 0 again
-    positions = skeleton.positions(Pose._adopt(clip.rotations, clip.translations))[:period]
+    world = skeleton.world(Pose._adopt(clip.rotations, clip.translations))
+    positions = world[:period, :, :3, 3]
     contacts = [_contacts(positions[:, foot, u], contact) for _, _, foot in chains]
     if speed is None:
         back = sum(positions[run[0], foot, f] - positions[run[-1], foot, f]
@@ -133,9 +136,8 @@ def plant_feet(clip: SkeletalClip, legs, *, up: str = "y", forward: str = "z", s
         speed = back / planted
     speed = validate.number(speed, "plant_feet speed", minimum=0, strict=True)
     rotations = np.array(clip.rotations)
-    whole = Pose._adopt(clip.rotations, clip.translations)
     for (upper, middle, foot), runs in zip(chains, contacts):
-        hinge = _hinge(skeleton, whole, upper, middle, foot)
+        hinge = _hinge(world, upper, middle, foot)
         target, weight = _targets(positions[:, foot], runs, u, f, speed / clip.fps, ease)
         frames = np.flatnonzero(weight > 0)
         if len(frames):
@@ -204,11 +206,10 @@ def _targets(foot: np.ndarray, runs, u: int, f: int, step: float, ease: int):
     return target, weight
 
 
-def _hinge(skeleton, pose: Pose, upper: int, middle: int, foot: int) -> np.ndarray:
-    """The axis (3,) in `upper`'s frame about which the leg's middle joint bends over `pose`'s
-    frames: the mean normal of the planes (upper, middle, foot), so that inverse kinematics bends
-    every frame's knee the way the clip bends it most."""
-    world = skeleton.world(pose)
+def _hinge(world: np.ndarray, upper: int, middle: int, foot: int) -> np.ndarray:
+    """The axis (3,) in `upper`'s frame about which the leg's middle joint bends over the frames
+    of world joint matrices (T, J, 4, 4): the mean normal of the planes (upper, middle, foot), so
+    that inverse kinematics bends every frame's knee the way the clip bends it most."""
     a, b, c = (world[:, j, :3, 3] for j in (upper, middle, foot))
     normals = _rotation(world[:, upper]).inv().apply(np.cross(c - b, a - b))
     return _unit(normals.sum(axis=0))

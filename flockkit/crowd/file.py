@@ -52,7 +52,7 @@ from .. import _tomlfile
 from ..errors import FlockkitError, ValidationError
 from ..motion import Motion
 from ..registry import resolve
-from .drive import Cue, Driver, State, StateMachine
+from .drive import CLIP_CONTROLLER, Cue, Driver, State, StateMachine
 from .feet import ground_speed, plant_feet
 from .pool import Stream, StreamPool
 from .runtime import Crowd
@@ -60,9 +60,6 @@ from .skeleton import read_clips
 
 __all__ = ["CrowdScene", "read_crowd_scene"]
 
-# The controller that plays one clip: a convenience default, as flockkit.build_graph's builder is;
-# a [[streams]] entry names another (any controller taking clip= and rate=).
-CLIP_CONTROLLER = "clip"
 _KEYS = {"seconds", "fps", "seed", "record", "trajectories", "character", "streams", "machine", "states", "cues"}
 
 

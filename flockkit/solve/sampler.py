@@ -359,6 +359,8 @@ def _warn_implausible(problem: Problem, model, seed) -> None:
     the solve still meets it exactly, at the cost of motion that does not look like the model's."""
     from ..convenience import random_flock
 
+    if not problem.tracks:  # shape constraints alone: no speed given or implied
+        return
     rng = np.random.default_rng(seed)
     steps = min(max(problem.n_frames - 1, 2), 60)  # long enough for a random flock to gather
     simulated = model.forward(random_flock(n_agents=problem.n_agents, dims=problem.dims, rng=rng), steps, rng)
