@@ -19,6 +19,7 @@ from .errors import FileFormatError, ValidationError
 from .features import Features
 from .mesh import AnimatedMesh, face_edges, faces_array
 from .motion import Motion
+from .synthesis import _positions, blended_frames, played_length
 
 __all__ = ["Segmentation", "GraphLayers", "LayeredWalk", "seam_stretch"]
 
@@ -29,11 +30,9 @@ LAYERS_FORMAT_VERSION = 1
 # unsmoothed and 0.039 with 2 rings and 8 passes, which cost 30% more time).
 SEAM_RINGS = 1
 SEAM_PASSES = 4
-# Synthesis copies a part's points run by run when its runs of consecutive indices hold this many
-# points on average, and gathers them otherwise.
-MIN_RUN = 4
-# Seam smoothing works on blocks of frames of about this many bytes, small enough to stay in cache.
-SEAM_BLOCK_BYTES = 1 << 20
+# Synthesis gathers the points into place in blocks of frames whose indices take about this many
+# bytes, small enough to stay in cache.
+GATHER_BLOCK_BYTES = 1 << 20
 
 
 def _labels(value) -> np.ndarray:
@@ -144,8 +143,7 @@ class GraphLayers:
     graphs: tuple = attrs.field(converter=tuple)
     faces: np.ndarray | None = attrs.field(default=None, converter=_faces_or_none)
     features: Features | None = attrs.field(default=None)
-    _seams: tuple | None = attrs.field(init=False, default=None, repr=False, eq=False)  # made by synthesis
-    _runs: list | None = attrs.field(init=False, default=None, repr=False, eq=False)  # made by synthesis
+    _seams: object = attrs.field(init=False, default=None, repr=False, eq=False)  # made by synthesis
 
     def __attrs_post_init__(self):
         from .graph import MotionGraph
@@ -286,42 +284,116 @@ def synthesize_layers(layers: GraphLayers, walk: LayeredWalk) -> Motion:
     within SEAM_RINGS rings of mesh neighbors of a face that spans two parts, each point's
     displacement from its mean position in the source is replaced, SEAM_PASSES times, by the mean
     of its neighbors' (points farther away keep theirs), so a seam bends over a few edges instead of
-    tearing."""
-    from .synthesis import _positions
+    tearing.
 
+    One gather writes every frame: each part contributes a table of rows (its source frames and
+    its blended frames, or its placed frames where its walk moves it) and the row each output
+    frame plays. The smoothing is linear, so each part's share of it is a table played the same
+    way, summed for a block of frames at a time."""
     if not isinstance(walk, LayeredWalk) or len(walk.walks) != layers.n_parts:
         raise ValidationError(f"synthesizing {layers.n_parts} layers needs a LayeredWalk of {layers.n_parts} walks")
-    played = [_positions(graph, w) for graph, w in zip(layers.graphs, walk.walks)]  # no Motion each: no copies
-    frames = min(len(p) for p in played)
-    positions = np.empty((frames, layers.source.n_agents, layers.source.dims))
-    for part, (points, shift, runs) in zip(played, _part_runs(layers)):
-        if runs is None:  # scattered points: one gather
-            positions[:, points] = part[:frames]
-            continue
-        for start, stop in runs:  # runs of consecutive points: slices copy far faster than a gather
-            positions[:, start:stop] = part[:frames, start - shift[start] : stop - shift[start]]
-    if layers.faces is not None and layers.n_parts > 1 and SEAM_PASSES > 0:
-        positions = _smooth_seams(positions, layers)
+    frames = min(played_length(graph, w) for graph, w in zip(layers.graphs, walk.walks))
+    plays = [_Play.of(graph, w, frames) for graph, w in zip(layers.graphs, walk.walks)]
+    seams = _seam_shares(layers)
+    n, d = layers.source.n_agents, layers.source.dims
+    smoothed = 0 if seams is None else len(seams.smoothed)
+    step = max(1, GATHER_BLOCK_BYTES // (8 * n))
+    # items: every part's table, then the smoothed points of one block of frames
+    width = [graph.motion.n_agents for graph in layers.graphs] + [smoothed]
+    offsets = np.cumsum([0] + [play.n_rows * w for play, w in zip(plays, width)])
+    items = np.empty((offsets[-1] + step * smoothed, d))
+    for play, graph, first, last, w in zip(plays, layers.graphs, offsets, offsets[1:], width):
+        play.table(graph.motion.positions, out=items[first:last].reshape(-1, w, d))
+    # the item of point v at frame t: start[t, its column] + its index in the column
+    start = np.empty((frames, layers.n_parts + 1), dtype=np.int64)
+    for k, play in enumerate(plays):
+        start[:, k] = offsets[k] + play.rows * width[k]
+    column, local = layers.segmentation.labels.astype(np.int64), _local_index(layers.segmentation)
+    shares = []
+    if seams is not None:
+        column[seams.smoothed], local[seams.smoothed] = layers.n_parts, np.arange(smoothed)
+        shares = [(play, part, part.table(play)) for play, part in zip(plays, seams.parts) if part is not None]
+    positions = np.empty((frames, n, d))
+    block = items[offsets[-1] :].reshape(step, smoothed, d)
+    for first in range(0, frames, step):
+        stop = min(first + step, frames)
+        if seams is not None:
+            block[...] = seams.offset
+            for play, part, table in shares:
+                taken = np.take(table, play.rows[first:stop], axis=0)
+                for a, b, row in part.runs:
+                    block[: stop - first, a:b] += taken[:, row : row + b - a]
+        start[first:stop, -1] = offsets[-1] + np.arange(stop - first) * smoothed
+        index = np.take(start[first:stop], column, axis=1) + local
+        np.take(items, index, axis=0, out=positions[first:stop], mode="clip")  # clip: no buffering
     return Motion._adopt(positions, layers.source.dt)
 
 
-def _part_runs(layers: GraphLayers):
-    """Per part: its points and, where they form runs of MIN_RUN consecutive indices on average,
-    each point's index minus its index in the part and the (start, stop) of each run; made once
-    per layers."""
-    if layers._runs is None:
-        found = []
-        for points in layers.segmentation.parts():
-            breaks = np.flatnonzero(np.diff(points) != 1) + 1
-            if len(breaks) + 1 > max(1, len(points) // MIN_RUN):
-                found.append((points, None, None))
-                continue
-            starts, stops = points[np.append(0, breaks)], points[np.append(breaks - 1, len(points) - 1)] + 1
-            shift = np.zeros(layers.source.n_agents, dtype=np.int64)
-            shift[points] = points - np.arange(len(points))
-            found.append((points, shift, list(zip(starts.tolist(), stops.tolist()))))
-        object.__setattr__(layers, "_runs", found)
-    return layers._runs
+@attrs.frozen(eq=False)
+class _Play:
+    """How a part plays its first frames: frame t plays row `rows[t]` of the part's table. Where
+    the part's walk moves it, the table is `placed`, its placed frames; otherwise the table is the
+    source frames followed by the frames blended from `old` into `new` with `weight`, so frames
+    outside blends read the source itself."""
+
+    rows: np.ndarray
+    placed: np.ndarray | None = None
+    old: np.ndarray | None = None
+    new: np.ndarray | None = None
+    weight: np.ndarray | None = None
+    n_source: int = 0
+
+    @classmethod
+    def of(cls, graph, walk, frames: int) -> _Play:
+        if not _stays_in_place(graph, walk):
+            return cls(rows=np.arange(frames), placed=_positions(graph, walk, frames))
+        new, old, weight = (a[:frames] for a in blended_frames(graph, walk))
+        blending = np.flatnonzero(weight < 1)
+        rows = new.copy()
+        rows[blending] = graph.motion.n_frames + np.arange(len(blending))
+        return cls(rows=rows, old=old[blending], new=new[blending], weight=weight[blending, None, None],
+                   n_source=graph.motion.n_frames)  # fmt: skip
+
+    @property
+    def n_rows(self) -> int:
+        return len(self.placed) if self.placed is not None else self.n_source + len(self.old)
+
+    def table(self, source: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """The table of `source` (values of the part's points at every source frame, or of
+        anything linear in them), into `out` if given."""
+        if out is None:
+            out = np.empty((self.n_rows, *source.shape[1:]))
+        if self.placed is not None:
+            out[...] = self.placed
+            return out
+        out[: self.n_source] = source
+        mixed = np.take(source, self.old, axis=0, out=out[self.n_source :], mode="clip")
+        mixed *= 1 - self.weight  # as synthesize blends: (1 - w) * old + w * new
+        blended_into = np.take(source, self.new, axis=0)
+        blended_into *= self.weight
+        mixed += blended_into
+        return out
+
+
+def _stays_in_place(graph, walk) -> bool:
+    """Whether `walk` plays every frame where the source has it (no placement, no exchange of
+    points), as the windowed builder's graphs do."""
+    d, n = graph.motion.dims, graph.motion.n_agents
+    rotation, translation = walk.pose(d)
+    tables = graph.tables
+    return (
+        np.array_equal(rotation, np.eye(d)) and not np.any(translation) and not np.any(tables.translation)
+        and np.array_equal(tables.rotation, np.broadcast_to(np.eye(d), tables.rotation.shape))
+        and np.array_equal(tables.assignment, np.broadcast_to(np.arange(n), tables.assignment.shape))
+    )  # fmt: skip
+
+
+def _local_index(segmentation: Segmentation) -> np.ndarray:
+    """Each point's index within its part."""
+    local = np.empty(len(segmentation.labels), dtype=np.int64)
+    for points in segmentation.parts():
+        local[points] = np.arange(len(points))
+    return local
 
 
 def _adjacency(n_points: int, faces: np.ndarray):
@@ -337,9 +409,43 @@ def seam_points(layers: GraphLayers) -> np.ndarray:
     return np.unique(layers.faces[spanning])
 
 
-def _seam_operator(layers: GraphLayers):
-    """(involved points, those smoothed, A, c): SEAM_PASSES passes of smoothing composed into one
-    affine map, smoothed positions = A @ involved positions + c; made once per layers."""
+@attrs.frozen(eq=False)
+class _SeamShare:
+    """One part's share of the seam smoothing: operator @ (the part's points `columns`), whose rows
+    are added to the smoothed points in `runs` of (first, stop, first row of the share); `shares`
+    is that share at every source frame (T, rows, D)."""
+
+    columns: np.ndarray
+    runs: list
+    operator: object
+    shares: np.ndarray
+
+    def table(self, play: _Play) -> np.ndarray:
+        """The share's table for `play` (worked out from the placed frames where the part moves)."""
+        if play.placed is not None:
+            return _apply(self.operator, play.placed[:, self.columns])
+        return play.table(self.shares)
+
+
+@attrs.frozen(eq=False)
+class _Seams:
+    """The seam smoothing of some layers: the smoothed points' positions are offset plus the sum
+    of every part's share. The smoothed points are ordered by the parts that give them a share,
+    so each part's rows are a few runs: slices add far faster than indices."""
+
+    passes: int
+    smoothed: np.ndarray
+    offset: np.ndarray
+    parts: list  # a _SeamShare per part, None for a part that gives no share
+
+
+def _seam_shares(layers: GraphLayers) -> _Seams | None:
+    """The seam smoothing of `layers` (made once per layers and SEAM_PASSES), None where there
+    is none."""
+    if layers.faces is None or layers.n_parts < 2 or SEAM_PASSES < 1:
+        return None
+    if layers._seams is not None and layers._seams.passes == SEAM_PASSES:
+        return layers._seams
     adjacency = _adjacency(layers.source.n_agents, layers.faces)
     zone = np.zeros(layers.source.n_agents, dtype=bool)
     zone[seam_points(layers)] = True
@@ -350,30 +456,42 @@ def _seam_operator(layers: GraphLayers):
     inner = zone[involved]
     degree = np.asarray(adjacency.sum(axis=1)).ravel()[involved]
     mean_of_neighbors = adjacency[involved][:, involved].multiply(1.0 / np.maximum(degree, 1)[:, None])
-    # one pass: inner rows take their neighbors' mean displacement, the others keep theirs
+    # one pass: inner rows take their neighbors' mean displacement, the others keep theirs; the
+    # passes composed: smoothed positions = composed @ involved positions + offset
     one_pass = (diags(inner.astype(float)) @ mean_of_neighbors + diags((~inner).astype(float))).tocsr()
     composed = identity(len(involved), format="csr")
     for _ in range(SEAM_PASSES):
         composed = one_pass @ composed
-    composed = composed[np.flatnonzero(inner)].tocsr()
+    composed = composed[np.flatnonzero(inner)].tocsc()
+    labels, local = layers.segmentation.labels[involved], _local_index(layers.segmentation)[involved]
+    mine = [np.flatnonzero(labels == k) for k in range(layers.n_parts)]
+    order = np.lexsort([composed[:, columns].getnnz(axis=1) > 0 for columns in mine])
+    composed = composed[order]
+    parts = []
+    for columns, graph in zip(mine, layers.graphs):
+        operator = composed[:, columns].tocsr()
+        touched = np.flatnonzero(operator.getnnz(axis=1))
+        if not len(touched):
+            parts.append(None)
+            continue
+        breaks = np.flatnonzero(np.diff(touched) != 1) + 1
+        firsts, lasts = np.append(0, breaks), np.append(breaks, len(touched)) - 1
+        runs = [(touched[a], touched[b] + 1, a) for a, b in zip(firsts.tolist(), lasts.tolist())]
+        operator = operator[touched]
+        shares = _apply(operator, graph.motion.positions[:, local[columns]])
+        parts.append(_SeamShare(columns=local[columns], runs=runs, operator=operator, shares=shares))
     rest = layers.source.positions.mean(axis=0)[involved]
-    return SEAM_PASSES, involved, involved[inner], composed, rest[inner] - composed @ rest
+    seams = _Seams(passes=SEAM_PASSES, smoothed=involved[inner][order], offset=rest[inner][order] - composed @ rest,
+                   parts=parts)  # fmt: skip
+    object.__setattr__(layers, "_seams", seams)
+    return seams
 
 
-def _smooth_seams(positions: np.ndarray, layers: GraphLayers) -> np.ndarray:
-    if layers._seams is None or layers._seams[0] != SEAM_PASSES:
-        object.__setattr__(layers, "_seams", _seam_operator(layers))
-    _, involved, smoothed, composed, offset = layers._seams
-    frames, _, d = positions.shape
-    if len(smoothed) == 0:
-        return positions
-    block = max(1, SEAM_BLOCK_BYTES // (8 * d * len(involved)))
-    for start in range(0, frames, block):
-        chunk = positions[start : start + block]
-        n = len(chunk)
-        points = np.take(chunk, involved, axis=1).transpose(1, 0, 2).reshape(len(involved), n * d)
-        chunk[:, smoothed] = (composed @ points).reshape(len(smoothed), n, d).transpose(1, 0, 2) + offset
-    return positions
+def _apply(operator, positions: np.ndarray) -> np.ndarray:
+    """operator (K, M) applied to every frame of positions (T, M, D): (T, K, D)."""
+    frames, m, d = positions.shape
+    flat = np.ascontiguousarray(positions.transpose(1, 0, 2)).reshape(m, frames * d)
+    return np.ascontiguousarray((operator @ flat).reshape(-1, frames, d).transpose(1, 0, 2))
 
 
 def seam_stretch(motion: Motion, faces, labels=None, *, reference: Motion | None = None) -> float:

@@ -125,23 +125,29 @@ def _blend_rows(blends, n_frames: int):
     frames and segments of the motion blended out of, and the weight of the motion blended into
     (a smoothstep from 0 to 1, exclusive)."""
     out, first, old_segment, blend = blends
-    count = np.minimum(blend, n_frames - out)
+    count = np.clip(n_frames - out, 0, blend)
     within = _runs(np.ones_like(count), count)  # 1..count inside each blend
     weight = _smoothstep(within / np.repeat(blend + 1, count))
     return _runs(out, count), _runs(first, count), np.repeat(old_segment, count), weight
 
 
-def _positions(graph: MotionGraph, walk: Walk) -> np.ndarray:
+def _positions(graph: MotionGraph, walk: Walk, n_frames: int | None = None) -> np.ndarray:
+    """The first `n_frames` (default: all) frames `walk` plays."""
     source = graph.motion.positions
     (output_start, source_start, length), rotations, translations, mappings, blends = _plan(graph, walk)
-    segment = np.repeat(np.arange(len(length)), length)
-    positions = _place(source, _runs(source_start, length), segment, rotations, translations, mappings)
+    segment = np.repeat(np.arange(len(length)), length)[:n_frames]
+    positions = _place(source, _runs(source_start, length)[:n_frames], segment, rotations, translations, mappings)
     if len(blends[0]):
         rows, old_frames, old_segments, weight = _blend_rows(blends, len(positions))
         old = _place(source, old_frames, old_segments, rotations, translations, mappings)
         weight = weight[:, None, None]
         positions[rows] = (1 - weight) * old + weight * positions[rows]
     return positions
+
+
+def played_length(graph: MotionGraph, walk: Walk) -> int:
+    """How many frames `walk` plays."""
+    return int(_plan(graph, walk)[0][2].sum())
 
 
 def blended_frames(graph: MotionGraph, walk: Walk) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -152,3 +152,62 @@ def test_layered_synthesis_equals_each_part_played_and_smoothed_pass_by_pass(mon
     smoothed = flockkit.synthesize(layers, walk).positions
     np.testing.assert_allclose(smoothed, displacement + rest, atol=1e-12)
     assert not np.allclose(smoothed, expected)
+
+
+def small_flag(side=12, frames=90):
+    """A grid whose left and right halves wave at different rates, with its halves as parts."""
+    u, v = np.meshgrid(np.linspace(0, 1, side), np.linspace(0, 1, side))
+    u, v = u.ravel(), v.ravel()
+    t = np.arange(frames)[:, None] / 30
+    wave = np.where(u < 0.5, 0.1 * np.sin(2 * np.pi * (0.7 * t + u)), 0.15 * np.sin(2 * np.pi * (1.3 * t + 2 * u)))
+    positions = np.stack([np.broadcast_to(u, wave.shape), np.broadcast_to(v, wave.shape), wave * u], axis=2)
+    index = np.arange(side * side).reshape(side, side)
+    quads = np.stack([index[:-1, :-1], index[:-1, 1:], index[1:, 1:], index[1:, :-1]], axis=2).reshape(-1, 4)
+    mesh = flockkit.AnimatedMesh(motion=flockkit.Motion(positions=positions, dt=1 / 30), faces=quads, name="flag")
+    return mesh, flockkit.Segmentation(labels=(u >= 0.5).astype(int), n_parts=2)
+
+
+def smoothed_by_hand(positions, layers):
+    """The documented smoothing, point by point: the zone is the points of faces that span two
+    parts and SEAM_RINGS rings around them; each pass gives every zone point the mean displacement
+    (from its mean source position) of its mesh neighbors."""
+    import flockkit.layers as module
+
+    labels = layers.segmentation.labels
+    neighbors = [set() for _ in labels]
+    for face in layers.faces:
+        for a, b in zip(face, np.roll(face, -1)):
+            neighbors[a].add(b)
+            neighbors[b].add(a)
+    zone = {p for face in layers.faces if len(set(labels[face])) > 1 for p in face}
+    for _ in range(module.SEAM_RINGS):
+        zone |= {q for p in zone for q in neighbors[p]}
+    rest = layers.source.positions.mean(axis=0)
+    shifted = positions - rest
+    for _ in range(module.SEAM_PASSES):
+        before = shifted.copy()
+        for p in zone:
+            shifted[:, p] = np.mean([before[:, q] for q in neighbors[p]], axis=0)
+    return shifted + rest
+
+
+@pytest.mark.parametrize("moved", [False, True])
+def test_layered_synthesis_is_its_parts_played_and_smoothed(moved):
+    """Every part plays exactly what synthesize plays for its own walk (a part moved by its walk's
+    start pose included), and the seams are smoothed as documented."""
+    mesh, parts = small_flag()
+    layers = flockkit.build_layers(mesh, segmentation=parts, seed=0)
+    walk = flockkit.walk(layers, duration=10, seed=3)
+    assert all(any(kind == "transition" for kind, _ in w.edges) for w in walk.walks)  # blends played
+    if moved:  # the second part played a little to the side
+        shifted = walk.walks[1]
+        shifted = flockkit.Walk(start=shifted.start, edges=shifted.edges, translation=[0.0, 0.0, 0.05])
+        walk = flockkit.LayeredWalk(walks=[walk.walks[0], shifted])
+    own = [flockkit.synthesize(graph, w).positions for graph, w in zip(layers.graphs, walk.walks)]
+    frames = min(len(p) for p in own)
+    assembled = np.empty((frames, mesh.motion.n_agents, 3))
+    for points, played in zip(parts.parts(), own):
+        assembled[:, points] = played[:frames]
+    played = flockkit.synthesize(layers, walk).positions
+    np.testing.assert_allclose(played, smoothed_by_hand(assembled, layers), rtol=0, atol=1e-12)
+    assert not np.allclose(played, assembled)  # the smoothing did something
