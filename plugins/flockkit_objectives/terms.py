@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.sparse import coo_matrix
+from scipy.sparse import coo_matrix, csr_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
@@ -92,14 +92,22 @@ def count_flocks(positions: np.ndarray, visibility: float):
     f, n = frames.shape[:2]
     if not f or not n:
         return 0 if single else np.zeros(f, dtype=int)
-    if n <= _DENSE_UP_TO:
-        squared = np.sum((frames[:, :, None] - frames[:, None]) ** 2, axis=-1)
-        frame, i, j = np.nonzero(np.triu(squared < visibility * visibility, k=1))
-        i, j = frame * n + i, frame * n + j
+    if n <= _DENSE_UP_TO:  # per frame an N x N table of who sees whom, axis by axis (no (F, N, N, D) temporary)
+        axes = np.ascontiguousarray(np.moveaxis(frames, 2, 0))
+        squared = np.zeros((f, n, n))
+        for coordinate in axes:
+            offset = coordinate[:, None, :] - coordinate[:, :, None]
+            offset *= offset
+            squared += offset
+        close = (squared < visibility * visibility).reshape(f * n, n)
+        rows, j = np.nonzero(close)
+        indptr = np.zeros(f * n + 1, dtype=np.int64)
+        np.cumsum(np.count_nonzero(close, axis=1), out=indptr[1:])
+        graph = csr_matrix((np.ones(len(j), dtype=np.int8), j + rows // n * n, indptr), shape=(f * n, f * n))
     else:
         pairs = [cKDTree(x).query_pairs(visibility, output_type="ndarray") + k * n for k, x in enumerate(frames)]
         i, j = np.concatenate(pairs).T if pairs else (np.zeros(0, int), np.zeros(0, int))
-    graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(f * n, f * n))
+        graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(f * n, f * n))
     labels = np.sort(connected_components(graph, directed=False)[1].reshape(f, n), axis=1)
     counts = 1 + np.count_nonzero(np.diff(labels, axis=1), axis=1)
     return int(counts[0]) if single else counts
