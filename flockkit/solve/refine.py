@@ -38,13 +38,19 @@ BOUNDARY = 0.05  # agents this close to their shape's boundary move along it, no
 _STEP = 1e-6  # finite-difference step, in the motion's length units
 
 
-def refine(problem: Problem, behavior, motion: Motion, pinned: np.ndarray, rng, *, iterations: int = 40) -> Motion:
+def refine(
+    problem: Problem, behavior, motion: Motion, pinned: np.ndarray, rng, *, iterations: int = 40, sample: bool = True
+) -> Motion:
     """`motion` improved by least squares on `behavior`'s residuals (see the module docstring),
     every agent-frame of `pinned` (T, N) and the first two frames (the state it starts from)
-    held where they are; at most `iterations` steps."""
+    held where they are; at most `iterations` steps. With ``sample=False`` the targets are zero:
+    the most regular motion the steps reach (a bound on what the model allows, not a sample)."""
     if not capabilities(behavior).residuals:
         raise ValidationError("refine needs a behavior model declaring Capabilities(residuals=True)")
-    return _Refinement(problem, behavior, motion, pinned, rng).run(iterations)
+    refinement = _Refinement(problem, behavior, motion, pinned, rng)
+    if not sample:
+        refinement.targets[...] = 0.0
+    return refinement.run(iterations)
 
 
 class _Refinement:

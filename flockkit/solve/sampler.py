@@ -4,7 +4,10 @@ log g(A) = sum over frames of [log g_w (the behavior's log_plausibility) + the o
 Each iteration picks a proposal move at random (default bump 0.6, velocity 0.3, regenerate 0.1),
 and accepts its candidate with probability min(1, exp(log g(candidate) - log g(current))). Every
 ADAPT_EVERY proposals of a move, the scale it is given (``ProposalContext.scale``, at most 1)
-halves if fewer than a fifth were accepted and doubles if more than half were.
+halves if fewer than a fifth were accepted and doubles if more than half were; a move none of
+whose last ADAPT_EVERY proposals was accepted is picked half as often (down to a RAREST share of
+its probability; back up as it is accepted again), so that moves which cannot improve the
+current motion, such as regenerate after a refined start, stop costing most of the time.
 Scoring is incremental: a proposal reports the frames and agents it changed, and only frames
 within the behavior's ``plausibility_reach`` of them are re-scored (all of them for a model that
 does not declare one); objective terms depend on their own frame only.
@@ -177,7 +180,8 @@ class Scorer:
 
 
 STABLE_WINDOW = 100  # iterations per running mean for the `stable` stopping rule
-ADAPT_EVERY = 25  # proposals of a move between adaptations of its scale
+ADAPT_EVERY = 25  # proposals of a move between adaptations of its scale and share
+RAREST = 1 / 8  # the smallest share of its probability a move that is never accepted keeps
 
 
 def run_chain(
@@ -201,6 +205,7 @@ def run_chain(
     names = [name for name, _, _ in moves]
     weights = np.array([p for _, _, p in moves], dtype=float)
     weights = weights / weights.sum()
+    shares = np.ones(len(moves))  # each move's share of its probability
     spans, pinned = tuple(windows(problem)), pinned_frames(problem)
     current, scores = initial, scorer.frames(initial)
     total = float(scores.sum())
@@ -208,7 +213,8 @@ def run_chain(
     log_g, tried, accepted = np.empty(iterations), [], np.zeros(iterations, dtype=bool)
     scales, tries, takes = np.ones(len(moves)), np.zeros(len(moves), dtype=int), np.zeros(len(moves), dtype=int)
     for iteration in range(iterations):
-        pick = int(rng.choice(len(moves), p=weights))
+        chances = weights * shares
+        pick = int(rng.choice(len(moves), p=chances / chances.sum()))
         context = ProposalContext(
             problem=problem, behavior=behavior, windows=spans, scores=_readonly(scores), pinned=pinned,
             scale=float(scales[pick]),
@@ -230,6 +236,7 @@ def run_chain(
         if tries[pick] == ADAPT_EVERY:  # aim each move's size at about a fifth to a half accepted
             rate = takes[pick] / ADAPT_EVERY
             scales[pick] = min(1.0, scales[pick] * (0.5 if rate < 0.2 else 2.0 if rate > 0.5 else 1.0))
+            shares[pick] = max(RAREST, shares[pick] / 2) if rate == 0 else min(1.0, shares[pick] * 2)
             tries[pick] = takes[pick] = 0
         if callback is not None:
             callback(iteration, total, bool(accepted[iteration]))

@@ -349,17 +349,18 @@ class Boids:
         count = pairs.total(seen)
         share = np.divide(1.0, count, out=np.zeros(count.shape), where=count > 0)
         # Per pair: cohesion pulls along the offset, separation pushes against it, alignment
-        # averages neighbors' velocities: steer_i = sum_j W_ij (x_j - x_i) + sum_j A_ij v_j - ...
-        push = np.where(
-            distance < self.separation_radius,
-            (1.0 - distance / self.separation_radius) / np.maximum(distance, 1e-12),
-            0.0,
-        )
-        pull = self.cohesion_weight / self.perception_radius * pairs.rows(share)
-        w = np.where(seen, pull - self.separation_weight * push, 0.0)
-        a = np.where(seen, (self.alignment_weight / self.target_speed) * pairs.rows(share), 0.0)
-        steer += pairs.weighted_sum(w, x) - pairs.total(w)[..., None] * x
-        steer += pairs.weighted_sum(a, v) - (self.alignment_weight / self.target_speed) * (count > 0)[..., None] * v
+        # averages neighbors' velocities. Cohesion and alignment weigh every seen neighbor alike,
+        # so they need only the sums over seen neighbors of positions and velocities (one product):
+        # steer_i = pull_i sum_j (x_j - x_i) - separation sum_j push_ij (x_j - x_i) + align_i sum_j v_j - ...
+        push = np.maximum(1.0 - distance / self.separation_radius, 0.0)  # 0 beyond the radius
+        push /= np.maximum(distance, 1e-12)
+        push *= seen
+        sums = pairs.weighted_sum(seen.astype(np.float64), np.concatenate([x, v], axis=-1))
+        pull = self.cohesion_weight / self.perception_radius * share
+        steer += pull[..., None] * (sums[..., : x.shape[-1]] - count[..., None] * x)
+        steer -= self.separation_weight * (pairs.weighted_sum(push, x) - pairs.total(push)[..., None] * x)
+        align = self.alignment_weight / self.target_speed
+        steer += align * (share[..., None] * sums[..., x.shape[-1] :] - (count > 0)[..., None] * v)
 
         steer += (self.speed_weight / self.target_speed) * (self.target_speed - speed)[..., None] * heading
         for obstacle in self.obstacles:
@@ -388,7 +389,7 @@ class _DensePairs:
         self._x = x
 
     def offsets(self):
-        return [c[..., None, :] - c[..., :, None] for c in np.moveaxis(self._x, -1, 0)]
+        return [c[..., None, :] - c[..., :, None] for c in np.ascontiguousarray(np.moveaxis(self._x, -1, 0))]
 
     def within(self, distance, radius):
         return (distance <= radius) & ~np.eye(distance.shape[-1], dtype=bool)

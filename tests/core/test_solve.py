@@ -124,6 +124,26 @@ def test_refining_makes_the_flock_model_like_and_keeps_every_constraint():
     assert np.array_equal(again.motion.positions, refined.motion.positions)
 
 
+def test_refining_without_sampling_fits_zero_residuals():
+    """sample=False aims every residual at zero: smaller residuals than the sampled refinement,
+    whose targets are the model's own draws, and every constraint still met."""
+    from flockkit.solve import refine
+    from flockkit.solve.sampler import pinned_frames, residuals
+
+    problem = small_problem()
+    boids = flockkit.get("behavior", "boids")
+    motion = flockkit.solve(problem, iterations=0, refine=0, seed=3).motion
+    pinned = pinned_frames(problem)
+    sampled = refine(problem, boids, motion, pinned, np.random.default_rng(0))
+    regular = refine(problem, boids, motion, pinned, np.random.default_rng(0), sample=False)
+
+    def size(m):
+        return float(np.sum(boids.plausibility_residuals(m) ** 2))
+
+    assert size(regular) < size(sampled) < size(motion)
+    assert max(residuals(problem, regular)) <= 1e-9
+
+
 def test_refine_needs_a_model_that_declares_residuals():
     from flockkit.solve import refine
     from flockkit.solve.sampler import pinned_frames
