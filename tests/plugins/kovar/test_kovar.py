@@ -80,10 +80,12 @@ def test_pruned_build_probing_from_strips_is_identical(monkeypatch):
     assert structure(pruned) == structure(full) and pruned.params["evaluated"] < full.params["evaluated"]
 
 
-def test_adaptive_threshold_is_the_last_local_minimum_taken(recording):
+def test_adaptive_threshold_is_the_last_local_minimum_taken():
     """The adaptive rule takes the lowest local minima of the difference matrix until enough
     transitions survive the trimming of dead ends: its threshold is one of them. (With the default
-    30, this short recording has too few: every minimum is taken.)"""
+    30, this short recording has too few: every minimum is taken. It is longer than the shared
+    one, whose few minima, all taken, leave fewer than 4 transitions.)"""
+    recording = flockkit.simulate(n_agents=6, steps=200, seed=11)
     graph = flockkit.get("builder", "kovar", min_transitions=4).build(recording, METRIC, np.random.default_rng(0))
     frames = np.arange(graph.params["candidates"]) * graph.params["stride"]
     values = squareform(METRIC.pairwise([recording.configuration(int(f)) for f in frames]))
