@@ -47,14 +47,11 @@ def refine(
     the most regular motion the steps reach (a bound on what the model allows, not a sample)."""
     if not capabilities(behavior).residuals:
         raise ValidationError("refine needs a behavior model declaring Capabilities(residuals=True)")
-    refinement = _Refinement(problem, behavior, motion, pinned, rng)
-    if not sample:
-        refinement.targets[...] = 0.0
-    return refinement.run(iterations)
+    return _Refinement(problem, behavior, motion, pinned, rng, sample).run(iterations)
 
 
 class _Refinement:
-    def __init__(self, problem, behavior, motion, pinned, rng):
+    def __init__(self, problem, behavior, motion, pinned, rng, sample=True):
         self.problem, self.behavior, self.motion = problem, behavior, motion
         self.shape = motion.positions.shape
         t, n, d = self.shape
@@ -66,11 +63,14 @@ class _Refinement:
         reach = capabilities(behavior).plausibility_reach
         self.reach = t if reach is None else reach
         # targets: each agent-frame's own residual where it is already one the model draws, else
-        # one drawn by a forward simulation of the same flock
-        simulated = np.asarray(behavior.plausibility_residuals(behavior.forward(motion.state(0), t - 1, rng)))
+        # one drawn by a forward simulation of the same flock; zero without sampling
         self.targets = np.asarray(behavior.plausibility_residuals(motion)).copy()
-        unlikely = np.linalg.norm(self.targets, axis=-1) > LIKELY
-        self.targets[unlikely] = simulated[unlikely]
+        if not sample:
+            self.targets[...] = 0.0
+        else:
+            simulated = np.asarray(behavior.plausibility_residuals(behavior.forward(motion.state(0), t - 1, rng)))
+            unlikely = np.linalg.norm(self.targets, axis=-1) > LIKELY
+            self.targets[unlikely] = simulated[unlikely]
         self.coms = [(problem.frame(c.time), np.array(problem.agents_of(c)), np.asarray(c.position))
                      for c in problem.constraints if isinstance(c, ComConstraint)]  # fmt: skip
         self.shapes = [(problem.frame(c.time), np.array(problem.agents_of(c)), c.shape)

@@ -2,9 +2,9 @@
 
 import flockkit
 
-from .metric import IcpHungarian
+from .metric import IcpHungarian, exact_distance
 
-__all__ = ["IcpHungarian"]
+__all__ = ["IcpHungarian", "exact_distance"]
 
 
 @flockkit.hookimpl

@@ -281,7 +281,7 @@ class IcpHungarian:
         root = math.sqrt(w)
         # positions and root(w) * velocities side by side: one cost matrix holds both terms
         left = np.concatenate([pa, root * va], axis=2) if w else pa
-        for _ in range(self.max_iterations):
+        for step in range(self.max_iterations):
             right = _rotate(pb[active], rotation[active])
             if w:
                 right = np.concatenate([right, root * _rotate(vb[active], rotation[active])], axis=2)
@@ -299,7 +299,7 @@ class IcpHungarian:
                 rotation[better],
             )
             going = improved & moved & (distance < previous * (1 - self.tolerance))
-            if len(active) == m and n >= PRUNE_FROM and group > KEEP:  # after the first assignment
+            if step == 0 and n >= PRUNE_FROM and group > KEEP:  # after the first assignment
                 rank = np.argsort(np.argsort(distance.reshape(-1, group), axis=1), axis=1)
                 going &= rank.ravel() < KEEP
             active, assignment = active[going], assignment[going]
@@ -341,6 +341,20 @@ class _Prepared:
         starts = [np.transpose(axes[ia], (0, 2, 1)) @ turn @ axes[ib]
                   for turn in turns for axes in (self.frames, self.principal)]  # fmt: skip
         return np.stack(starts, axis=1)
+
+
+def exact_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """E without velocities by enumeration, for small groups (N!): every assignment of `b`'s
+    points (N, D) to `a`'s, each with its best proper rotation (batched Kabsch). The reference
+    the metric's search is checked against (tests, bench/metric.py)."""
+    a, b = a - a.mean(axis=0), b - b.mean(axis=0)
+    orders = np.array(list(itertools.permutations(range(len(a)))))
+    best = np.inf
+    for chunk in np.array_split(orders, max(1, len(orders) // 5000)):
+        source = b[chunk]
+        placed = rigid.rotate(rigid.kabsch(np.broadcast_to(a, source.shape), source)[:, None], source)
+        best = min(best, float(np.min(np.mean(np.sum((placed - a) ** 2, axis=2), axis=1))))
+    return best
 
 
 def _principal_axes(points: np.ndarray) -> np.ndarray:
