@@ -47,6 +47,8 @@ from flockkit.errors import ValidationError
 # 20 agents is 6.6 MB); larger chunks were not faster on 2 cores.
 _CHUNK = 256
 _BOUND_CHUNK = 2048  # pairs bounded together, for the same reason
+_SAMPLE_BYTES = 1 << 25  # cost matrices built at once by the branch and bound (32 MB)
+_PERPENDICULAR = np.array([-1.0, 1.0, -1.0, 1.0])  # (x, y, dx, dy) -> (-y, x, -dy, dx) after reordering
 # Small groups start from many rotations (assignments are cheap there and local minima many); in
 # groups of PRUNE_FROM agents or more, only the KEEP starts closest after the first assignment go
 # on descending (at 20 agents the best start was once 5th after it; at 50 and 100 never below 2nd).
@@ -421,14 +423,10 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=12) -> np.ndarra
     their bound exceeds the limit, or their ends agree, or a sampled E(theta) is within it."""
     n = prepared.n_agents
     root = math.sqrt(w)
-    # a . R(theta) b = p cos(theta) + q sin(theta), for positions plus root(w) * deviations
+    # positions and root(w) * deviations side by side, turned together
     stacked = np.concatenate([prepared.centered, root * prepared.deviations], axis=2)
     left, right = stacked[ia], stacked[ib]  # (P, N, 4): x, y, dx, dy
-    turned = right[:, :, [1, 0, 3, 2]] * np.array([-1.0, 1.0, -1.0, 1.0])  # (-y, x, -dy, dx)
-    p2 = 2 * left @ np.transpose(right, (0, 2, 1))
-    q2 = 2 * left @ np.transpose(turned, (0, 2, 1))  # 2 (ay bx - ax by) (+ deviations)
     left_squares, right_squares = (left**2).sum(axis=2), (right**2).sum(axis=2)
-    squares = left_squares[:, :, None] + right_squares[:, None, :]  # entry = squares - p2 cos - q2 sin
     # the mean-velocity term w |Va - R Vb|^2 = a0 - 2 (p0 cos(theta) + q0 sin(theta))
     va, vb = prepared.mean_velocity[ia], prepared.mean_velocity[ib]
     p0, q0 = w * (va[:, 0] * vb[:, 0] + va[:, 1] * vb[:, 1]), w * (va[:, 1] * vb[:, 0] - va[:, 0] * vb[:, 1])
@@ -436,23 +434,41 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=12) -> np.ndarra
     total = (left_squares.sum(axis=1) + right_squares.sum(axis=1)) / n + a0  # S
 
     def sample(pair, theta):
-        """E(theta) and its optimal assignment for each (pair, angle)."""
+        """E(theta) and its optimal assignment for each (pair, angle), a block of cost matrices at a time."""
+        value, assignment = np.empty(len(pair)), np.empty((len(pair), n), dtype=int)
         c, s = np.cos(theta), np.sin(theta)
-        cost = squares[pair] - p2[pair] * c[:, None, None] - q2[pair] * s[:, None, None]
-        assignment = np.array([linear_sum_assignment(m)[1] for m in cost]).reshape(len(pair), n)
-        matched = np.take_along_axis(cost, assignment[:, :, None], axis=2)[:, :, 0].sum(axis=1) / n
-        return matched + a0[pair] - 2 * (p0[pair] * c + q0[pair] * s), assignment
+        size = max(1, _SAMPLE_BYTES // (8 * n * n))
+        for at in range(0, len(pair), size):
+            block = slice(at, at + size)
+            b = right[pair[block]]  # R(theta) turns both planes: b cos + (-y, x, -dy, dx) sin
+            turned = c[block, None, None] * b + s[block, None, None] * b[:, :, [1, 0, 3, 2]] * _PERPENDICULAR
+            cost = _pair_costs(left[pair[block]], turned)
+            assignment[block] = [linear_sum_assignment(m)[1] for m in cost]
+            value[block] = np.take_along_axis(cost, assignment[block, :, None], axis=2)[:, :, 0].sum(axis=1) / n
+        return value + a0[pair] - 2 * (p0[pair] * c + q0[pair] * s), assignment
 
-    # only angles where the mean-velocity term alone stays under the limit, in pieces <= pi / 2
+    # only angles where the mean-velocity term alone stays under the limit, in an even number of
+    # pieces <= pi / 2 about the angle phi that aligns the mean velocities
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         cosine = np.where(h0 > 0, (a0 - (limit - floor)) / (2 * h0), -1.0)
-    reach = np.arccos(np.clip(cosine, -1.0, 1.0))
-    pieces = np.where(cosine > 1, 0, np.maximum(1, np.ceil(2 * reach / (math.pi / 2)))).astype(int)
-    pair = np.repeat(np.arange(len(ia)), pieces + (pieces > 0))  # each piece's start, plus the last end
-    order = np.arange(len(pair)) - (np.cumsum(pieces + (pieces > 0)) - pieces - (pieces > 0))[pair]
-    theta = np.arctan2(q0, p0)[pair] - reach[pair] + order * (2 * reach / np.maximum(pieces, 1))[pair]
-    value, assignment = sample(pair, theta)
+    reach, phi = np.arccos(np.clip(cosine, -1.0, 1.0)), np.arctan2(q0, p0)
+    pieces = np.where(cosine > 1, 0, 2 * np.maximum(1, np.ceil(reach / (math.pi / 2)))).astype(int)
+    # a pair within the limit is nearly always within at phi: one sample there lists it before
+    # any other angle is tried (and is the middle end of the pieces of the others)
+    first = np.flatnonzero(pieces > 0)
+    first_value, first_assignment = sample(first, phi[first])
     passed = np.zeros(len(ia), dtype=bool)
+    passed[first[first_value <= limit[first]]] = True
+    todo = np.where(passed, 0, pieces)
+    pair = np.repeat(np.arange(len(ia)), todo + (todo > 0))  # each piece's start, plus the last end
+    order = np.arange(len(pair)) - (np.cumsum(todo + (todo > 0)) - todo - (todo > 0))[pair]
+    theta = phi[pair] - reach[pair] + order * (2 * reach / np.maximum(pieces, 1))[pair]
+    middle = order == pieces[pair] // 2
+    theta[middle] = phi[pair[middle]]
+    value, assignment = np.empty(len(pair)), np.empty((len(pair), n), dtype=int)
+    value[~middle], assignment[~middle] = sample(pair[~middle], theta[~middle])
+    known = np.searchsorted(first, pair[middle])
+    value[middle], assignment[middle] = first_value[known], first_assignment[known]
     passed[pair[value <= limit[pair]]] = True
     piece = np.flatnonzero(np.r_[pair[1:] == pair[:-1], False])  # samples that start a piece
     pair, lo, hi = pair[piece], theta[piece], theta[piece + 1]
