@@ -24,7 +24,7 @@ from .errors import FileFormatError, ValidationError
 from .motion import DEFAULT_UP, Alignment, Motion, heading_axes
 from .validate import integer
 
-__all__ = ["MotionGraph", "Clip", "Transition", "Walk", "turns", "local_minima"]
+__all__ = ["MotionGraph", "Clip", "Transition", "Walk", "turns", "local_minima", "local_minima_of_cells"]
 
 GRAPH_FORMAT_VERSION = 1
 
@@ -490,17 +490,34 @@ def turns(motion: Motion, frames, *, angle: float, blend: int) -> list[tuple[int
 def local_minima(values: np.ndarray, far: np.ndarray) -> list[tuple[int, int]]:
     """The local minima of a difference matrix `values` (K, K) where builders place transitions:
     cells (i, j), i != j, at most each of their 8 neighbors (the diagonal ignored), with far[i, j]."""
-    k = len(values)
-    padded = np.full((k + 2, k + 2), np.inf)
-    padded[1:-1, 1:-1] = values
-    np.fill_diagonal(padded[1:-1, 1:-1], np.inf)
-    centre = padded[1:-1, 1:-1]
-    is_min = np.isfinite(centre) & far
+    rows, cols = np.nonzero(np.isfinite(values))
+    minima = local_minima_of_cells(rows, cols, values[rows, cols], far[rows, cols])
+    return [(int(i), int(j)) for i, j in minima]
+
+
+def local_minima_of_cells(rows, cols, values, far) -> np.ndarray:
+    """``local_minima`` of a difference matrix known only at cells (rows[m], cols[m]), every other
+    cell +inf: shape (M, 2), in row-major order. Memory and time grow with the cells given, not with
+    the matrix, so that builders of long recordings need not hold it whole."""
+    rows, cols = np.asarray(rows, dtype=np.int64), np.asarray(cols, dtype=np.int64)
+    values = np.asarray(values, dtype=np.float64)
+    if not len(rows):
+        return np.zeros((0, 2), dtype=np.int64)
+    base = int(max(rows.max(), cols.max())) + 3  # neighbors' indices run from -1 to max + 1
+    keys = (rows + 1) * base + cols + 1
+    order = np.argsort(keys)
+    sorted_keys, sorted_values = keys[order], values[order]
+    is_min = np.asarray(far, dtype=bool) & (rows != cols) & np.isfinite(values)
     for di in (-1, 0, 1):
         for dj in (-1, 0, 1):
             if di or dj:
-                is_min &= centre <= padded[1 + di : k + 1 + di, 1 + dj : k + 1 + dj]
-    return [(int(i), int(j)) for i, j in zip(*np.nonzero(is_min))]
+                wanted = keys + di * base + dj  # each cell's neighbor
+                at = np.minimum(np.searchsorted(sorted_keys, wanted), len(keys) - 1)
+                found = (sorted_keys[at] == wanted) & (rows + di != cols + dj)  # the diagonal counts as +inf
+                is_min &= ~found | (values <= sorted_values[at])
+    minima = np.flatnonzero(is_min)
+    minima = minima[np.argsort(keys[minima])]
+    return np.column_stack([rows[minima], cols[minima]])
 
 
 def _clips(nodes) -> list[Clip]:

@@ -14,13 +14,14 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from hypothesis import strategies as st
 from hypothesis.errors import InvalidArgument
 from hypothesis.extra import numpy as hnp
 
 from ..motion import Configuration, Motion, State
 
-__all__ = ["configurations", "states", "motions", "anything", "damaged"]
+__all__ = ["configurations", "states", "motions", "difference_matrices", "anything", "damaged"]
 
 
 def _check_count(name, value, low=1):
@@ -137,6 +138,20 @@ def motions(
         )
 
     return draw_motion()
+
+
+def difference_matrices(*, max_size: int = 12):
+    """Symmetric (K, K) difference matrices, K in [1, max_size], of a few distinct values (so that
+    ties are common) with some cells +inf (not computed), as builders hold them."""
+    _check_count("max_size", max_size)
+
+    @st.composite
+    def draw_matrix(draw):
+        k = draw(st.integers(1, max_size))
+        cells = draw(hnp.arrays("float64", (k, k), elements=st.sampled_from([0.0, 0.5, 1.0, 2.0, math.inf])))
+        return np.minimum(cells, cells.T)
+
+    return draw_matrix()
 
 
 def anything(*, max_leaves: int = 4):

@@ -120,12 +120,9 @@ class Kovar:
                 "record longer motion or lower candidate_interval and blend_time"
             )
         configs = [motion.configuration(int(f)) for f in frames]
-        apart = np.abs(np.subtract.outer(np.arange(len(frames)), np.arange(len(frames))))  # in candidates
-        far = apart * stride >= max(gap, 1)
+        far = math.ceil(max(gap, 1) / stride)  # candidates apart at least, for a transition
         # nearer the diagonal than the neighbors of far cells, cells never matter: pruning skips them
-        matrix = _Matrix(
-            configs, metric, n_jobs=self.n_jobs, progress=progress, needed=apart >= math.ceil(max(gap, 1) / stride) - 2
-        )
+        matrix = _Matrix(configs, metric, n_jobs=self.n_jobs, progress=progress, needed=far - 2)
         threshold, chosen = self._choose(motion, frames, far, matrix, blend, configs, flockkit.capabilities(metric))
         transitions = _transitions(frames, chosen, matrix, blend)
         if _kept(motion, frames, chosen, matrix, blend) == 0:
@@ -159,18 +156,15 @@ class Kovar:
         if self.per_second is not None:
             matrix.fill(matrix.all_pairs())
             count = math.ceil(self.per_second * motion.duration)
-            minima = flockkit.graph.local_minima(matrix.values, far)
-            chosen = sorted(minima, key=lambda ij: (matrix.values[ij], ij))[:count]
-            return float(max((matrix.values[ij] for ij in chosen), default=0.0)), chosen
+            chosen = matrix.minima(far)[:count]
+            return float(max((matrix.value(*ij) for ij in chosen), default=0.0)), chosen
         prune = self.prune and (offers.pairs_within or offers.lower_bound)
         if self.threshold is not None:
             if prune:
                 matrix.fill_within(self.threshold)
             else:
                 matrix.fill(matrix.all_pairs())
-            return self.threshold, [
-                ij for ij in flockkit.graph.local_minima(matrix.values, far) if matrix.values[ij] <= self.threshold
-            ]
+            return self.threshold, matrix.minima(far, self.threshold)
         spread = float(np.mean([np.mean(np.sum((c.positions - c.center_of_mass()) ** 2, axis=1)) for c in configs]))
         wanted = max(self.min_transitions, math.ceil(self.transitions_per_minute * motion.duration / 60))
         return self._adaptive(motion, frames, far, matrix, blend, spread, wanted, prune)
@@ -186,15 +180,12 @@ class Kovar:
                 matrix.fill_within(probe)
             else:
                 matrix.fill(matrix.all_pairs())
-            minima = sorted(
-                (ij for ij in flockkit.graph.local_minima(matrix.values, far) if matrix.values[ij] <= probe),
-                key=lambda ij: (matrix.values[ij], ij),
-            )
+            minima = matrix.minima(far, probe)
             # the lowest minima, adding the shortfall until enough survive the trimming of dead ends
             while count <= len(minima):
                 kept = _kept(motion, frames, minima[:count], matrix, blend)
                 if kept >= wanted:
-                    return float(matrix.values[minima[count - 1]]), minima[:count]
+                    return float(matrix.value(*minima[count - 1])), minima[:count]
                 count += wanted - kept
             if probe >= spread:
                 return spread, minima
@@ -213,17 +204,13 @@ class Kovar:
         interior = np.zeros(k, dtype=bool)
         for a, b in strips:
             interior[a + 1 : b - 1] = True
-        upper = np.triu(far, 1)
-        scale = 2 * np.count_nonzero(upper) / max(np.count_nonzero(upper[interior]), 1)  # both directions
+        far_in_row = np.maximum(k - np.arange(k) - far, 0)  # cells (i, j > i) far enough, per row i
+        scale = 2 * far_in_row.sum() / max(far_in_row[interior].sum(), 1)  # both directions
         needed = math.ceil(2 * wanted / scale)
         probe = _FIRST_PROBE * spread
         while True:
             matrix.fill_within(probe, ranges=strips)
-            values = sorted(
-                matrix.values[i, j]
-                for i, j in flockkit.graph.local_minima(matrix.values, far)
-                if i < j and interior[i] and matrix.values[i, j] <= probe
-            )
+            values = [matrix.value(i, j) for i, j in matrix.minima(far, probe) if i < j and interior[i]]
             if len(values) >= needed:
                 return float(values[needed - 1]), 1.1
             if probe >= spread:
@@ -233,11 +220,11 @@ class Kovar:
     def _no_transition_message(self, motion, frames, far, matrix, blend, threshold) -> str:
         """Say that no transition is left, with the smallest cost seen and a threshold that works."""
         matrix.fill(matrix.all_pairs())
-        minima = sorted(flockkit.graph.local_minima(matrix.values, far), key=lambda ij: matrix.values[ij])
-        smallest = f"{matrix.values[minima[0]]:.4g}" if minima else "none (no local minimum at least min_gap apart)"
+        minima = matrix.minima(far)
+        smallest = f"{matrix.value(*minima[0]):.4g}" if minima else "none (no local minimum at least min_gap apart)"
         for count in range(1, len(minima) + 1):
             if _kept(motion, frames, minima[:count], matrix, blend):
-                working = matrix.values[minima[count - 1]]
+                working = matrix.value(*minima[count - 1])
                 return (
                     f"kovar: threshold {threshold:.4g} leaves no transition; the smallest transition cost seen is "
                     f"{smallest}; threshold={float(working)!r} would give a graph"
@@ -263,22 +250,40 @@ def _kept(motion, frames, chosen, matrix, blend) -> int:
 
 
 class _Matrix:
-    """The difference matrix, computed where asked, symmetric; cells not computed hold +inf.
-    Alignments are only kept for the cells that become transitions."""
+    """The difference matrix, computed where asked, symmetric; cells not computed count as +inf.
+    Only the computed cells are held (sorted by i * K + j, both directions), so that a pruned build
+    needs memory for the cells it computes, not K x K. Alignments are only kept for the cells that
+    become transitions."""
 
     def __init__(self, configs, metric, *, n_jobs, progress, needed):
-        k = len(configs)
         self.configs, self.metric, self.progress, self.needed = configs, metric, progress, needed
         self.n_jobs = flockkit.parallel.jobs(n_jobs)
         self.offers = flockkit.capabilities(metric)
-        self.values = np.full((k, k), np.inf)
-        self.listed = np.full(k, -np.inf)  # per row, the threshold its pairs were listed at
-        self.computed = np.zeros((k, k), dtype=bool)
+        self.listed = np.full(len(configs), -np.inf)  # per row, the threshold its pairs were listed at
+        # computed cells by key i * K + j, ending with a sentinel key above every cell's
+        self._keys, self._values = np.array([np.iinfo(np.int64).max]), np.array([np.inf])
         self._alignments: dict[tuple[int, int], flockkit.Alignment] = {}
 
     @property
     def evaluated(self) -> int:
-        return int(np.count_nonzero(self.computed))
+        """Cells computed, both directions."""
+        return len(self._keys) - 1
+
+    def value(self, i, j):
+        """E of cells (i, j) (arrays or ints); +inf where not computed."""
+        keys = np.asarray(i, dtype=np.int64) * len(self.configs) + np.asarray(j, dtype=np.int64)
+        at = np.searchsorted(self._keys, keys)  # the sentinel keeps it in range
+        found = np.where(self._keys[at] == keys, self._values[at], np.inf)
+        return found if found.ndim else float(found)
+
+    def minima(self, far: int, probe: float = np.inf) -> list[tuple[int, int]]:
+        """Local minima (``flockkit.graph.local_minima``) of the cells `far` or more candidates apart,
+        at most `probe`, lowest first (ties: row-major)."""
+        rows, cols = np.divmod(self._keys[:-1], len(self.configs))
+        cells = flockkit.graph.local_minima_of_cells(rows, cols, self._values[:-1], np.abs(rows - cols) >= far)
+        values = self.value(cells[:, 0], cells[:, 1])
+        order = np.lexsort((cells[:, 1], cells[:, 0], values))
+        return [(int(i), int(j)) for i, j in cells[order][values[order] <= probe]]
 
     def all_pairs(self) -> np.ndarray:
         return np.column_stack(np.triu_indices(len(self.configs), 1))
@@ -288,7 +293,7 @@ class _Matrix:
         declared pairs_within or lower_bound); with `ranges` (only with pairs_within), only those
         with i in one of the (start, stop) row ranges."""
         pairs = self._listed(threshold, ranges)
-        self.fill(pairs[self.needed[pairs[:, 0], pairs[:, 1]]])
+        self.fill(pairs[pairs[:, 1] - pairs[:, 0] >= self.needed])
 
     def _listed(self, threshold, ranges):
         if self.offers.pairs_within:
@@ -313,13 +318,14 @@ class _Matrix:
 
     def fill(self, pairs: np.ndarray) -> None:
         """Compute the distance of every pair (i < j) not computed yet."""
-        pairs = pairs[~self.computed[pairs[:, 0], pairs[:, 1]]]
+        pairs = pairs[np.isinf(self.value(pairs[:, 0], pairs[:, 1]))]
         if not len(pairs):
             return
         distances = _distances(self.metric, self.configs, pairs, self.n_jobs, self.progress)
-        i, j = pairs[:, 0], pairs[:, 1]
-        self.values[i, j] = self.values[j, i] = distances
-        self.computed[i, j] = self.computed[j, i] = True
+        k = len(self.configs)
+        keys = np.concatenate([self._keys, pairs[:, 0] * k + pairs[:, 1], pairs[:, 1] * k + pairs[:, 0]])
+        order = np.argsort(keys)
+        self._keys, self._values = keys[order], np.concatenate([self._values, distances, distances])[order]
 
     def alignment(self, i: int, j: int) -> flockkit.Alignment:
         """compare(config i, config j): computed for i < j, inverted for i > j."""
