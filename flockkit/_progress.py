@@ -9,7 +9,8 @@ import contextlib
 @contextlib.contextmanager
 def progress_bar(enabled: bool, unit: str = "it"):
     """A ``progress(done, total, stage)`` callback drawing one tqdm bar per stage (None when not
-    `enabled`); every bar is closed on leaving."""
+    `enabled`), closed when the stage's count reaches its total (a stage reported again later gets
+    a new bar); every bar is closed on leaving. Components report (0, total) as a stage starts."""
     if not enabled:
         yield None
         return
@@ -26,6 +27,9 @@ def progress_bar(enabled: bool, unit: str = "it"):
             current["stage"] = stage
         bar.total = total
         bar.update(done - bar.n)
+        if done >= total:  # closed when its work is done, so that its time is the stage's own
+            bar.close()
+            current["bar"] = None
 
     try:
         yield report

@@ -301,6 +301,9 @@ class _Matrix:
             # threshold or above already are left out
             ranges = ranges or _row_ranges(len(self.configs), 4 * max(abs(self.n_jobs), 2))
             ranges = [run for a, b in ranges for run in _runs(self.listed[a:b] < threshold, a)]
+            stage = f"bounding pairs (threshold {threshold:.3g})"
+            if self.progress is not None:
+                self.progress(0, len(ranges), stage)
             parts = flockkit.parallel.imap(
                 _pairs_within, [(self.metric, self.configs, threshold, rows) for rows in ranges], n_jobs=self.n_jobs
             )
@@ -308,7 +311,7 @@ class _Matrix:
             for done, part in enumerate(parts, 1):
                 found.append(np.asarray(part, dtype=int).reshape(-1, 2))
                 if self.progress is not None:
-                    self.progress(done, len(ranges), f"bounding pairs (threshold {threshold:.3g})")
+                    self.progress(done, len(ranges), stage)
             for a, b in ranges:
                 self.listed[a:b] = threshold
             return np.concatenate(found)
@@ -342,6 +345,8 @@ def _distances(metric, configs, pairs, n_jobs, progress) -> np.ndarray:
     chunks = [pairs[s : s + size] for s in range(0, len(pairs), size)]
     # each job gets only the configurations its chunk uses
     calls = [(metric, *(_localized(configs, chunk) if n_jobs != 1 else (configs, chunk))) for chunk in chunks]
+    if progress is not None:
+        progress(0, len(pairs), "difference matrix")
     results = flockkit.parallel.imap(_chunk_distances, calls, n_jobs=n_jobs)
     found, done = [], 0
     for chunk, distances in zip(chunks, results):
