@@ -377,8 +377,9 @@ class Boids:
         return steer
 
 
-# Pair-table entries per block of frames steered at once (an N x N table per frame): a few MB.
-_PAIRS_PER_BLOCK = 200_000
+# Pair-table entries per block of frames steered at once (an N x N table per frame): tables that
+# stay in a core's cache (2-3x faster than blocks of 200 000 on the development machine).
+_PAIRS_PER_BLOCK = 10_000
 
 
 class _DensePairs:

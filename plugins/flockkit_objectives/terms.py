@@ -78,8 +78,10 @@ class FlockTerm:
         return -problem.flock_weight * np.abs(np.atleast_1d(counts) - problem.flocks).astype(float)
 
 
-# Agents per frame up to which frames are compared all pairs at once (N x N per frame).
+# Agents per frame up to which frames are compared all pairs at once (N x N per frame), in blocks
+# of frames of about this many pairs (tables that stay in cache: 3-4x faster than larger blocks).
 _DENSE_UP_TO = 256
+_PAIRS_PER_BLOCK = 20_000
 
 
 def count_flocks(positions: np.ndarray, visibility: float):
@@ -92,22 +94,49 @@ def count_flocks(positions: np.ndarray, visibility: float):
     f, n = frames.shape[:2]
     if not f or not n:
         return 0 if single else np.zeros(f, dtype=int)
-    if n <= _DENSE_UP_TO:  # per frame an N x N table of who sees whom, axis by axis (no (F, N, N, D) temporary)
+    block = max(1, _PAIRS_PER_BLOCK // (n * n))
+    if n <= _DENSE_UP_TO and f > block:
+        counts = np.concatenate([count_flocks(frames[k : k + block], visibility) for k in range(0, f, block)])
+    elif n <= _DENSE_UP_TO:  # per frame an N x N table of who sees whom, axis by axis (no (F, N, N, D) temporary)
         axes = np.ascontiguousarray(np.moveaxis(frames, 2, 0))
         squared = np.zeros((f, n, n))
         for coordinate in axes:
             offset = coordinate[:, None, :] - coordinate[:, :, None]
             offset *= offset
             squared += offset
-        close = (squared < visibility * visibility).reshape(f * n, n)
-        rows, j = np.nonzero(close)
-        indptr = np.zeros(f * n + 1, dtype=np.int64)
-        np.cumsum(np.count_nonzero(close, axis=1), out=indptr[1:])
-        graph = csr_matrix((np.ones(len(j), dtype=np.int8), j + rows // n * n, indptr), shape=(f * n, f * n))
+        close = squared < visibility * visibility
+        # A sampled flock is mostly one group: a breadth-first search from agent 0, every frame at
+        # once (products with the table), settles the frames it reaches whole; only the others
+        # are labelled, by scipy.
+        table = close.astype(np.float32)
+        reached = close[:, 0, :] | (np.arange(n) == 0)
+        while True:
+            grown = (table @ reached[:, :, None].astype(np.float32))[:, :, 0] > 0
+            grown |= reached
+            if np.array_equal(grown, reached):
+                break
+            reached = grown
+        counts = np.ones(f, dtype=int)
+        split = np.flatnonzero(~reached.all(axis=1))
+        if len(split):
+            counts[split] = _components(close[split])
     else:
         pairs = [cKDTree(x).query_pairs(visibility, output_type="ndarray") + k * n for k, x in enumerate(frames)]
         i, j = np.concatenate(pairs).T if pairs else (np.zeros(0, int), np.zeros(0, int))
-        graph = coo_matrix((np.ones(len(i)), (i, j)), shape=(f * n, f * n))
-    labels = np.sort(connected_components(graph, directed=False)[1].reshape(f, n), axis=1)
-    counts = 1 + np.count_nonzero(np.diff(labels, axis=1), axis=1)
+        counts = _counts(coo_matrix((np.ones(len(i)), (i, j)), shape=(f * n, f * n)), f, n)
     return int(counts[0]) if single else counts
+
+
+def _components(close: np.ndarray) -> np.ndarray:
+    """Groups per frame of (F, N, N) tables of who sees whom, each frame a block of one graph."""
+    f, n = close.shape[:2]
+    flat = close.reshape(f * n, n)
+    rows, j = np.nonzero(flat)
+    indptr = np.zeros(f * n + 1, dtype=np.int64)
+    np.cumsum(np.count_nonzero(flat, axis=1), out=indptr[1:])
+    return _counts(csr_matrix((np.ones(len(j), dtype=np.int8), j + rows // n * n, indptr), shape=(f * n, f * n)), f, n)
+
+
+def _counts(graph, f: int, n: int) -> np.ndarray:
+    labels = np.sort(connected_components(graph, directed=False)[1].reshape(f, n), axis=1)
+    return 1 + np.count_nonzero(np.diff(labels, axis=1), axis=1)

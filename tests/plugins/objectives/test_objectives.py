@@ -1,7 +1,9 @@
 import math
+from unittest import mock
 
 import numpy as np
 import pytest
+from flockkit_objectives import terms
 from flockkit_objectives.terms import count_flocks
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -66,8 +68,11 @@ def test_flock_term_counts_groups_that_cannot_see_each_other(preferred, expected
 @settings(max_examples=40, deadline=None)
 @given(motion=strategies.motions(max_frames=6, max_agents=12, max_coordinate=5.0), visibility=st.floats(0.1, 4.0))
 def test_flocks_counted_over_many_frames_at_once_are_each_frames_own_count(motion, visibility):
-    """count_flocks over (F, N, D) in one graph equals, frame by frame, a union-find of its own."""
+    """count_flocks over (F, N, D) in one graph equals, frame by frame, a union-find of its own,
+    whether the frames are counted in one block or in blocks of a few."""
     counts = count_flocks(motion.positions, visibility)
+    with mock.patch.object(terms, "_PAIRS_PER_BLOCK", 2 * motion.n_agents**2):
+        np.testing.assert_array_equal(count_flocks(motion.positions, visibility), counts)
     for frame, count in zip(motion.positions, counts):
         parent = list(range(len(frame)))
 
