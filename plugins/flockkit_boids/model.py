@@ -63,7 +63,7 @@ def _non_negative(default):
 
 
 def _unit(vectors: np.ndarray) -> np.ndarray:
-    norms = np.sqrt(np.sum(vectors * vectors, axis=-1))[..., None]
+    norms = np.sqrt(np.einsum("...k,...k->...", vectors, vectors))[..., None]
     return np.divide(vectors, norms, out=np.zeros_like(vectors), where=norms > 0)
 
 
@@ -333,36 +333,33 @@ class Boids:
                                for k in range(0, len(x), block)])  # fmt: skip
 
     def _steer(self, x, v, perception: float) -> np.ndarray:
-        n = x.shape[-2]
-        speed = np.sqrt(np.sum(v * v, axis=-1))
-        heading = np.divide(v, speed[..., None], out=np.zeros_like(v), where=speed[..., None] > 0)
-        steer = np.zeros_like(x)
-
-        pairs = _SparsePairs(x, self.perception_radius) if x.ndim == 2 and n > self.kdtree_above else _DensePairs(x)
-        offsets = pairs.offsets()  # per axis: x_j - x_i
-        distance = np.sqrt(sum(o * o for o in offsets))
-        seen = pairs.within(distance, self.perception_radius)
-        if self.field_of_view < 360:
-            cos_half = math.cos(math.radians(self.field_of_view) / 2)
-            ahead = perception * sum(o * pairs.rows(heading[..., k]) for k, o in enumerate(offsets))
-            seen &= ahead >= cos_half * distance * pairs.rows(speed > 0)
-        count = pairs.total(seen)
-        share = np.divide(1.0, count, out=np.zeros(count.shape), where=count > 0)
+        dims = x.shape[-1]
+        speed = np.sqrt(np.einsum("...k,...k->...", v, v))[..., None]
+        heading = np.divide(v, speed, out=np.zeros_like(v), where=speed > 0)
+        sparse = x.ndim == 2 and len(x) > self.kdtree_above
+        pairs = _SparsePairs(x, self.perception_radius) if sparse else _DensePairs(x)
+        # an agent and itself: put beyond every radius (finite, so products with it stay numbers)
+        distance = pairs.distances(beyond=2 * max(self.perception_radius, self.separation_radius))
+        seen = distance <= self.perception_radius
+        if self.field_of_view < 360:  # a stationary agent sees all round
+            cos_half = math.cos(math.radians(self.field_of_view) / 2) * (speed[..., 0] > 0)
+            seen &= pairs.along(perception * heading) >= distance * pairs.rows(cos_half)
+        seen = seen.astype(np.float64)
         # Per pair: cohesion pulls along the offset, separation pushes against it, alignment
         # averages neighbors' velocities. Cohesion and alignment weigh every seen neighbor alike,
         # so they need only the sums over seen neighbors of positions and velocities (one product):
         # steer_i = pull_i sum_j (x_j - x_i) - separation sum_j push_ij (x_j - x_i) + align_i sum_j v_j - ...
-        push = np.maximum(1.0 - distance / self.separation_radius, 0.0)  # 0 beyond the radius
+        push = 1.0 - distance * (1.0 / self.separation_radius)
+        np.maximum(push, 0.0, out=push)  # 0 beyond the radius
         push /= np.maximum(distance, 1e-12)
         push *= seen
-        sums = pairs.weighted_sum(seen.astype(np.float64), np.concatenate([x, v], axis=-1))
-        pull = self.cohesion_weight / self.perception_radius * share
-        steer += pull[..., None] * (sums[..., : x.shape[-1]] - count[..., None] * x)
+        count = pairs.total(seen)[..., None]
+        share = np.divide(1.0, count, out=np.zeros(count.shape), where=count > 0)
+        sums = pairs.weighted_sum(seen, np.concatenate([x, v], axis=-1))
+        steer = (self.cohesion_weight / self.perception_radius * share) * (sums[..., :dims] - count * x)
         steer -= self.separation_weight * (pairs.weighted_sum(push, x) - pairs.total(push)[..., None] * x)
-        align = self.alignment_weight / self.target_speed
-        steer += align * (share[..., None] * sums[..., x.shape[-1] :] - (count > 0)[..., None] * v)
-
-        steer += (self.speed_weight / self.target_speed) * (self.target_speed - speed)[..., None] * heading
+        steer += (self.alignment_weight / self.target_speed) * (share * sums[..., dims:] - (count > 0) * v)
+        steer += (self.speed_weight / self.target_speed) * (self.target_speed - speed) * heading
         for obstacle in self.obstacles:
             distance = obstacle.signed_distance(x)
             # Grows like 1 / distance near the surface so that no other rule can push an agent in;
@@ -389,17 +386,28 @@ class _DensePairs:
     def __init__(self, x):
         self._x = x
 
-    def offsets(self):
-        return [c[..., None, :] - c[..., :, None] for c in np.ascontiguousarray(np.moveaxis(self._x, -1, 0))]
+    def distances(self, beyond):
+        """|x_j - x_i|, `beyond` on the diagonal (no agent is its own neighbor)."""
+        squared = None
+        for k in range(self._x.shape[-1]):
+            c = self._x[..., k]
+            offset = c[..., None, :] - c[..., :, None]
+            offset *= offset
+            squared = offset if squared is None else np.add(squared, offset, out=squared)
+        n = self._x.shape[-2]
+        np.sqrt(squared, out=squared).reshape(*squared.shape[:-2], n * n)[..., :: n + 1] = beyond
+        return squared
 
-    def within(self, distance, radius):
-        return (distance <= radius) & ~np.eye(distance.shape[-1], dtype=bool)
+    def along(self, direction):
+        """(x_j - x_i) . direction_i."""
+        own = np.einsum("...k,...k->...", direction, self._x)[..., None]
+        return np.matmul(direction, np.swapaxes(self._x, -1, -2)) - own
 
     def rows(self, values):
         return values[..., :, None]
 
     def total(self, values):
-        return values.sum(axis=-1, dtype=np.float64)
+        return values.sum(axis=-1)
 
     def weighted_sum(self, weights, y):
         return weights @ y
@@ -413,12 +421,13 @@ class _SparsePairs:
         self._i = np.concatenate([pairs[:, 0], pairs[:, 1]])
         self._j = np.concatenate([pairs[:, 1], pairs[:, 0]])
         self._x = x
+        self._offsets = [c[self._j] - c[self._i] for c in x.T]
 
-    def offsets(self):
-        return [c[self._j] - c[self._i] for c in self._x.T]
+    def distances(self, beyond):
+        return np.sqrt(sum(o * o for o in self._offsets))  # no pair of an agent and itself
 
-    def within(self, distance, radius):
-        return np.ones(distance.shape, dtype=bool)
+    def along(self, direction):
+        return sum(o * direction[self._i, k] for k, o in enumerate(self._offsets))
 
     def rows(self, values):
         return values[self._i]

@@ -4,6 +4,7 @@ moves a point-constrained agent at a constrained frame."""
 
 from __future__ import annotations
 
+import functools
 import math
 
 import attrs
@@ -147,48 +148,59 @@ def _extended(track: np.ndarray, first: int, last: int) -> np.ndarray:
     return points
 
 
-def _hierarchy(last: int):
-    """(point, left, right) from coarse to fine: each point with the neighbours it is coded against."""
-    found, stack = [], [(0, last)]
-    while stack:
-        left, right = stack.pop(0)
-        if right - left < 2:
-            continue
-        middle = (left + right) // 2
-        found.append((middle, left, right))
-        stack += [(left, middle), (middle, right)]
-    return found
+@functools.lru_cache(maxsize=512)
+def _hierarchy(last: int) -> tuple:
+    """(points, lefts, rights) per level, coarse to fine: each point with the neighbours it is
+    coded against (the points of a level depend only on coarser ones). Cached: read only."""
+    levels, spans = [], [(0, last)]
+    while spans:
+        spans = [(left, right) for left, right in spans if right - left >= 2]
+        if not spans:
+            break
+        lefts, rights = np.array(spans).T
+        middles = (lefts + rights) // 2
+        levels.append(tuple(_read_only(a) for a in (middles, lefts, rights)))
+        spans = [pair for mid, left, right in zip(middles, lefts, rights) for pair in ((left, mid), (mid, right))]
+    return tuple(levels)
 
 
-def _frame(span: np.ndarray) -> np.ndarray:
-    """Rows: the unit vector along `span` and unit vectors across it (paper 004's n, s, t; in 3D the
-    global r = z, or x where span is along z)."""
-    length = np.linalg.norm(span)
-    along = span / length if length > 1e-12 else np.eye(len(span))[0]
-    if len(span) == 2:
-        return np.array([along, [-along[1], along[0]]])
-    r = np.array([0.0, 0.0, 1.0]) if abs(along[2]) < 0.99 else np.array([1.0, 0.0, 0.0])
+def _read_only(array: np.ndarray) -> np.ndarray:
+    array.flags.writeable = False
+    return array
+
+
+def _frames(spans: np.ndarray) -> np.ndarray:
+    """Per span (M, D), rows: the unit vector along it and unit vectors across it (paper 004's n,
+    s, t; in 3D the global r = z, or x where the span is along z), (M, D, D)."""
+    length = np.linalg.norm(spans, axis=1, keepdims=True)
+    along = np.where(length > 1e-12, spans / np.maximum(length, 1e-12), np.eye(spans.shape[1])[0])
+    if spans.shape[1] == 2:
+        return np.stack([along, np.column_stack([-along[:, 1], along[:, 0]])], axis=1)
+    r = np.where(np.abs(along[:, 2:]) < 0.99, [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
     t = np.cross(r, along)
-    t /= np.linalg.norm(t)
-    return np.array([along, np.cross(along, t), t])
+    t /= np.linalg.norm(t, axis=1, keepdims=True)
+    return np.stack([along, np.cross(along, t), t], axis=1)
 
 
-def _decompose(points: np.ndarray):
-    coefficients = {}
-    for middle, left, right in _hierarchy(len(points) - 1):
-        span = points[right] - points[left]
-        scale = max(np.linalg.norm(span), 1e-12)
-        coefficients[middle] = _frame(span) @ (points[middle] - (points[left] + points[right]) / 2) / scale
+def _decompose(points: np.ndarray) -> list:
+    """Per level of the hierarchy, each point's offset from its neighbours' midpoint in the frame
+    of the span between them, over the span's length."""
+    coefficients = []
+    for middles, lefts, rights in _hierarchy(len(points) - 1):
+        span = points[rights] - points[lefts]
+        scale = np.maximum(np.linalg.norm(span, axis=1), 1e-12)[:, None]
+        offset = points[middles] - (points[lefts] + points[rights]) / 2
+        coefficients.append(np.einsum("mij,mj->mi", _frames(span), offset) / scale)
     return coefficients
 
 
-def _recompose(ends: np.ndarray, coefficients: dict, count: int) -> np.ndarray:
+def _recompose(ends: np.ndarray, coefficients: list, count: int) -> np.ndarray:
     points = np.empty((count, ends.shape[1]))
     points[0], points[-1] = ends
-    for middle, left, right in _hierarchy(count - 1):
-        span = points[right] - points[left]
-        scale = max(np.linalg.norm(span), 1e-12)
-        points[middle] = (points[left] + points[right]) / 2 + scale * (_frame(span).T @ coefficients[middle])
+    for (middles, lefts, rights), level in zip(_hierarchy(count - 1), coefficients):
+        span = points[rights] - points[lefts]
+        scale = np.maximum(np.linalg.norm(span, axis=1), 1e-12)[:, None]
+        points[middles] = (points[lefts] + points[rights]) / 2 + scale * np.einsum("mji,mj->mi", _frames(span), level)
     return points
 
 
@@ -205,4 +217,4 @@ def _add_bump(segment: np.ndarray, height: float, rng) -> np.ndarray:
         angle = rng.uniform(0.0, 2 * math.pi)
         bump[:, 1], bump[:, 2] = across * math.cos(angle), across * math.sin(angle)
     mine, theirs = _decompose(segment), _decompose(bump)
-    return _recompose(segment[[0, -1]], {k: mine[k] + theirs[k] for k in mine}, count)
+    return _recompose(segment[[0, -1]], [m + t for m, t in zip(mine, theirs)], count)
