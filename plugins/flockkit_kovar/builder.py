@@ -123,10 +123,15 @@ class Kovar:
         far = math.ceil(max(gap, 1) / stride)  # candidates apart at least, for a transition
         # nearer the diagonal than the neighbors of far cells, cells never matter: pruning skips them
         matrix = _Matrix(configs, metric, n_jobs=self.n_jobs, progress=progress, needed=far - 2)
-        threshold, chosen = self._choose(motion, frames, far, matrix, blend, configs, flockkit.capabilities(metric))
+        offers = flockkit.capabilities(metric)
+        prune = self.prune and self.per_second is None and bool(offers.pairs_within or offers.lower_bound)
+        spread = float(np.mean([np.mean(np.sum((c.positions - c.center_of_mass()) ** 2, axis=1)) for c in configs]))
+        threshold, chosen = self._choose(motion, frames, far, matrix, blend, spread, prune)
         transitions = _transitions(frames, chosen, matrix, blend)
         if _kept(motion, frames, chosen, matrix, blend) == 0:
-            raise ValidationError(self._no_transition_message(motion, frames, far, matrix, blend, threshold))
+            raise ValidationError(
+                self._no_transition_message(motion, frames, far, matrix, blend, threshold, spread, prune)
+            )
         params = {
             "candidate_interval": self.candidate_interval,
             "stride": stride,
@@ -150,7 +155,7 @@ class Kovar:
             )
         return flockkit.MotionGraph.assemble(motion, transitions, params=params, provenance={"builder": "kovar"})
 
-    def _choose(self, motion, frames, far, matrix, blend, configs, offers):
+    def _choose(self, motion, frames, far, matrix, blend, spread, prune):
         """(threshold, chosen minima) by the rule the parameters ask for: the paper's `per_second`,
         an absolute `threshold`, or the adaptive rule (module docstring)."""
         if self.per_second is not None:
@@ -158,14 +163,12 @@ class Kovar:
             count = math.ceil(self.per_second * motion.duration)
             chosen = matrix.minima(far)[:count]
             return float(max((matrix.value(*ij) for ij in chosen), default=0.0)), chosen
-        prune = self.prune and (offers.pairs_within or offers.lower_bound)
         if self.threshold is not None:
             if prune:
                 matrix.fill_within(self.threshold)
             else:
                 matrix.fill(matrix.all_pairs())
             return self.threshold, matrix.minima(far, self.threshold)
-        spread = float(np.mean([np.mean(np.sum((c.positions - c.center_of_mass()) ** 2, axis=1)) for c in configs]))
         wanted = max(self.min_transitions, math.ceil(self.transitions_per_minute * motion.duration / 60))
         return self._adaptive(motion, frames, far, matrix, blend, spread, wanted, prune)
 
@@ -217,21 +220,37 @@ class Kovar:
                 return spread, 2
             probe = min(2 * probe, spread)
 
-    def _no_transition_message(self, motion, frames, far, matrix, blend, threshold) -> str:
-        """Say that no transition is left, with the smallest cost seen and a threshold that works."""
-        matrix.fill(matrix.all_pairs())
-        minima = matrix.minima(far)
-        smallest = f"{matrix.value(*minima[0]):.4g}" if minima else "none (no local minimum at least min_gap apart)"
-        for count in range(1, len(minima) + 1):
-            if _kept(motion, frames, minima[:count], matrix, blend):
-                working = matrix.value(*minima[count - 1])
-                return (
-                    f"kovar: threshold {threshold:.4g} leaves no transition; the smallest transition cost seen is "
-                    f"{smallest}; threshold={float(working)!r} would give a graph"
-                )
+    def _no_transition_message(self, motion, frames, far, matrix, blend, threshold, spread, prune) -> str:
+        """Say that no transition is left, with the smallest transition cost and a threshold that
+        works: the lowest minima that give a graph, searched upwards from `threshold`, doubling, up
+        to the group's mean squared radius (or the threshold, if higher); pruned, computing only
+        the pairs each probe needs (the matrix is complete otherwise)."""
+        ceiling = max(spread, threshold)
+        probe = min(max(threshold, _FIRST_PROBE * spread), ceiling)
+        while True:
+            if prune:
+                matrix.fill_within(probe)
+            minima = matrix.minima(far, probe)
+            for count in range(1, len(minima) + 1):
+                if _kept(motion, frames, minima[:count], matrix, blend):
+                    return (
+                        f"kovar: threshold {threshold:.4g} leaves no transition; the smallest transition cost is "
+                        f"{matrix.value(*minima[0]):.4g}; threshold={float(matrix.value(*minima[count - 1]))!r} "
+                        "would give a graph"
+                    )
+            if probe >= ceiling:
+                break
+            probe = min(2 * probe, ceiling)
+        found = (
+            f"the smallest transition cost under it is {matrix.value(*minima[0]):.4g}, and no set of transitions "
+            "under it forms a loop"
+            if minima
+            else "no local minimum of the transition cost at least min_gap apart lies under it"
+        )
         return (
-            f"kovar: no threshold gives a walkable graph: the smallest transition cost seen is {smallest}, and no "
-            "set of transitions forms a loop; record longer motion, or lower min_gap or blend_time"
+            f"kovar: no threshold up to {ceiling:.4g} (the group's mean squared radius, beyond which configurations "
+            f"do not resemble each other) gives a walkable graph: {found}; record longer motion, or lower min_gap "
+            "or blend_time"
         )
 
 

@@ -164,12 +164,45 @@ def test_paper_rule_and_absolute_threshold(recording):
     with pytest.raises(ValidationError, match="leaves no transition") as info:
         flockkit.get("builder", "kovar", threshold=1e-12).build(recording, METRIC, np.random.default_rng(0))
     working = float(str(info.value).split("threshold=")[1].split()[0])
-    assert "smallest transition cost seen is" in str(info.value)
+    assert "smallest transition cost is" in str(info.value)
     assert (
         flockkit.get("builder", "kovar", threshold=working)
         .build(recording, METRIC, np.random.default_rng(0))
         .transitions
     )
+
+
+def _failure(motion, **params):
+    """(the error message, pairs computed) of a build that finds no graph."""
+    computed = []
+
+    def progress(done, total, stage):
+        if stage == "difference matrix" and done == 0:
+            computed.append(total)
+
+    with pytest.raises(ValidationError) as info:
+        flockkit.get("builder", "kovar", **params).build(motion, METRIC, np.random.default_rng(0), progress=progress)
+    return str(info.value), sum(computed)
+
+
+def test_a_failed_build_names_the_same_threshold_pruned_or_not_computing_less(recording):
+    """Pruned, the threshold that works is searched upwards from the one given, computing only
+    what each probe needs; the message is the one a complete matrix gives."""
+    pruned, pruned_pairs = _failure(recording, threshold=1e-12)
+    full, full_pairs = _failure(recording, threshold=1e-12, prune=False)
+    assert pruned == full and "threshold=" in pruned
+    assert pruned_pairs < full_pairs
+
+
+def test_a_group_that_never_recurs_gets_no_graph_whatever_the_threshold():
+    """A group that only grows: no local minimum of E under its mean squared radius."""
+    base = np.array([[1.0, 0.0], [0.0, 1.2], [-0.9, 0.1], [0.2, -1.1]])
+    t = np.arange(120) * 0.1
+    growing = flockkit.Motion(positions=base * np.exp(0.1 * t)[:, None, None] + [0.5, 0.0] * t[:, None, None], dt=0.1)
+    messages = {_failure(growing, prune=prune)[0] for prune in (True, False)}
+    messages |= {_failure(growing, prune=prune, threshold=1e-9)[0] for prune in (True, False)}
+    (message,) = messages
+    assert "no threshold up to" in message and "no local minimum" in message
 
 
 def test_parallel_build_is_identical(recording, graph):
