@@ -13,7 +13,8 @@ alignment (section 4.1) and the principal-axes alignment, each also turned by pi
 Groups of at most MANY_STARTS_UP_TO agents, whose local minima are many and whose assignments are
 cheap, start from both alignments turned by every rotation that maps axes onto axes (24 in 3D,
 8 in 2D): on unrelated pairs of 4 to 8 agents that found the exact optimum (within 1%) in 198 of
-200 cases, against 74 of 100 with the 8 starts (bench/metric.py). In groups of PRUNE_FROM agents
+200 cases, against 74 of 100 with the 8 starts (bench/metric.py); so do pairs with a static
+configuration (no velocities, so no heading) below PRUNE_FROM agents. In groups of PRUNE_FROM agents
 or more only the KEEP starts closest after the first assignment go on descending, which cut the
 time per pair at 100 agents from 20-32 to 6-9 ms with the same distances on that bench. The search runs
 on many pairs at once (`pairwise`); `compare` is the one-pair case of the same code, so both give
@@ -254,8 +255,21 @@ class IcpHungarian:
         return bound
 
     def _search(self, prepared, ia, ib):
-        """ICP from every start for pairs (ia[p], ib[p]): (distances, assignments, rotations) of the best."""
-        starts = prepared.starts(ia, ib)  # (P, S, D, D)
+        """ICP from every start for pairs (ia[p], ib[p]): (distances, assignments, rotations) of the
+        best. Pairs with a static configuration (no heading) get their own starts, searched apart."""
+        static = prepared.static[ia] | prepared.static[ib]
+        if static.all() or not static.any():
+            return self._search_from(prepared, ia, ib, prepared.starts(ia, ib, static=bool(static.all())))
+        n, d = prepared.n_agents, prepared.dims
+        distance, assignment, rotation = np.empty(len(ia)), np.empty((len(ia), n), dtype=int), np.empty((len(ia), d, d))
+        for kind in (False, True):
+            mine = static == kind
+            found = self._search_from(prepared, ia[mine], ib[mine], prepared.starts(ia[mine], ib[mine], static=kind))
+            distance[mine], assignment[mine], rotation[mine] = found
+        return distance, assignment, rotation
+
+    def _search_from(self, prepared, ia, ib, starts):
+        """ICP from `starts` (P, S, D, D) for pairs (ia[p], ib[p]): the best of each pair."""
         p, s, d = starts.shape[0], starts.shape[1], prepared.dims
         pick = lambda array, index: np.repeat(array[index], s, axis=0)  # noqa: E731
         distance, assignment, rotation = self._descend(
@@ -334,12 +348,17 @@ class _Prepared:
         self.sorted_deviation_speeds = np.sort(np.linalg.norm(self.deviations, axis=2), axis=1)
         self.scale = (self.centered**2).sum(axis=(1, 2)) / self.n_agents  # mean squared radius
         self.speed_scale = (self.velocities**2).sum(axis=(1, 2)) / self.n_agents
+        self.static = ~self.velocities.any(axis=(1, 2))  # no heading: its frame is the world's axes
 
-    def starts(self, ia, ib) -> np.ndarray:
-        """Start rotations (P, S, D, D): the configuration frames aligned, turned by each half turn,
-        then the principal axes aligned, turned by each rotation that maps axes onto axes (the
-        principal axes' order and signs are arbitrary where spreads are close)."""
-        turns = _axis_turns(self.dims) if self.n_agents <= MANY_STARTS_UP_TO else _half_turns(self.dims)
+    def starts(self, ia, ib, static=False) -> np.ndarray:
+        """Start rotations (P, S, D, D): the configuration frames aligned, then the principal axes
+        aligned, each turned by each half turn, or in small groups by each rotation that maps axes
+        onto axes (the principal axes' order and signs are arbitrary where spreads are close). So
+        are `static` pairs (a configuration without velocities, whose frame is the world's axes)
+        below PRUNE_FROM agents: at 20 agents, 8 starts left one unrelated pair of 40 5% above rmsd's
+        best; these 48 (3x the time) none (bench/metric.py)."""
+        many = self.n_agents <= MANY_STARTS_UP_TO or (static and self.n_agents < PRUNE_FROM)
+        turns = _axis_turns(self.dims) if many else _half_turns(self.dims)
         starts = [np.transpose(axes[ia], (0, 2, 1)) @ turn @ axes[ib]
                   for turn in turns for axes in (self.frames, self.principal)]  # fmt: skip
         return np.stack(starts, axis=1)
