@@ -356,7 +356,7 @@ class _Prepared:
         onto axes (the principal axes' order and signs are arbitrary where spreads are close). So
         are `static` pairs (a configuration without velocities, whose frame is the world's axes)
         below PRUNE_FROM agents: at 20 agents, 8 starts left one unrelated pair of 40 5% above rmsd's
-        best; these 48 (3x the time) none (bench/metric.py)."""
+        best; these (48 in 3D, 3x the time) none (bench/metric.py)."""
         many = self.n_agents <= MANY_STARTS_UP_TO or (static and self.n_agents < PRUNE_FROM)
         turns = _axis_turns(self.dims) if many else _half_turns(self.dims)
         starts = [np.transpose(axes[ia], (0, 2, 1)) @ turn @ axes[ib]
