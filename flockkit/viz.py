@@ -250,8 +250,6 @@ def animate(
     regions = _named(regions)
     trail = number(trail, "animate: trail (seconds)", minimum=0)
     plt = _pyplot()
-    from matplotlib import animation
-
     frames, rate = _timeline(motion.dt, motion.n_frames, fps, max_frames, "animate")
     xy, heading = motion.positions[..., :2], _unit(motion.velocities()[..., :2])
     low, high = _scene_bounds(xy, problem, obstacles, regions)
@@ -280,7 +278,7 @@ def animate(
         return [arrows, label, *trails]
 
     try:
-        _save_animation(animation.FuncAnimation(figure, draw, frames=frames, blit=False), path, rate, progress)
+        _save_animation(figure, draw, frames, path, rate, progress)
     finally:
         plt.close(figure)
     return path
@@ -341,15 +339,70 @@ def _timeline(dt: float, n_frames: int, fps, max_frames, what: str) -> tuple[np.
     return np.arange(0, n_frames, step), fps or 1.0 / (dt * step)
 
 
-def _save_animation(movie, path, rate: float, progress: bool) -> None:
-    """Write `movie` (a matplotlib animation) atomically at `rate` frames per second (GIF through
-    Pillow, MP4 through ffmpeg), with a progress bar over its frames."""
-    from matplotlib import animation
+# Frames, evenly spaced, whose colours make a GIF's palette: enough to see every colour a figure
+# uses for a while (a stream's colour in a crowd); the others are matched to the nearest.
+PALETTE_SAMPLES = 9
 
-    writer = animation.PillowWriter(fps=rate) if path.suffix.lower() == ".gif" else animation.FFMpegWriter(fps=rate)
+
+def _save_animation(figure, draw, frames, path, rate: float, progress: bool) -> None:
+    """Write the animation `draw(frame)` makes of `figure` for each of `frames` atomically, at
+    `rate` frames per second, with a progress bar over its frames; `draw` returns the artists it
+    changed. An MP4 goes through matplotlib's ffmpeg writer.
+
+    A GIF is blitted: the rest of the figure is drawn once and each frame draws only those
+    artists over it, and all frames share one palette, made from PALETTE_SAMPLES of them.
+    Matplotlib's Pillow writer draws each frame whole twice, axes and ticks included, and Pillow
+    then picks a palette per frame: 301 frames of 20 agents at 600 pixels took 28.0 s that way and
+    take 4.0 s this way (`flockkit demo`: 313 -> 70 s)."""
+    frames = list(frames)
     with progress_bar(progress, unit="frame") as report, atomic_path(path) as tmp:
-        callback = None if report is None else (lambda done, total: report(done + 1, total, f"drawing {path.name}"))
-        movie.save(tmp, writer=writer, progress_callback=callback)
+        if path.suffix.lower() != ".gif":
+            from matplotlib import animation
+
+            callback = None if report is None else (lambda done, total: report(done + 1, total, f"drawing {path.name}"))
+            movie = animation.FuncAnimation(figure, draw, frames=frames, blit=False)
+            movie.save(tmp, writer=animation.FFMpegWriter(fps=rate), progress_callback=callback)
+            return
+        from PIL import Image
+
+        canvas = figure.canvas
+        for artist in draw(frames[0]):
+            artist.set_animated(True)  # left out when the rest is drawn
+        canvas.draw()
+        background = canvas.copy_from_bbox(figure.bbox)
+
+        def render(frame):
+            changed = sorted(draw(frame), key=lambda artist: artist.get_zorder())
+            canvas.restore_region(background)
+            for artist in changed:
+                figure.draw_artist(artist)
+            return Image.fromarray(np.array(canvas.buffer_rgba())[..., :3])
+
+        picks = np.unique(np.linspace(0, len(frames) - 1, PALETTE_SAMPLES).round().astype(int))
+        palette = _shared_palette([render(frames[k]) for k in picks])
+        images = []
+        for done, frame in enumerate(frames):
+            images.append(render(frame).quantize(palette=palette, dither=Image.Dither.NONE))
+            if report is not None:
+                report(done + 1, len(frames), f"drawing {path.name}")
+        images[0].save(tmp, format="GIF", save_all=True, append_images=images[1:], duration=int(1000 / rate), loop=0)
+
+
+def _shared_palette(images):
+    """A GIF palette for frames like `images` (RGB): the most frequent colour of each cell of 32
+    levels a channel, most frequent first. The background and the main colours stay exact (a
+    median cut's palette, with near-white entries beside white, turned white into 252 grey)."""
+    from PIL import Image
+
+    strip = Image.new("RGB", (images[0].width, images[0].height * len(images)))
+    for k, image in enumerate(images):
+        strip.paste(image, (0, k * image.height))
+    cells = {}
+    for _, colour in sorted(strip.getcolors(strip.width * strip.height), reverse=True):
+        cells.setdefault(tuple(value >> 3 for value in colour), colour)
+    palette = Image.new("P", (1, 1))
+    palette.putpalette([value for colour in list(cells.values())[:256] for value in colour])
+    return palette
 
 
 def _mesh_view(mesh, axes):
@@ -428,8 +481,6 @@ def animate_mesh(mesh, path, *, segmentation=None, axes=None, fps=None, size=Non
     frames, rate = _timeline(mesh.motion.dt, mesh.motion.n_frames, fps, None, "animate_mesh")
     figure, ax, draw = _mesh_drawing(mesh, segmentation, axes, size, title=mesh.name)
     plt = _pyplot()
-    from matplotlib import animation
-
     label = ax.set_title("")
 
     def frame_and_time(frame):
@@ -437,8 +488,7 @@ def animate_mesh(mesh, path, *, segmentation=None, axes=None, fps=None, size=Non
         return [*draw(frame), label]
 
     try:
-        _save_animation(animation.FuncAnimation(figure, frame_and_time, frames=frames, blit=False), path, rate,
-                        progress)  # fmt: skip
+        _save_animation(figure, frame_and_time, frames, path, rate, progress)
     finally:
         plt.close(figure)
     return path
@@ -617,7 +667,6 @@ def animate_scene(animation, path, *, fps=None, size=None, max_frames=None, prog
     path = _check_movie_path(path)
     frames, rate = _timeline(animation.dt, animation.n_frames, fps, max_frames, "animate_scene")
     plt = _pyplot()
-    from matplotlib import animation as movies
 
     from .scene import FlowField
 
@@ -657,7 +706,7 @@ def animate_scene(animation, path, *, fps=None, size=None, max_frames=None, prog
         return [dots, quiver, label]
 
     try:
-        _save_animation(movies.FuncAnimation(figure, draw, frames=len(frames), blit=False), path, rate, progress)
+        _save_animation(figure, draw, range(len(frames)), path, rate, progress)
     finally:
         plt.close(figure)
     return path
@@ -709,7 +758,6 @@ def _animate_skeletons(recording, placed, path, *, fps, size, progress, ticks: b
     parents = recording.skeleton.parents
     frames, rate = _timeline(1.0 / recording.fps, recording.n_frames, fps, None, "animate_crowd")
     plt = _pyplot()
-    from matplotlib import animation as movies
     from matplotlib.collections import LineCollection
 
     low, high = placed.reshape(-1, 2).min(axis=0), placed.reshape(-1, 2).max(axis=0)
@@ -734,7 +782,7 @@ def _animate_skeletons(recording, placed, path, *, fps, size, progress, ticks: b
         return [lines, label]
 
     try:
-        _save_animation(movies.FuncAnimation(figure, draw, frames=len(frames), blit=False), path, rate, progress)
+        _save_animation(figure, draw, range(len(frames)), path, rate, progress)
     finally:
         plt.close(figure)
     return path

@@ -181,3 +181,37 @@ def test_a_crowd_gif_colours_parts_by_stream_and_the_offsets_plot_shows_dilation
     with pytest.raises(ValidationError, match="axes"):
         viz.animate_crowd(crowd, tmp_path / "bad.gif", axes="xw")
     assert not (tmp_path / "bad.gif").exists()
+
+
+def test_a_gif_frame_is_the_figure_drawn_whole(tmp_path):
+    """GIFs are blitted (the still part drawn once) and share one palette: a frame is what
+    matplotlib draws of the whole figure, white kept exactly white, the rest within a level."""
+    import matplotlib.pyplot as plt
+    from PIL import Image
+
+    figure, ax = plt.subplots(figsize=(3, 2), dpi=100)
+    ax.set_xlim(0, 10)
+    ax.set_ylim(-1.2, 1.2)
+    (line,) = ax.plot([], [], color="tab:orange", lw=2)
+    label = ax.set_title("")
+    x = np.linspace(0, 10, 200)
+
+    def draw(frame):
+        line.set_data(x, np.sin(x + frame / 3))
+        label.set_text(f"frame {frame}")
+        return [line, label]
+
+    viz._save_animation(figure, draw, range(12), tmp_path / "wave.gif", 10.0, False)
+    with Image.open(tmp_path / "wave.gif") as image:
+        assert image.n_frames == 12 and image.info["duration"] == 100
+        image.seek(7)
+        frame = np.asarray(image.convert("RGB")).astype(int)
+    for artist in (line, label):
+        artist.set_animated(False)
+    draw(7)
+    figure.canvas.draw()
+    whole = np.asarray(figure.canvas.buffer_rgba())[..., :3].astype(int)
+    plt.close(figure)
+    white = (whole == 255).all(axis=2)
+    assert frame.shape == whole.shape and (frame[white] == 255).all()
+    assert np.abs(frame - whole).mean() < 1.0
