@@ -258,14 +258,12 @@ class IcpHungarian:
         """ICP from every start for pairs (ia[p], ib[p]): (distances, assignments, rotations) of the
         best. Pairs with a static configuration (no heading) get their own starts, searched apart."""
         static = prepared.static[ia] | prepared.static[ib]
-        if static.all() or not static.any():
-            return self._search_from(prepared, ia, ib, prepared.starts(ia, ib, static=bool(static.all())))
         n, d = prepared.n_agents, prepared.dims
         distance, assignment, rotation = np.empty(len(ia)), np.empty((len(ia), n), dtype=int), np.empty((len(ia), d, d))
-        for kind in (False, True):
+        for kind in np.unique(static):
             mine = static == kind
-            found = self._search_from(prepared, ia[mine], ib[mine], prepared.starts(ia[mine], ib[mine], static=kind))
-            distance[mine], assignment[mine], rotation[mine] = found
+            starts = prepared.starts(ia[mine], ib[mine], static=bool(kind))
+            distance[mine], assignment[mine], rotation[mine] = self._search_from(prepared, ia[mine], ib[mine], starts)
         return distance, assignment, rotation
 
     def _search_from(self, prepared, ia, ib, starts):

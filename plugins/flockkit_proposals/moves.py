@@ -152,15 +152,13 @@ def _extended(track: np.ndarray, first: int, last: int) -> np.ndarray:
 def _hierarchy(last: int) -> tuple:
     """(points, lefts, rights) per level, coarse to fine: each point with the neighbours it is
     coded against (the points of a level depend only on coarser ones). Cached: read only."""
-    levels, spans = [], [(0, last)]
+    levels, spans = [], [(0, last)] if last >= 2 else []
     while spans:
-        spans = [(left, right) for left, right in spans if right - left >= 2]
-        if not spans:
-            break
         lefts, rights = np.array(spans).T
         middles = (lefts + rights) // 2
         levels.append(tuple(_read_only(a) for a in (middles, lefts, rights)))
-        spans = [pair for mid, left, right in zip(middles, lefts, rights) for pair in ((left, mid), (mid, right))]
+        spans = [(a, b) for mid, left, right in zip(middles, lefts, rights) for a, b in ((left, mid), (mid, right))
+                 if b - a >= 2]  # fmt: skip
     return tuple(levels)
 
 
