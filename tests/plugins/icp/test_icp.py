@@ -3,6 +3,7 @@ import pytest
 from flockkit_icp import IcpHungarian, exact_distance
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
+from scipy.optimize import linear_sum_assignment
 
 import flockkit
 from flockkit.errors import ValidationError
@@ -169,6 +170,33 @@ def test_static_and_moving_pairs_searched_apart_equal_compare_bit_for_bit():
     pairs = np.array([[0, 1], [5, 6], [2, 7], [3, 4], [9, 8], [1, 0]])
     expected = [metric.compare(configs[i], configs[j]).distance for i, j in pairs]
     assert list(metric.pairwise(configs, pairs)) == expected
+
+
+@pytest.mark.parametrize("dims", [2, 3])
+def test_starts_spared_by_their_bound_change_nothing(dims, monkeypatch):
+    """From 40 agents only a pair's KEEP best starts after the first assignment go on, and starts
+    whose bound (rotation-free floor plus the mean-velocity term at the start) already exceeds the
+    KEEP-th distance are not assigned at all: on a flock's configurations that spares the starts
+    turned away from the heading, with the same distances, bit for bit, as assigning every start."""
+    import flockkit_icp.metric as module
+
+    motion = flockkit.simulate(n_agents=40, steps=200, dims=dims, seed=5)
+    configs = [motion.configuration(t) for t in range(0, 200, 10)]
+    metric = IcpHungarian()
+    assignments = []
+    monkeypatch.setattr(module, "linear_sum_assignment", lambda c: assignments.append(1) or linear_sum_assignment(c))
+    spared = metric.pairwise(configs)
+    spared_count = len(assignments)
+    first = IcpHungarian._first_assignments
+    monkeypatch.setattr(
+        IcpHungarian,
+        "_first_assignments",
+        lambda self, *args: first(self, *args[:-1], np.full_like(args[-1], -np.inf)),  # no start spared
+    )
+    assignments.clear()
+    every = metric.pairwise(configs)
+    assert np.array_equal(spared, every)
+    assert spared_count < 0.9 * len(assignments)
 
 
 def test_pairwise_rejects_bad_pairs():
