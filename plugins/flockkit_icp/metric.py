@@ -321,8 +321,7 @@ class IcpHungarian:
             if step == 0 and prune:  # after the first assignment (starts not assigned rank last)
                 first = np.full(m, np.inf)
                 first[active] = distance
-                rank = np.argsort(np.argsort(first.reshape(-1, group), axis=1), axis=1).ravel()
-                going &= rank[active] < KEEP
+                going &= _ranks(first, group)[active] < KEEP
             active, assignment = active[going], assignment[going]
             if not len(active):
                 break
@@ -356,7 +355,7 @@ class IcpHungarian:
         bound = floor + self.velocity_weight * ((va.mean(axis=1) - turned) ** 2).sum(axis=1)
         bound = bound * (1 - 1e-9) - 1e-12  # rounding must never spare a start that could rank
         distance, assignment = np.full(m, np.inf), np.tile(np.arange(n), (m, 1))
-        take = np.argsort(np.argsort(bound.reshape(-1, group), axis=1), axis=1).ravel() < KEEP
+        take = _ranks(bound, group) < KEEP
         while take.any():
             rows = np.flatnonzero(take)
             distance[rows], assignment[rows] = self._assign(left, pb, vb, rotation, rows)
@@ -459,6 +458,11 @@ def _pair_costs(x, y):
     cost += (x * x).sum(axis=2)[:, :, None]
     cost += (y * y).sum(axis=2)[:, None, :]
     return cost
+
+
+def _ranks(values, group) -> np.ndarray:
+    """Each value's rank (0 lowest) within its run of `group` consecutive values (one pair's starts)."""
+    return np.argsort(np.argsort(values.reshape(-1, group), axis=1), axis=1).ravel()
 
 
 def _gather(points, assignment):
