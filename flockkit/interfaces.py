@@ -78,6 +78,13 @@ class Capabilities:
         Behavior: ``forward`` and ``backward`` take ``guide``, a mapping of agent index to the
         (steps + 1, D) positions that agent takes (keyframed) while the others react to it. The
         initial trajectories of ``solve`` guide point-constrained agents along their paths.
+    group_guide : bool
+        Behavior: ``forward`` takes ``group_guide``, a sequence of (agents, path) pairs, path the
+        (steps + 1, D) positions that group's center of mass should follow: the model biases its
+        own random choices so that the group drifts along the path instead of wherever chance
+        takes it (loosely: it is steered, not placed). The initial trajectories of ``solve`` steer
+        COM-constrained groups along their paths, and then only move them onto the path at the
+        window's ends and its constraints' times, instead of at every frame.
     obstacles : bool
         Behavior: the factory takes ``obstacles``, a sequence of flockkit regions the model
         avoids. ``solve`` passes a Problem's obstacles to a model it makes by name, and refuses a
@@ -105,6 +112,7 @@ class Capabilities:
 
     dims: tuple = attrs.field(default=(2, 3), converter=_dims)
     guide: bool = attrs.field(default=False, validator=_flag("guide"))
+    group_guide: bool = attrs.field(default=False, validator=_flag("group_guide"))
     obstacles: bool = attrs.field(default=False, validator=_flag("obstacles"))
     plausibility_reach: int | None = attrs.field(default=None, validator=_reach)
     residuals: bool = attrs.field(default=False, validator=_flag("residuals"))
@@ -125,7 +133,7 @@ class Capabilities:
 
 # kind -> the Capabilities fields (besides dims) that something reads for that kind
 KIND_FIELDS: dict[str, frozenset] = {
-    "behavior": frozenset({"guide", "obstacles", "plausibility_reach", "residuals", "progress"}),
+    "behavior": frozenset({"guide", "group_guide", "obstacles", "plausibility_reach", "residuals", "progress"}),
     "metric": frozenset({"lower_bound", "pairs_within", "pairwise"}),
     "builder": frozenset({"progress"}),
     "walk": frozenset(),
@@ -323,6 +331,10 @@ class _Guided(Protocol):
     def backward(self, final, steps, rng, *, guide=None): ...
 
 
+class _GroupGuided(Protocol):
+    def forward(self, initial, steps, rng, *, group_guide=None): ...
+
+
 class _Residuals(Protocol):
     def plausibility_residuals(self, motion, start=0, stop=None): ...
 
@@ -352,6 +364,7 @@ class _Pairwise(Protocol):
 # Capabilities field -> kind -> the methods (and parameters) a component declaring it must offer
 OPTIONAL_PROTOCOLS: dict[str, dict[str, type]] = {
     "guide": {"behavior": _Guided},
+    "group_guide": {"behavior": _GroupGuided},
     "residuals": {"behavior": _Residuals},
     "progress": {"behavior": _SimulationProgress, "builder": _BuildProgress},
     "lower_bound": {"metric": _LowerBound},

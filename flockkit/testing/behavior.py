@@ -2,8 +2,8 @@
 
 Each check is ``check_<property>(name, model)`` and raises AssertionError saying what is wrong.
 They run on a few fixed flocks (one agent to a hundred) in the dimensions the model declares, so
-results are reproducible; the checks of ``guide``, ``progress``, ``plausibility_reach`` and
-``residuals`` run only for models that declare them.
+results are reproducible; the checks of ``guide``, ``group_guide``, ``progress``,
+``plausibility_reach`` and ``residuals`` run only for models that declare them.
 """
 
 from __future__ import annotations
@@ -228,6 +228,27 @@ def check_guide(name, model):
     )
 
 
+@applies_when("group_guide")
+def check_group_guide(name, model):
+    """A model declaring ``group_guide`` steers a group's center of mass along its path: sent along
+    its own unguided course shifted sideways by the flock's radius over the simulation, the group
+    ends nearer the path's end than it does unguided (the same generator seed)."""
+    state = _flock(model)
+    steps = 4 * STEPS
+    free = model.forward(state, steps, np.random.default_rng(0)).positions.mean(axis=1)
+    radius = float(np.max(np.linalg.norm(state.positions - state.positions.mean(axis=0), axis=1))) or 1.0
+    offset = np.zeros(state.dims)
+    offset[-1] = radius
+    path = free + np.linspace(0.0, 1.0, steps + 1)[:, None] * offset
+    agents = np.arange(state.n_agents)
+    guided = model.forward(state, steps, np.random.default_rng(0), group_guide=[(agents, path)]).positions
+    miss, unguided_miss = np.linalg.norm(guided[-1].mean(axis=0) - path[-1]), np.linalg.norm(offset)
+    assert miss < 0.9 * unguided_miss, (
+        f"{name}.forward(group_guide=...) ends {miss:.3g} from its path's end, not nearer than 0.9 times unguided "
+        f"({unguided_miss:.3g})"
+    )
+
+
 @applies_when("progress")
 def check_progress(name, model):
     """A model declaring ``progress`` reports (done, total, stage) as it simulates, done rising to
@@ -314,6 +335,7 @@ CHECKS = (
     check_log_plausibility_window,
     check_rejects_bad_window,
     check_guide,
+    check_group_guide,
     check_progress,
     check_plausibility_reach,
     check_residuals,

@@ -38,6 +38,10 @@ from flockkit import validate
 from flockkit.errors import ValidationError
 
 _WANDER = "wander"
+# Seconds over which a guided group's wander is turned towards its path (group_guide). On 20 boids
+# steered along a 14 s straight path the group ended 0.14-0.19 m from it with impulses like a free
+# flock's (median 0.085-0.088 against 0.084); 8 s lagged by 0.8-1.9 m (bench/README.md).
+GUIDE_TIME = 2.0
 
 
 def _obstacles(value):
@@ -117,7 +121,7 @@ class Boids:
     # A change at frame f alters the inferred impulses at frames f - 1 .. f + 2 (see
     # log_plausibility), so scores within 2 frames of a change.
     capabilities = flockkit.Capabilities(
-        guide=True, obstacles=True, plausibility_reach=2, residuals=True, progress=True
+        guide=True, group_guide=True, obstacles=True, plausibility_reach=2, residuals=True, progress=True
     )
 
     def __attrs_post_init__(self):
@@ -129,15 +133,26 @@ class Boids:
     # -- the three operations -------------------------------------------------------------
 
     def forward(
-        self, initial: flockkit.State, steps: int, rng: np.random.Generator, *, progress=None, guide=None
+        self,
+        initial: flockkit.State,
+        steps: int,
+        rng: np.random.Generator,
+        *,
+        progress=None,
+        guide=None,
+        group_guide=None,
     ) -> flockkit.Motion:
         """Simulate `steps` steps from `initial`; ``steps + 1`` frames, the first equal to `initial`.
 
         `guide` maps agent indices to (steps + 1, D) positions those agents take from frame 1 on
-        (keyframed agents): the others see them there and react."""
+        (keyframed agents): the others see them there and react. `group_guide` is a sequence of
+        (agents, path) pairs, path (steps + 1, D): each step adds to the group's wander impulses
+        the turn that would bring its center of mass onto the path in about GUIDE_TIME seconds
+        (critically damped), so the group drifts along the path by the model's own means."""
         self._check_state(initial, "initial")
         steps = _steps(steps)
         guide = self._guide(guide, steps, initial)
+        group_guide = self._group_guide(group_guide, steps, initial)
         positions, wander = self._simulate(
             initial.positions,
             initial.velocities,
@@ -147,6 +162,7 @@ class Boids:
             perception=1.0,
             progress=progress,
             guide=guide,
+            group_guide=group_guide,
         )
         return flockkit.Motion(positions=positions, dt=self.dt, channels={_WANDER: wander})
 
@@ -263,6 +279,33 @@ class Boids:
             checked[int(agent)] = path
         return checked
 
+    def _group_guide(self, group_guide, steps, state) -> list:
+        checked = []
+        for index, pair in enumerate(group_guide or ()):
+            try:
+                agents, path = pair
+                agents = np.asarray(agents)
+                path = np.asarray(path, dtype=np.float64)
+            except (TypeError, ValueError):
+                raise ValidationError(f"boids: group_guide[{index}] must be an (agents, path) pair") from None
+            if (
+                agents.ndim != 1
+                or not len(agents)
+                or not np.issubdtype(agents.dtype, np.integer)
+                or agents.min() < 0
+                or agents.max() >= state.n_agents
+            ):
+                raise ValidationError(
+                    f"boids: group_guide[{index}] agents must be agent indices below {state.n_agents}; got {agents!r}"
+                )
+            if path.shape != (steps + 1, state.dims) or not np.all(np.isfinite(path)):
+                raise ValidationError(
+                    f"boids: group_guide[{index}] path must be finite positions of shape {(steps + 1, state.dims)}; "
+                    f"got {path.shape}"
+                )
+            checked.append((agents, path))
+        return checked
+
     def _check_memory(self, x) -> None:
         """Refuse, before simulating, a flock whose neighbor pairs would not fit in memory: pairs
         expected at the flock's mean density, about 20 numbers each (offsets, distances, weights)."""
@@ -275,7 +318,7 @@ class Boids:
         validate.allocation(20 * pairs, f"boids: finding the neighbors of {n} agents in {d}D")
 
     @np.errstate(over="ignore", invalid="ignore")  # overflow is reported as an error at the end
-    def _simulate(self, x0, v0, wander0, steps, rng, *, perception, progress, guide=None):
+    def _simulate(self, x0, v0, wander0, steps, rng, *, perception, progress, guide=None, group_guide=None):
         n, d = x0.shape
         if steps > 1:
             self._check_memory(x0)
@@ -287,7 +330,10 @@ class Boids:
         for t in range(steps):
             if t > 0:
                 direction = _unit(rng.standard_normal((n, d)))
-                wander[t] = _unit(wander[t - 1]) + direction * rng.normal(0.0, self.wander_sigma, (n, 1))
+                impulse = direction * rng.normal(0.0, self.wander_sigma, (n, 1))
+                for agents, path in group_guide or ():
+                    impulse[agents] += self._towards(path, t, positions[t, agents], velocity[agents])
+                wander[t] = _unit(wander[t - 1]) + impulse
                 steer = self._steering(positions[t], velocity, perception)
                 velocity = velocity + gain * (steer + self.wander_weight * wander[t])
             else:
@@ -308,6 +354,16 @@ class Boids:
                 f"{self.acceleration:g}); use a smaller dt"
             )
         return positions, wander
+
+    def _towards(self, path, t, x, v) -> np.ndarray:
+        """The impulse turning a group's wander towards its path at step t: the acceleration that
+        brings its center of mass onto the path in about GUIDE_TIME (critically damped), as the
+        wander that makes it, spread over GUIDE_TIME (a turn, not an offset: the wander is renormalized
+        every step, so an offset would be paid again at every frame)."""
+        miss = path[t] - x.mean(axis=0)
+        late = (path[t + 1] - path[t]) / self.dt - v.mean(axis=0)
+        wanted = miss / GUIDE_TIME**2 + 2 * late / GUIDE_TIME
+        return wanted * self._weight_sum / (self.acceleration * self.wander_weight) * self.dt / GUIDE_TIME
 
     def _infer_wander(self, x, dt, first, last) -> np.ndarray:
         """The wander contributions at frames first..last-1 (1 <= t <= T - 2) implied by the

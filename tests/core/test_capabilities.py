@@ -78,6 +78,7 @@ def test_capabilities_reads_the_declaration_or_gives_the_defaults():
     boids = flockkit.get("behavior", "boids")
     assert flockkit.capabilities(boids).declared() == {
         "guide": True,
+        "group_guide": True,
         "obstacles": True,
         "plausibility_reach": 2,
         "residuals": True,
@@ -150,11 +151,18 @@ def test_declared_operations_are_checked_at_registration(kind, factory, problem)
 
 def test_the_kit_reports_undeclared_operations_as_skipped_with_the_reason():
     report = check_plugin("behavior", RandomVelocity())
-    assert set(report.skipped) == {"check_guide", "check_progress", "check_plausibility_reach", "check_residuals"}
+    assert set(report.skipped) == {
+        "check_guide",
+        "check_group_guide",
+        "check_progress",
+        "check_plausibility_reach",
+        "check_residuals",
+    }
     assert all("does not declare Capabilities." in reason for reason in report.skipped.values())
     assert not set(report.passed) & set(report.skipped)
     assert {c.__name__ for c in checks_for("behavior", Declaring())} >= {
         "check_guide",
+        "check_group_guide",
         "check_progress",
         "check_plausibility_reach",
         "check_residuals",

@@ -1,5 +1,6 @@
 import warnings
 
+import attrs
 import numpy as np
 import pytest
 
@@ -34,6 +35,46 @@ def test_initial_trajectories_meet_every_constraint_exactly():
     solution = flockkit.solve(problem, iterations=0, seed=3)
     assert solution.motion.n_frames == 31 and solution.trace[0].log_g.size == 0
     assert max(solution.residuals) <= 1e-9
+
+
+class Unsteered:
+    """The boids model without ``group_guide``: COM groups are moved onto their paths at every frame."""
+
+    def __init__(self):
+        self.model = flockkit.get("behavior", "boids")
+        self.capabilities = attrs.evolve(flockkit.capabilities(self.model), group_guide=False)
+
+    def __getattr__(self, name):
+        return getattr(self.model, name)
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_a_steered_com_group_keeps_the_model_s_impulses(seed):
+    """A group held to a 10 s COM path: steered by the model (group_guide), its agents' inferred
+    impulses stay near a free flock's; moved onto the path at every frame, they are far larger."""
+    rest = list(range(1, 12))
+    problem = Problem(
+        n_agents=12,
+        duration=12.0,
+        constraints=[
+            ComConstraint(agents=rest, time=1.0, position=[0.0, 0.0], velocity=[1.0, 0.0]),
+            ComConstraint(agents=rest, time=11.0, position=[10.0, 0.0], velocity=[1.0, 0.0]),
+        ],
+    )
+    boids = flockkit.get("behavior", "boids")
+
+    def median_impulse(behavior):
+        motion = flockkit.solve(problem, behavior=behavior, iterations=0, refine=0, seed=seed).motion
+        return float(np.median(np.linalg.norm(boids.wander_impulses(motion)[20:100, rest], axis=-1)))
+
+    free = float(
+        np.median(
+            np.linalg.norm(boids.wander_impulses(flockkit.simulate(n_agents=12, steps=120, seed=seed))[1:-1], axis=-1)
+        )
+    )
+    steered = median_impulse(boids)
+    assert steered < 1.7 * free  # a free flock's: 0.082-0.087 (seeds 1-4); steered 0.099-0.135
+    assert 1.5 * steered < median_impulse(Unsteered())  # moved onto the path at every frame: 0.17-0.35
 
 
 @pytest.mark.parametrize("seed", [0, 1])

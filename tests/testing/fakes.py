@@ -26,13 +26,16 @@ class RandomVelocity:
         if not isinstance(steps, int) or steps < 0:
             raise ValidationError(f"steps must be an integer >= 0; got {steps!r}")
 
-    def _run(self, x0, v0, steps, rng, guide=None, progress=None):
+    def _run(self, x0, v0, steps, rng, guide=None, progress=None, group_guide=None):
         positions = np.empty((steps + 1, *x0.shape))
         positions[0] = x0
         velocity = np.array(v0)
         for t in range(steps):
             if t > 0:
                 velocity = velocity + self.sigma * rng.standard_normal(x0.shape)
+                for agents, path in group_guide or ():  # half way to the velocity that reaches the path
+                    wanted = (path[t + 1] - positions[t, agents].mean(axis=0)) / self.dt
+                    velocity[agents] += 0.5 * (wanted - velocity[agents].mean(axis=0))
             positions[t + 1] = positions[t] + velocity * self.dt
             for agent, path in (guide or {}).items():
                 positions[t + 1, agent] = path[t + 1]
@@ -66,7 +69,9 @@ class Declaring(RandomVelocity):
     agents, progress reports, its plausibility's reach (frame t reads frames t - 1 .. t + 1) and
     its residuals (the inferred noise)."""
 
-    capabilities = flockkit.Capabilities(guide=True, progress=True, plausibility_reach=1, residuals=True)
+    capabilities = flockkit.Capabilities(
+        guide=True, group_guide=True, progress=True, plausibility_reach=1, residuals=True
+    )
 
     def plausibility_residuals(self, motion, start=0, stop=None):
         stop = motion.n_frames if stop is None else stop
@@ -77,11 +82,10 @@ class Declaring(RandomVelocity):
         noise[1:-1] = (velocities[1:] - velocities[:-1]) / self.sigma
         return noise[start:stop]
 
-    def forward(self, initial, steps, rng, *, guide=None, progress=None):
+    def forward(self, initial, steps, rng, *, guide=None, progress=None, group_guide=None):
         self._steps(steps)
-        return flockkit.Motion(
-            positions=self._run(initial.positions, initial.velocities, steps, rng, guide, progress), dt=self.dt
-        )
+        positions = self._run(initial.positions, initial.velocities, steps, rng, guide, progress, group_guide)
+        return flockkit.Motion(positions=positions, dt=self.dt)
 
     def backward(self, final, steps, rng, *, guide=None, progress=None):
         self._steps(steps)
@@ -176,6 +180,11 @@ class IgnoresGuide(Declaring):
         return super().forward(initial, steps, rng, progress=progress)
 
 
+class IgnoresGroupGuide(Declaring):
+    def forward(self, initial, steps, rng, *, guide=None, progress=None, group_guide=None):
+        return super().forward(initial, steps, rng, guide=guide, progress=progress)
+
+
 class SilentProgress(Declaring):
     def forward(self, initial, steps, rng, *, guide=None, progress=None):
         return super().forward(initial, steps, rng, guide=guide)
@@ -215,6 +224,7 @@ BROKEN = {
     "check_log_plausibility_window": WindowIgnored,
     "check_rejects_bad_window": WindowUnchecked,
     "check_guide": IgnoresGuide,
+    "check_group_guide": IgnoresGroupGuide,
     "check_progress": SilentProgress,
     "check_plausibility_reach": ReachTooShort,
     "check_residuals": ResidualsOffScale,
