@@ -186,3 +186,30 @@ def test_bad_guides_are_named(guide, match):
     start = flockkit.random_flock(n_agents=3, rng=np.random.default_rng(0))
     with pytest.raises(ValidationError, match=match):
         boids.forward(start, 10, np.random.default_rng(0), guide=guide)
+
+
+@pytest.mark.parametrize(
+    "group_guide, match",
+    [
+        ([([0, 7], np.zeros((11, 2)))], "group_guide\\[0\\] agents"),
+        ([([], np.zeros((11, 2)))], "group_guide\\[0\\] agents"),
+        ([([0, 1], np.zeros((5, 2)))], "group_guide\\[0\\] path"),
+        ([([0, 1], np.full((11, 2), np.nan))], "group_guide\\[0\\] path"),
+        ([[0, 1, 2]], "group_guide\\[0\\] must be an \\(agents, path\\) pair"),
+    ],
+)
+def test_bad_group_guides_are_named(group_guide, match):
+    boids = flockkit.get("behavior", "boids")
+    start = flockkit.random_flock(n_agents=3, rng=np.random.default_rng(0))
+    with pytest.raises(ValidationError, match=match):
+        boids.forward(start, 10, np.random.default_rng(0), group_guide=group_guide)
+
+
+def test_no_group_guide_simulates_as_before():
+    """Without a group guide the draws and arithmetic are those of a plain simulation."""
+    boids = flockkit.get("behavior", "boids")
+    start = flockkit.random_flock(n_agents=6, rng=np.random.default_rng(2))
+    plain = boids.forward(start, 30, np.random.default_rng(5))
+    assert plain == boids.forward(start, 30, np.random.default_rng(5), group_guide=[])
+    steered = boids.forward(start, 30, np.random.default_rng(5), group_guide=[([0, 1, 2], np.zeros((31, 2)))])
+    assert not np.allclose(steered.positions, plain.positions)
