@@ -161,12 +161,10 @@ class _Initial:
         one frame early joins the windows without a kink in the inferred wander."""
         steps = stop - start
         spanning = [p for p in self.paths if p.spans(start, stop)]
-        guide = self._guide(spanning, start, steps)
         if prior is None:
-            steered = {**guide, **self._group_guide(spanning, start, steps)}
-            forward = self.behavior.forward(state, steps, self.rng, **steered)
+            forward = self.behavior.forward(state, steps, self.rng, **self._guide(spanning, start, steps, steer=True))
         else:
-            early = {**self._guide(spanning, start - 1, steps + 1), **self._group_guide(spanning, start - 1, steps + 1)}
+            early = self._guide(spanning, start - 1, steps + 1, steer=True)
             forward = self.behavior.forward(prior, steps + 1, self.rng, **early)[1:]
         positions = self._onto_paths(forward.positions, spanning, start, anchor=forward.positions[0])
         ending = [c for c in self.by_frame.get(stop, []) if not any(id(c) in p.members for p in spanning)]
@@ -184,7 +182,10 @@ class _Initial:
         else:
             end_positions, end_velocities = np.array(end.positions), np.array(end.velocities)
         backward = self.behavior.backward(
-            State(positions=end_positions, velocities=end_velocities), steps, self.rng, **guide
+            State(positions=end_positions, velocities=end_velocities),
+            steps,
+            self.rng,
+            **self._guide(spanning, start, steps),
         )
         back = self._onto_paths(backward.positions, spanning, start, anchor=forward.positions[0])
         u = _blend_weights(steps)[:, None, None]
@@ -194,23 +195,18 @@ class _Initial:
         blended[0], blended[-1] = positions[0], end_positions  # exactly, whatever the rounding
         return Motion(positions=blended, dt=self.dt, channels=_channels(forward))
 
-    def _guide(self, spanning, start, steps) -> dict:
+    def _guide(self, spanning, start, steps, steer=False) -> dict:
         """Keyword arguments keeping point-path agents on their paths during simulation, so the
-        others react to where they really are (for models declaring the `guide` capability)."""
-        points = [p for p in spanning if p.is_point]
-        if not points or not self.guided:
-            return {}
+        others react to where they really are (for models declaring `guide`); with `steer`, also
+        steering COM-path groups along theirs by the model's own random choices (for models
+        declaring `group_guide`; `forward` only)."""
+        points = [p for p in spanning if p.is_point] if self.guided else []
+        coms = [p for p in spanning if not p.is_point] if steer and self.group_guided else []
         times = (start + np.arange(steps + 1)) * self.dt
-        return {"guide": {p.agents[0]: p.spline(times) for p in points}}
-
-    def _group_guide(self, spanning, start, steps) -> dict:
-        """Keyword arguments steering COM-path groups along their paths during simulation (for
-        models declaring `group_guide`): the group drifts there by the model's own random choices."""
-        coms = [p for p in spanning if not p.is_point]
-        if not coms or not self.group_guided:
-            return {}
-        times = (start + np.arange(steps + 1)) * self.dt
-        return {"group_guide": [(list(p.agents), p.spline(times)) for p in coms]}
+        found = {"guide": {p.agents[0]: p.spline(times) for p in points}} if points else {}
+        if coms:
+            found["group_guide"] = [(list(p.agents), p.spline(times)) for p in coms]
+        return found
 
     def _onto_paths(self, positions, spanning, start, anchor) -> np.ndarray:
         """Operation 2: translate constrained agents onto their paths, the others with them."""

@@ -268,15 +268,9 @@ class Boids:
             return {}
         checked = {}
         for agent, path in dict(guide).items():
-            path = np.asarray(path, dtype=np.float64)
             if isinstance(agent, bool) or not isinstance(agent, (int, np.integer)) or not 0 <= agent < state.n_agents:
                 raise ValidationError(f"boids: guide keys must be agent indices below {state.n_agents}; got {agent!r}")
-            if path.shape != (steps + 1, state.dims) or not np.all(np.isfinite(path)):
-                raise ValidationError(
-                    f"boids: guide[{agent}] must be finite positions of shape {(steps + 1, state.dims)}; got "
-                    f"{path.shape}"
-                )
-            checked[int(agent)] = path
+            checked[int(agent)] = _checked_path(path, steps, state, f"guide[{agent}]")
         return checked
 
     def _group_guide(self, group_guide, steps, state) -> list:
@@ -285,7 +279,6 @@ class Boids:
             try:
                 agents, path = pair
                 agents = np.asarray(agents)
-                path = np.asarray(path, dtype=np.float64)
             except (TypeError, ValueError):
                 raise ValidationError(f"boids: group_guide[{index}] must be an (agents, path) pair") from None
             if (
@@ -298,12 +291,7 @@ class Boids:
                 raise ValidationError(
                     f"boids: group_guide[{index}] agents must be agent indices below {state.n_agents}; got {agents!r}"
                 )
-            if path.shape != (steps + 1, state.dims) or not np.all(np.isfinite(path)):
-                raise ValidationError(
-                    f"boids: group_guide[{index}] path must be finite positions of shape {(steps + 1, state.dims)}; "
-                    f"got {path.shape}"
-                )
-            checked.append((agents, path))
+            checked.append((agents, _checked_path(path, steps, state, f"group_guide[{index}] path")))
         return checked
 
     def _check_memory(self, x) -> None:
@@ -493,6 +481,19 @@ class _SparsePairs:
 
     def weighted_sum(self, weights, y):
         return np.stack([self.total(weights * c[self._j]) for c in y.T], axis=1)
+
+
+def _checked_path(path, steps, state, where) -> np.ndarray:
+    """`path` as finite float positions (steps + 1, D) of a guide, else a ValidationError naming it."""
+    try:
+        path = np.asarray(path, dtype=np.float64)
+    except (TypeError, ValueError):
+        path = np.empty(0)
+    if path.shape != (steps + 1, state.dims) or not np.all(np.isfinite(path)):
+        raise ValidationError(
+            f"boids: {where} must be finite positions of shape {(steps + 1, state.dims)}; got {path.shape}"
+        )
+    return path
 
 
 def _steps(steps) -> int:
