@@ -88,7 +88,8 @@ def _sequence(value, field: str) -> list:
 def _edge(value) -> tuple[str, int]:
     kind, index = value if isinstance(value, (tuple, list)) and len(value) == 2 else (None, None)
     if (
-        kind not in ("clip", "transition")
+        not isinstance(kind, str)  # an array would compare elementwise
+        or kind not in ("clip", "transition")
         or isinstance(index, bool)
         or not isinstance(index, (int, np.integer))
         or index < 0
