@@ -544,6 +544,10 @@ class Problem:
         The paper's sigma_com = 0.1, c_S = 10 and c_F = 1000.
     visibility : float
         Agents closer than this see each other when counting flocks (boids' perception radius).
+    clearance : float
+        How far (length units, >= 0) the initial trajectories keep agents from the obstacles'
+        surfaces: blending simulations and moving groups onto their paths can carry an agent into
+        an obstacle, where a model's avoidance is at its strongest (0: not kept).
     follow : str
         How the initial trajectories move unconstrained agents: "nearest" (with the constrained
         agent nearest to them, smoother) or "random" (with a constrained agent drawn at random,
@@ -570,6 +574,9 @@ class Problem:
     )
     visibility: float = attrs.field(
         default=3.0, converter=functools.partial(number, field="Problem.visibility", minimum=0, strict=True)
+    )
+    clearance: float = attrs.field(
+        default=0.5, converter=functools.partial(number, field="Problem.clearance", minimum=0, maximum=EXTENT)
     )
     follow: str = attrs.field(default="nearest")
 

@@ -3,8 +3,8 @@
 ::
 
     [problem]
-    agents = 20          # required; dims = 2, dt = 0.1, flocks = 1, sigma_com, shape_weight,
-    duration = 8.0       # flock_weight, visibility and follow are optional (defaults as in Problem)
+    agents = 20          # required; dims = 2, dt = 0.1, flocks = 1, sigma_com, shape_weight, flock_weight,
+    duration = 8.0       # visibility, clearance and follow are optional (defaults as in Problem)
 
     [solve]              # optional: behavior, behavior_params = {...}, iterations, refine, chains, seed, stable,
                          # proposals = {bump = 0.6, ...}, objectives = [...]
@@ -40,6 +40,7 @@ _PROBLEM_KEYS = {
     "shape_weight": "shape_weight",
     "flock_weight": "flock_weight",
     "visibility": "visibility",
+    "clearance": "clearance",
     "follow": "follow",
 }
 _SOLVE_KEYS = {

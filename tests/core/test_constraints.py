@@ -78,6 +78,7 @@ def test_bad_constraints_are_named(constraints, match):
         (lambda: Problem(n_agents=2, duration=0.0), "duration"),
         (lambda: Problem(n_agents=2, duration=1.0, obstacles=[flockkit.Ball(center=[0, 0, 0], radius=1)]), "obstacles"),
         (lambda: Problem(n_agents=2, duration=1.0, sigma_com=0), "sigma_com"),
+        (lambda: Problem(n_agents=2, duration=1.0, clearance=-0.5), "clearance"),
     ],
 )
 def test_bad_fields_are_named(make, match):

@@ -37,6 +37,53 @@ def test_initial_trajectories_meet_every_constraint_exactly():
     assert max(solution.residuals) <= 1e-9
 
 
+def test_a_com_group_leaves_its_constraint_at_the_constraint_s_velocity():
+    """The group placed at a COM constraint moves off at its velocity, not only in its direction
+    (a snapshot's speed where the path asks more is made up later, at a cost in every frame)."""
+    velocity = np.array([1.3, 0.4])
+    problem = Problem(
+        n_agents=10, duration=1.0, constraints=[ComConstraint(time=0.0, position=[0, 0], velocity=velocity)]
+    )
+    for seed in (0, 1, 2):
+        motion = flockkit.solve(problem, iterations=0, refine=0, seed=seed).motion
+        assert np.allclose(motion.velocities()[0].mean(axis=0), velocity, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_initial_and_regenerated_trajectories_keep_clear_of_obstacles(seed):
+    """A COM path squeezed past a ball: every agent-frame stays Problem.clearance outside it
+    (point-constrained ones aside), and every constraint is still met exactly; without clearance
+    the blends carry agents into it."""
+    from flockkit.solve import initial_trajectories, regenerate
+    from flockkit.solve.sampler import residuals
+
+    ball = flockkit.Ball(center=[2.5, 1.6], radius=1.0)
+    problem = Problem(
+        n_agents=20,
+        duration=5.0,
+        obstacles=[ball],
+        constraints=[
+            ComConstraint(time=0.5, position=[0.0, 0.0]),
+            ComConstraint(time=2.5, position=[2.5, -0.6]),
+            ComConstraint(time=4.5, position=[5.0, 0.0]),
+            PointConstraint(agent=3, time=1.5, position=[1.5, -0.5], velocity=[1.2, 0.0]),
+        ],
+    )
+    behavior = flockkit.get("behavior", "boids", obstacles=[ball])
+
+    def depth(motion):
+        return ball.signed_distance(motion.positions.reshape(-1, 2)).reshape(motion.n_frames, -1)
+
+    motion = initial_trajectories(problem, behavior, np.random.default_rng(seed))
+    again = regenerate(problem, behavior, motion, 5, 45, np.random.default_rng(seed + 10))
+    for found in (motion, again):
+        assert max(residuals(problem, found)) <= 1e-9
+        assert depth(found).min() >= problem.clearance - 1e-9
+    assert np.array_equal(again.positions[:6], motion.positions[:6])
+    bare = initial_trajectories(attrs.evolve(problem, clearance=0.0), behavior, np.random.default_rng(seed))
+    assert depth(bare).min() < 0.5 * problem.clearance
+
+
 class Unsteered:
     """The boids model without ``group_guide``: COM groups are moved onto their paths at every frame."""
 
