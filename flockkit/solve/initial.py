@@ -284,7 +284,7 @@ class _Initial:
         held. The simulations avoid obstacles, but blending them and moving groups onto their
         paths can carry agents into one, where the model's avoidance is at its strongest and each
         agent-frame costs thousands in log g (obstacle-squeeze's initial trajectories, seed 1:
-        -3 488 per agent-step before, -434 with this)."""
+        -3 488 per agent-step before, -486 with this)."""
         if not self.problem.obstacles:
             return motion
         held = np.zeros(motion.positions.shape[:2], dtype=bool)
