@@ -292,10 +292,10 @@ class _Initial:
         coms = []
         for c in self.problem.constraints:
             f = self.problem.frame(c.time)
-            if isinstance(c, ComConstraint):
-                coms += [(f, c)] if start < f < stop else []
-            else:
+            if not isinstance(c, ComConstraint):
                 held[f, list(self.problem.agents_of(c))] = True
+            elif start < f < stop:
+                coms.append((f, c))
         positions = self._clear_of_obstacles(np.array(motion.positions), held, coms)
         return Motion(positions=positions, dt=motion.dt, channels=dict(motion.channels))
 
