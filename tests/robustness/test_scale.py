@@ -5,8 +5,8 @@ These need the `scale` extra (dask, distributed, ray); without it they are skipp
 
 import os
 import shutil
+import socket
 import subprocess
-import time
 
 import joblib
 import pytest
@@ -63,10 +63,18 @@ def _dask(*args, env=None):
                             stderr=subprocess.DEVNULL, env=env)  # fmt: skip
 
 
+def _free_port() -> int:
+    """A port no one listens on now (the system's pick). A port chosen by the clock was 8787
+    (dask's default dashboard port) in one CI run, and no scheduler answered there within 30 s."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return probe.getsockname()[1]
+
+
 @pytest.fixture
 def scheduler():
-    port = 8700 + int(time.time() * 1000) % 200
-    process = _dask("scheduler", "--port", str(port), "--no-dashboard")
+    port = _free_port()
+    process = _dask("scheduler", "--host", "127.0.0.1", "--port", str(port), "--no-dashboard")
     workers = []
     yield f"tcp://127.0.0.1:{port}", workers
     for worker in workers:
