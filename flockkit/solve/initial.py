@@ -285,18 +285,22 @@ class _Initial:
         paths can carry agents into one, where the model's avoidance is at its strongest and each
         agent-frame costs thousands in log g (obstacle-squeeze's initial trajectories, seed 1:
         -3 488 per agent-step before, -486 with this)."""
-        if not self.problem.obstacles:
+        if not self.problem.obstacles or self.problem.clearance <= 0:
             return motion
-        held = np.zeros(motion.positions.shape[:2], dtype=bool)
-        held[: start + 1] = held[stop:] = True
+        # only frames start..stop take part: the frames beyond are held, and their zero pushes
+        # spread nothing into the window
+        first, last = max(start, 0), min(stop, motion.n_frames - 1)
+        held = np.zeros((last + 1 - first, motion.n_agents), dtype=bool)
+        held[: start + 1 - first] = held[stop - first :] = True
         coms = []
         for c in self.problem.constraints:
             f = self.problem.frame(c.time)
-            if not isinstance(c, ComConstraint):
-                held[f, list(self.problem.agents_of(c))] = True
-            elif start < f < stop:
-                coms.append((f, c))
-        positions = self._clear_of_obstacles(np.array(motion.positions), held, coms)
+            if not isinstance(c, ComConstraint) and first <= f <= last:
+                held[f - first, list(self.problem.agents_of(c))] = True
+            elif isinstance(c, ComConstraint) and start < f < stop:
+                coms.append((f - first, c))
+        positions = np.array(motion.positions)
+        positions[first : last + 1] = self._clear_of_obstacles(positions[first : last + 1], held, coms)
         return Motion(positions=positions, dt=motion.dt, channels=dict(motion.channels))
 
     def _clear_of_obstacles(self, positions, held, coms) -> np.ndarray:
@@ -313,9 +317,10 @@ class _Initial:
         original = positions.copy()
         frames = np.arange(len(positions))
         spread = _SPREAD / self.dt
+        bumps = [np.exp(-0.5 * ((frames - f) / spread) ** 2) for f, _ in coms]
         for round_ in range(_PUSHES):
-            for f, c in coms:
-                self._recentre(positions, free, f, c, np.exp(-0.5 * ((frames - f) / spread) ** 2))
+            for (f, c), bump in zip(coms, bumps):
+                self._recentre(positions, free, f, c, bump)
             for obstacle in self.problem.obstacles:
                 depth = obstacle.signed_distance(positions.reshape(-1, self.problem.dims)).reshape(held.shape)
                 near = free & (depth < clearance)
