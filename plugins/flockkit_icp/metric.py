@@ -42,11 +42,12 @@ import math
 
 import attrs
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 import flockkit
 from flockkit import rigid, validate
 from flockkit.errors import ValidationError
+
+from .assignment import assign
 
 # Pairs searched together: bounds the (pairs x starts x N x N) cost array (256 pairs x 8 starts of
 # 20 agents is 6.6 MB); larger chunks were not faster on 2 cores.
@@ -290,7 +291,8 @@ class IcpHungarian:
     def _descend(self, pa, pb, va, vb, rotation, group=1, floor=None):
         """Alternate assignment and rotation from each start until its distance stops falling; of
         each `group` of starts (one pair's), only the KEEP best after the first assignment go on
-        (`floor`, a bound per start without the mean velocities, spares starts that cannot be)."""
+        (`floor`, a bound per start without the mean velocities, spares starts that cannot be).
+        Each start's assignment after the first starts from its last one (`assign`, warm)."""
         m, n, _ = pa.shape
         w = self.velocity_weight
         best = np.full(m, np.inf)
@@ -301,12 +303,13 @@ class IcpHungarian:
         root = math.sqrt(w)
         # positions and root(w) * velocities side by side: one cost matrix holds both terms
         left = np.concatenate([pa, root * va], axis=2) if w else pa
+        solved = _Solved(m, n)
         prune = n >= PRUNE_FROM and group > KEEP
         for step in range(self.max_iterations):
             if step == 0 and prune:
-                active, distance, assignment = self._first_assignments(left, pb, va, vb, rotation, group, floor)
+                active, distance, assignment = self._first_assignments(left, pb, va, vb, rotation, group, floor, solved)
             else:
-                distance, assignment = self._assign(left, pb, vb, rotation, active)
+                distance, assignment = self._assign(left, pb, vb, rotation, active, solved)
             previous = best[active]
             improved = distance < previous
             better = active[improved]
@@ -332,17 +335,16 @@ class IcpHungarian:
             rotation[active] = rigid.kabsch(target, source)
         return best, best_assignment, best_rotation
 
-    def _assign(self, left, pb, vb, rotation, rows):
-        """(distance, optimal assignment) at the rotation of each of `rows`."""
+    def _assign(self, left, pb, vb, rotation, rows, solved):
+        """(distance, optimal assignment) at the rotation of each of `rows`, each started from
+        its row's last solution in `solved` where it has one."""
         w = self.velocity_weight
         right = _rotate(pb[rows], rotation[rows])
         if w:
             right = np.concatenate([right, math.sqrt(w) * _rotate(vb[rows], rotation[rows])], axis=2)
-        cost = _pair_costs(left[rows], right)
-        assignment = np.array([linear_sum_assignment(c)[1] for c in cost])
-        return np.take_along_axis(cost, assignment[:, :, None], axis=2)[:, :, 0].sum(axis=1) / left.shape[1], assignment
+        return solved.assign(left[rows], right, rows)
 
-    def _first_assignments(self, left, pb, va, vb, rotation, group, floor):
+    def _first_assignments(self, left, pb, va, vb, rotation, group, floor, solved):
         """(rows, distances, assignments) of the first assignment of only the starts that may rank
         among their pair's KEEP best after it, so that the others are never assigned. A start's
         distance is at least `floor` plus w |Va - R Vb|^2 at its rotation R (the velocity cost
@@ -358,11 +360,28 @@ class IcpHungarian:
         take = _ranks(bound, group) < KEEP
         while take.any():
             rows = np.flatnonzero(take)
-            distance[rows], assignment[rows] = self._assign(left, pb, vb, rotation, rows)
+            distance[rows], assignment[rows] = self._assign(left, pb, vb, rotation, rows, solved)
             kept = np.partition(distance.reshape(-1, group), KEEP - 1, axis=1)[:, KEEP - 1]
             take = np.isinf(distance) & (bound <= np.repeat(kept, group))
         rows = np.flatnonzero(np.isfinite(distance))
         return rows, distance[rows], assignment[rows]
+
+
+class _Solved:
+    """The last assignment and duals of each of m problems, so that the next assignment of a
+    problem starts from them (`assignment.assign`)."""
+
+    def __init__(self, m, n):
+        self.assignment, self.duals = np.empty((m, n), dtype=np.int64), np.empty((m, n))
+        self.warm = np.zeros(m, dtype=bool)
+
+    def assign(self, left, right, rows):
+        """(mean cost, assignment) of problems `rows` with these point sets, remembered."""
+        totals, self.assignment[rows], self.duals[rows] = assign(
+            left, right, self.assignment[rows], self.duals[rows], self.warm[rows]
+        )
+        self.warm[rows] = True
+        return totals / left.shape[1], self.assignment[rows]
 
 
 class _Prepared:
@@ -449,17 +468,6 @@ def _rotate(points, rotation):
     return rigid.rotate(rotation[:, None], points)
 
 
-def _pair_costs(x, y):
-    """Squared distances (M, N, N) between the rows of x (M, N, D) and y (M, N, D), as
-    |x|^2 + |y|^2 - 2 x.y: ten times faster than differences. The batched product multiplies each
-    pair's matrices on their own, so a pair's result does not depend on the batch it is in."""
-    cost = x @ np.transpose(y, (0, 2, 1))
-    cost *= -2
-    cost += (x * x).sum(axis=2)[:, :, None]
-    cost += (y * y).sum(axis=2)[:, None, :]
-    return cost
-
-
 def _ranks(values, group) -> np.ndarray:
     """Each value's rank (0 lowest) within its run of `group` consecutive values (one pair's starts)."""
     return np.argsort(np.argsort(values.reshape(-1, group), axis=1), axis=1).ravel()
@@ -493,19 +501,23 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=12) -> np.ndarra
     a0, h0 = w * ((va**2).sum(axis=1) + (vb**2).sum(axis=1)), np.hypot(p0, q0)
     total = (left_squares.sum(axis=1) + right_squares.sum(axis=1)) / n + a0  # S
 
-    def sample(pair, theta):
-        """E(theta) and its optimal assignment for each (pair, angle), a block of cost matrices at a time."""
-        value, assignment = np.empty(len(pair)), np.empty((len(pair), n), dtype=int)
+    def sample(pair, theta, start=None):
+        """E(theta), its optimal assignment and that assignment's duals for each (pair, angle),
+        each assignment started from `start` (assignments, duals) where given; a block of turned
+        point sets at a time."""
+        value, assignment, duals = np.empty(len(pair)), np.empty((len(pair), n), dtype=np.int64), np.empty((len(pair), n))
+        if start is not None:
+            assignment[:], duals[:] = start
         c, s = np.cos(theta), np.sin(theta)
-        size = max(1, _SAMPLE_BYTES // (8 * n * n))
+        size = max(1, _SAMPLE_BYTES // (8 * n * 4))
         for at in range(0, len(pair), size):
             block = slice(at, at + size)
             b = right[pair[block]]  # R(theta) turns both planes: b cos + (-y, x, -dy, dx) sin
             turned = c[block, None, None] * b + s[block, None, None] * b[:, :, [1, 0, 3, 2]] * _PERPENDICULAR
-            cost = _pair_costs(left[pair[block]], turned)
-            assignment[block] = [linear_sum_assignment(m)[1] for m in cost]
-            value[block] = np.take_along_axis(cost, assignment[block, :, None], axis=2)[:, :, 0].sum(axis=1) / n
-        return value + a0[pair] - 2 * (p0[pair] * c + q0[pair] * s), assignment
+            value[block], assignment[block], duals[block] = assign(
+                left[pair[block]], turned, assignment[block], duals[block], np.full(len(turned), start is not None)
+            )
+        return value / n + a0[pair] - 2 * (p0[pair] * c + q0[pair] * s), assignment, duals
 
     # only angles where the mean-velocity term alone stays under the limit, in an even number of
     # pieces <= pi / 2 about the angle phi that aligns the mean velocities
@@ -516,7 +528,7 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=12) -> np.ndarra
     # a pair within the limit is nearly always within at phi: one sample there lists it before
     # any other angle is tried (and is the middle end of the pieces of the others)
     first = np.flatnonzero(pieces > 0)
-    first_value, first_assignment = sample(first, phi[first])
+    first_value, first_assignment, first_duals = sample(first, phi[first])
     passed = np.zeros(len(ia), dtype=bool)
     passed[first[first_value <= limit[first]]] = True
     todo = np.where(passed, 0, pieces)
@@ -525,19 +537,15 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=12) -> np.ndarra
     theta = phi[pair] - reach[pair] + order * (2 * reach / np.maximum(pieces, 1))[pair]
     middle = order == pieces[pair] // 2
     theta[middle] = phi[pair[middle]]
-    value, assignment = np.empty(len(pair)), np.empty((len(pair), n), dtype=int)
-    value[~middle], assignment[~middle] = sample(pair[~middle], theta[~middle])
+    value, assignment, duals = np.empty(len(pair)), np.empty((len(pair), n), dtype=np.int64), np.empty((len(pair), n))
+    value[~middle], assignment[~middle], duals[~middle] = sample(pair[~middle], theta[~middle])
     known = np.searchsorted(first, pair[middle])
-    value[middle], assignment[middle] = first_value[known], first_assignment[known]
+    value[middle], assignment[middle], duals[middle] = first_value[known], first_assignment[known], first_duals[known]
     passed[pair[value <= limit[pair]]] = True
     piece = np.flatnonzero(np.r_[pair[1:] == pair[:-1], False])  # samples that start a piece
     pair, lo, hi = pair[piece], theta[piece], theta[piece + 1]
-    lo_value, hi_value, lo_assignment, hi_assignment = (
-        value[piece],
-        value[piece + 1],
-        assignment[piece],
-        assignment[piece + 1],
-    )
+    lo_value, hi_value = value[piece], value[piece + 1]
+    lo_assignment, hi_assignment, lo_duals = assignment[piece], assignment[piece + 1], duals[piece]
     for level in range(levels + 1):
         alive = (_wedge_bound(total[pair], lo, hi, lo_value, hi_value) <= limit[pair]) & ~passed[pair]
         exact = np.all(lo_assignment == hi_assignment, axis=1)
@@ -547,19 +555,16 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=12) -> np.ndarra
             passed[pair[alive]] = True  # still undecided: listed
         if level == levels or not alive.any():
             break
-        pair, lo, hi = pair[alive], lo[alive], hi[alive]
-        lo_value, hi_value, lo_assignment, hi_assignment = (
-            lo_value[alive],
-            hi_value[alive],
-            lo_assignment[alive],
-            hi_assignment[alive],
-        )
+        pair, lo, hi, lo_value, hi_value = pair[alive], lo[alive], hi[alive], lo_value[alive], hi_value[alive]
+        lo_assignment, hi_assignment, lo_duals = lo_assignment[alive], hi_assignment[alive], lo_duals[alive]
         middle = (lo + hi) / 2
-        value, assignment = sample(pair, middle)
+        # the middle's assignment starts from the lower end's: a few degrees away, most rows keep theirs
+        value, assignment, duals = sample(pair, middle, start=(lo_assignment, lo_duals))
         passed[pair[value <= limit[pair]]] = True
         pair, lo, hi = np.r_[pair, pair], np.r_[lo, middle], np.r_[middle, hi]
         lo_value, hi_value = np.r_[lo_value, value], np.r_[value, hi_value]
         lo_assignment, hi_assignment = np.r_[lo_assignment, assignment], np.r_[assignment, hi_assignment]
+        lo_duals = np.r_[lo_duals, duals]
     return passed
 
 
