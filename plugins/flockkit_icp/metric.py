@@ -505,7 +505,11 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=12) -> np.ndarra
         """E(theta), its optimal assignment and that assignment's duals for each (pair, angle),
         each assignment started from `start` (assignments, duals) where given; a block of turned
         point sets at a time."""
-        value, assignment, duals = np.empty(len(pair)), np.empty((len(pair), n), dtype=np.int64), np.empty((len(pair), n))
+        value, assignment, duals = (
+            np.empty(len(pair)),
+            np.empty((len(pair), n), dtype=np.int64),
+            np.empty((len(pair), n)),
+        )
         if start is not None:
             assignment[:], duals[:] = start
         c, s = np.cos(theta), np.sin(theta)

@@ -31,24 +31,22 @@ def _stacked(pairs):
     return left, right
 
 
+def _same_size(count, dims):
+    """`count` configurations of one size (1 to 30 agents)."""
+    one = lambda n: fst.configurations(min_agents=n, max_agents=n, dims=dims)  # noqa: E731
+    return st.integers(1, 30).flatmap(lambda n: st.tuples(*[one(n)] * count))
+
+
 @settings(max_examples=60, deadline=None)
-@given(st.integers(1, 30).flatmap(lambda n: st.lists(
-    st.tuples(fst.configurations(min_agents=n, max_agents=n, dims=2),
-              fst.configurations(min_agents=n, max_agents=n, dims=2)), min_size=1, max_size=4)))  # fmt: skip
-def test_cold_assignments_are_optimal(pairs):
-    left, right = _stacked(pairs)
+@given(_same_size(8, 2))
+def test_cold_assignments_are_optimal(configs):
+    left, right = _stacked(list(zip(configs[::2], configs[1::2])))
     totals, assignment, _ = assign(left, right)
     _check(left, right, totals, assignment)
 
 
 @settings(max_examples=60, deadline=None)
-@given(
-    st.integers(1, 30).flatmap(lambda n: st.tuples(
-        fst.configurations(min_agents=n, max_agents=n, dims=3),
-        fst.configurations(min_agents=n, max_agents=n, dims=3),
-        fst.configurations(min_agents=n, max_agents=n, dims=3))),  # fmt: skip
-    st.integers(0, 2**32 - 1),
-)
+@given(_same_size(3, 3), st.integers(0, 2**32 - 1))
 def test_assignments_started_from_any_earlier_solution_are_optimal(configs, seed):
     """Warm from another problem's solution, and from a random permutation with random duals: the
     start changes the work only, never the optimum."""
@@ -75,4 +73,3 @@ def test_ties_and_coincident_points_still_give_a_permutation():
     assert totals[1] == 0.0
     warm = assign(left, right, assignment.copy(), duals.copy(), np.array([True, True]))
     _check(left, right, warm[0], warm[1])
-

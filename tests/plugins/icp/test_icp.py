@@ -217,7 +217,6 @@ def test_wedge_bound_holds_over_the_interval_and_is_reached_when_its_ends_agree(
     """The branch and bound's bound on E over an interval of rotations, from E at its two ends,
     against E sampled densely inside (each sample: the optimal assignment at that rotation)."""
     from flockkit_icp.metric import _wedge_bound
-    from scipy.optimize import linear_sum_assignment
 
     left, right = a.positions - a.center_of_mass(), b.positions - b.center_of_mass()
 
