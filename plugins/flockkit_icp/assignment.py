@@ -19,7 +19,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-__all__ = ["assign"]
+__all__ = ["assign", "solve", "workspace"]
 
 
 @numba.njit(cache=True, nogil=True)
@@ -159,7 +159,17 @@ def _rows(cost, col4row, v, row4col, free):
 
 
 @numba.njit(cache=True, nogil=True)
-def _solve(left, right, col4row, v, warm, cost, u, row4col, shortest, path, seen_row, seen_col, remaining):
+def workspace(n):
+    """The scratch arrays `solve` needs for problems of n rows (made once, used for many)."""
+    return (np.empty((n, n)), np.empty(n), np.empty(n, np.int64), np.empty(n), np.empty(n, np.int64),
+            np.empty(n, np.bool_), np.empty(n, np.bool_), np.empty(n, np.int64))  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def solve(left, right, col4row, v, warm, work):
+    """The optimal total cost of one problem (see `assign`), for compiled callers; `col4row` and
+    `v` (in: an earlier solution where `warm`) receive the solution."""
+    cost, u, row4col, shortest, path, seen_row, seen_col, remaining = work
     n, f = left.shape
     for i in range(n):
         for j in range(n):
@@ -185,18 +195,9 @@ def _solve(left, right, col4row, v, warm, cost, u, row4col, shortest, path, seen
 
 @numba.njit(cache=True, nogil=True)
 def _solve_many(left, right, col4row, v, warm, totals):
-    m, n = left.shape[0], left.shape[1]
-    cost = np.empty((n, n))
-    u = np.empty(n)
-    row4col = np.empty(n, np.int64)
-    shortest = np.empty(n)
-    path = np.empty(n, np.int64)
-    seen_row = np.empty(n, np.bool_)
-    seen_col = np.empty(n, np.bool_)
-    remaining = np.empty(n, np.int64)
-    for p in range(m):
-        totals[p] = _solve(left[p], right[p], col4row[p], v[p], warm[p], cost, u, row4col, shortest, path,
-                           seen_row, seen_col, remaining)  # fmt: skip
+    work = workspace(left.shape[1])
+    for p in range(left.shape[0]):
+        totals[p] = solve(left[p], right[p], col4row[p], v[p], warm[p], work)
 
 
 def assign(left, right, assignment=None, duals=None, warm=None):

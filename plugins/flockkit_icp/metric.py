@@ -41,20 +41,19 @@ import itertools
 import math
 
 import attrs
+import numba
 import numpy as np
 
 import flockkit
 from flockkit import rigid, validate
 from flockkit.errors import ValidationError
 
-from .assignment import assign
+from .assignment import assign, solve, workspace
 
 # Pairs searched together: bounds the (pairs x starts x N x N) cost array (256 pairs x 8 starts of
 # 20 agents is 6.6 MB); larger chunks were not faster on 2 cores.
 _CHUNK = 256
 _BOUND_CHUNK = 2048  # pairs bounded together, for the same reason
-_SAMPLE_BYTES = 1 << 25  # cost matrices built at once by the branch and bound (32 MB)
-_PERPENDICULAR = np.array([-1.0, 1.0, -1.0, 1.0])  # (x, y, dx, dy) -> (-y, x, -dy, dx) after reordering
 # Small groups start from many rotations (assignments are cheap there and local minima many); in
 # groups of PRUNE_FROM agents or more, only the KEEP starts closest after the first assignment go
 # on descending (at 20 agents the best start was once 5th after it; at 50 and 100 never below 2nd).
@@ -406,6 +405,14 @@ class _Prepared:
         self.scale = (self.centered**2).sum(axis=(1, 2)) / self.n_agents  # mean squared radius
         self.speed_scale = (self.velocities**2).sum(axis=(1, 2)) / self.n_agents
         self.static = ~self.velocities.any(axis=(1, 2))  # no heading: its frame is the world's axes
+        self._turned = None
+
+    def turned_together(self, w) -> np.ndarray:
+        """Positions and sqrt(w) * velocity deviations side by side (K, N, 4), as the branch and
+        bound turns them; made once per weight."""
+        if self._turned is None or self._turned[0] != w:
+            self._turned = (w, np.concatenate([self.centered, math.sqrt(w) * self.deviations], axis=2))
+        return self._turned[1]
 
     def starts(self, ia, ib, static=False) -> np.ndarray:
         """Start rotations (P, S, D, D): the configuration frames aligned, then the principal axes
@@ -496,91 +503,118 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=12) -> np.ndarra
     wedge {<x, u(t1)> <= g(t1), <x, u(t2)> <= g(t2)}, so g is at most the wedge apex's support:
     a lower bound on E over the interval from its two ends alone. It is exact when both ends have
     the same optimal assignment (that vertex is then the apex), so intervals are halved until
-    their bound exceeds the limit, or their ends agree, or a sampled E(theta) is within it."""
-    n = prepared.n_agents
-    root = math.sqrt(w)
-    # positions and root(w) * deviations side by side, turned together
-    stacked = np.concatenate([prepared.centered, root * prepared.deviations], axis=2)
-    left, right = stacked[ia], stacked[ib]  # (P, N, 4): x, y, dx, dy
-    left_squares, right_squares = (left**2).sum(axis=2), (right**2).sum(axis=2)
+    their bound exceeds the limit, or their ends agree, or a sampled E(theta) is within it (pair by
+    pair, compiled: `_bound_pairs`)."""
+    stacked = prepared.turned_together(w)
+    squares = (stacked**2).sum(axis=(1, 2))
     # the mean-velocity term w |Va - R Vb|^2 = a0 - 2 (p0 cos(theta) + q0 sin(theta))
     va, vb = prepared.mean_velocity[ia], prepared.mean_velocity[ib]
     p0, q0 = w * (va[:, 0] * vb[:, 0] + va[:, 1] * vb[:, 1]), w * (va[:, 1] * vb[:, 0] - va[:, 0] * vb[:, 1])
     a0, h0 = w * ((va**2).sum(axis=1) + (vb**2).sum(axis=1)), np.hypot(p0, q0)
-    total = (left_squares.sum(axis=1) + right_squares.sum(axis=1)) / n + a0  # S
-
-    def sample(pair, theta):
-        """E(theta) and its optimal assignment for each (pair, angle), a block of turned point sets
-        at a time. Each is solved from nothing: started from the assignment at the interval's
-        lower end instead, they took as long (measured at 20 and 100 agents)."""
-        value, assignment = np.empty(len(pair)), np.empty((len(pair), n), dtype=np.int64)
-        c, s = np.cos(theta), np.sin(theta)
-        size = max(1, _SAMPLE_BYTES // (8 * n * 4))
-        for at in range(0, len(pair), size):
-            block = slice(at, at + size)
-            b = right[pair[block]]  # R(theta) turns both planes: b cos + (-y, x, -dy, dx) sin
-            turned = c[block, None, None] * b + s[block, None, None] * b[:, :, [1, 0, 3, 2]] * _PERPENDICULAR
-            value[block], assignment[block], _ = assign(left[pair[block]], turned)
-        return value / n + a0[pair] - 2 * (p0[pair] * c + q0[pair] * s), assignment
-
+    total = (squares[ia] + squares[ib]) / prepared.n_agents + a0  # S
     # only angles where the mean-velocity term alone stays under the limit, in an even number of
     # pieces <= pi / 2 about the angle phi that aligns the mean velocities
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         cosine = np.where(h0 > 0, (a0 - (limit - floor)) / (2 * h0), -1.0)
     reach, phi = np.arccos(np.clip(cosine, -1.0, 1.0)), np.arctan2(q0, p0)
-    pieces = np.where(cosine > 1, 0, 2 * np.maximum(1, np.ceil(reach / (math.pi / 2)))).astype(int)
-    # a pair within the limit is nearly always within at phi: one sample there lists it before
-    # any other angle is tried (and is the middle end of the pieces of the others)
-    first = np.flatnonzero(pieces > 0)
-    first_value, first_assignment = sample(first, phi[first])
+    pieces = np.where(cosine > 1, 0, 2 * np.maximum(1, np.ceil(reach / (math.pi / 2)))).astype(np.int64)
     passed = np.zeros(len(ia), dtype=bool)
-    passed[first[first_value <= limit[first]]] = True
-    todo = np.where(passed, 0, pieces)
-    pair = np.repeat(np.arange(len(ia)), todo + (todo > 0))  # each piece's start, plus the last end
-    order = np.arange(len(pair)) - (np.cumsum(todo + (todo > 0)) - todo - (todo > 0))[pair]
-    theta = phi[pair] - reach[pair] + order * (2 * reach / np.maximum(pieces, 1))[pair]
-    middle = order == pieces[pair] // 2
-    theta[middle] = phi[pair[middle]]
-    value, assignment = np.empty(len(pair)), np.empty((len(pair), n), dtype=np.int64)
-    value[~middle], assignment[~middle] = sample(pair[~middle], theta[~middle])
-    known = np.searchsorted(first, pair[middle])
-    value[middle], assignment[middle] = first_value[known], first_assignment[known]
-    passed[pair[value <= limit[pair]]] = True
-    piece = np.flatnonzero(np.r_[pair[1:] == pair[:-1], False])  # samples that start a piece
-    pair, lo, hi = pair[piece], theta[piece], theta[piece + 1]
-    lo_value, hi_value = value[piece], value[piece + 1]
-    lo_assignment, hi_assignment = assignment[piece], assignment[piece + 1]
-    for level in range(levels + 1):
-        alive = (_wedge_bound(total[pair], lo, hi, lo_value, hi_value) <= limit[pair]) & ~passed[pair]
-        exact = np.all(lo_assignment == hi_assignment, axis=1)
-        passed[pair[alive & exact]] = True  # that bound is reached inside the interval
-        alive &= ~exact
-        if level == levels:
-            passed[pair[alive]] = True  # still undecided: listed
-        if level == levels or not alive.any():
-            break
-        pair, lo, hi, lo_value, hi_value = pair[alive], lo[alive], hi[alive], lo_value[alive], hi_value[alive]
-        lo_assignment, hi_assignment = lo_assignment[alive], hi_assignment[alive]
-        middle = (lo + hi) / 2
-        value, assignment = sample(pair, middle)
-        passed[pair[value <= limit[pair]]] = True
-        pair, lo, hi = np.r_[pair, pair], np.r_[lo, middle], np.r_[middle, hi]
-        lo_value, hi_value = np.r_[lo_value, value], np.r_[value, hi_value]
-        lo_assignment, hi_assignment = np.r_[lo_assignment, assignment], np.r_[assignment, hi_assignment]
+    _bound_pairs(stacked, ia, ib, total, a0, p0, q0, phi, reach, pieces, np.asarray(limit, float), levels, passed)
     return passed
 
 
+@numba.njit(cache=True, nogil=True)
+def _sample(left, right, theta, a0, p0, q0, assignment, turned, duals, work):
+    """E(theta) of one pair (its optimal assignment into `assignment`): `right` (N, 4: x, y, dx,
+    dy) turned by theta in both planes, solved from nothing (started from the assignment at an
+    interval's end instead, a sample took as long at 20 and 100 agents)."""
+    c, s = math.cos(theta), math.sin(theta)
+    for j in range(right.shape[0]):
+        turned[j, 0] = c * right[j, 0] - s * right[j, 1]
+        turned[j, 1] = s * right[j, 0] + c * right[j, 1]
+        turned[j, 2] = c * right[j, 2] - s * right[j, 3]
+        turned[j, 3] = s * right[j, 2] + c * right[j, 3]
+    return solve(left, turned, assignment, duals, False, work) / left.shape[0] + a0 - 2 * (p0 * c + q0 * s)
+
+
+@numba.njit(cache=True, nogil=True)
+def _bound_pairs(stacked, ia, ib, total, a0, p0, q0, phi, reach, pieces, limit, levels, passed):
+    """The branch and bound of `_branch_and_bound`, pair by pair: a sample at phi, then at the
+    pieces' ends, then the pieces halved depth first (lower half first) until a sample is within
+    the limit, an interval's ends agree with its bound within it, or an interval is `levels`
+    halvings deep with its bound within it (listed: undecided); a pair is listed on the first."""
+    n = stacked.shape[1]
+    work, turned, duals = workspace(n), np.empty((n, 4)), np.empty(n)
+    most = max(1, pieces.max())
+    depth = most + levels + 1  # each halving replaces one interval by two
+    ends, end_theta, end_value = np.empty((most + 1, n), np.int64), np.empty(most + 1), np.empty(most + 1)
+    lo, hi, lo_value, hi_value = np.empty(depth), np.empty(depth), np.empty(depth), np.empty(depth)
+    lo_assignment, hi_assignment = np.empty((depth, n), np.int64), np.empty((depth, n), np.int64)
+    level, middle = np.empty(depth, np.int64), np.empty(n, np.int64)
+    for p in range(len(ia)):
+        k = pieces[p]
+        if k == 0:
+            continue
+        left, right, bound = stacked[ia[p]], stacked[ib[p]], limit[p]
+        centre = k // 2
+        end_theta[centre] = phi[p]
+        end_value[centre] = _sample(left, right, phi[p], a0[p], p0[p], q0[p], ends[centre], turned, duals, work)
+        if end_value[centre] <= bound:
+            passed[p] = True
+            continue
+        for e in range(k + 1):
+            if e != centre:
+                end_theta[e] = phi[p] - reach[p] + e * (2 * reach[p] / k)
+                end_value[e] = _sample(left, right, end_theta[e], a0[p], p0[p], q0[p], ends[e], turned, duals, work)
+                if end_value[e] <= bound:
+                    passed[p] = True
+                    break
+        if passed[p]:
+            continue
+        top = 0
+        for e in range(k - 1, -1, -1):
+            lo[top], hi[top] = end_theta[e], end_theta[e + 1]
+            lo_value[top], hi_value[top] = end_value[e], end_value[e + 1]
+            lo_assignment[top], hi_assignment[top], level[top] = ends[e], ends[e + 1], 0
+            top += 1
+        while top > 0 and not passed[p]:
+            top -= 1
+            if not _wedge_bound(total[p], lo[top], hi[top], lo_value[top], hi_value[top]) <= bound:
+                continue
+            same = True
+            for i in range(n):
+                if lo_assignment[top, i] != hi_assignment[top, i]:
+                    same = False
+                    break
+            if same or level[top] == levels:  # the bound is reached inside, or still undecided
+                passed[p] = True
+                break
+            half = 0.5 * (lo[top] + hi[top])
+            value = _sample(left, right, half, a0[p], p0[p], q0[p], middle, turned, duals, work)
+            if value <= bound:
+                passed[p] = True
+                break
+            # the upper half below the lower, so that the lower is taken next
+            lo[top + 1], hi[top + 1], lo_value[top + 1], hi_value[top + 1] = lo[top], half, lo_value[top], value
+            lo_assignment[top + 1], hi_assignment[top + 1] = lo_assignment[top], middle
+            lo[top], lo_value[top], lo_assignment[top] = half, value, middle
+            level[top + 1] = level[top] = level[top] + 1
+            top += 2
+
+
+@numba.njit(cache=True, error_model="numpy")
 def _wedge_bound(total, lo, hi, lo_value, hi_value):
     """Lower bound on E(theta) = total - 2 g(theta) over [lo, hi] (narrower than pi), g a support
     function, from E at the two ends: g is at most the support of the apex of the wedge
     {<x, u(lo)> <= g(lo), <x, u(hi)> <= g(hi)}, which is |apex| where the apex lies in the
-    interval's directions, else the larger end value."""
+    interval's directions, else the larger end value (and for an interval of one angle, which
+    has no apex)."""
     half = (hi - lo) / 2
     g1, g2 = (total - lo_value) / 2, (total - hi_value) / 2
-    with np.errstate(divide="ignore", invalid="ignore"):  # an interval of one angle has no apex
-        x, y = (g1 + g2) / (2 * np.cos(half)), (g2 - g1) / (2 * np.sin(half))  # apex, axes along the middle
-    apex = np.where(np.abs(np.arctan2(y, x)) <= half, np.hypot(x, y), np.maximum(g1, g2))
-    return total - 2 * apex
+    x, y = (g1 + g2) / (2 * math.cos(half)), (g2 - g1) / (2 * math.sin(half))  # apex, axes along the middle
+    if abs(math.atan2(y, x)) <= half:
+        return total - 2 * math.hypot(x, y)
+    return total - 2 * max(g1, g2)
 
 
 def _checked_pairs(pairs, k) -> np.ndarray:
