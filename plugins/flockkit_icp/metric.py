@@ -6,7 +6,7 @@ E(a, b) = min over rotations R, translations t and one-to-one assignments M of
 
 Every agent is matched, so the best translation always maps centroid onto centroid; the search
 works on centered positions and alternates the optimal assignment for the current rotation
-(`scipy.optimize.linear_sum_assignment`) with the optimal rotation for the current assignment
+(`assignment.assign`, compiled, each step started from the last) with the optimal rotation for the current assignment
 (Kabsch, proper rotations only) until the distance stops decreasing. Because that only finds a
 local minimum, it starts from several rotations and keeps the best: the configuration-space
 alignment (section 4.1) and the principal-axes alignment, each also turned by pi about each axis.
