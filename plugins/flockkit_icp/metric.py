@@ -37,6 +37,7 @@ neighboring configurations are ruled out together first (the triangle inequality
 
 from __future__ import annotations
 
+import functools
 import itertools
 import math
 
@@ -50,8 +51,8 @@ from flockkit.errors import ValidationError
 
 from .assignment import assign, solve, workspace
 
-# Pairs searched together: bounds the (pairs x starts x N x N) cost array (256 pairs x 8 starts of
-# 20 agents is 6.6 MB); larger chunks were not faster on 2 cores.
+# Pairs searched together: bounds the (pairs x starts x N x D) arrays of a search step; larger
+# chunks were not faster on 2 cores.
 _CHUNK = 256
 _BOUND_CHUNK = 2048  # pairs bounded together, for the same reason
 # Small groups start from many rotations (assignments are cheap there and local minima many); in
@@ -95,7 +96,7 @@ class IcpHungarian:
     def compare(self, a: flockkit.Configuration, b: flockkit.Configuration) -> flockkit.Alignment:
         """The alignment of `b` onto `a` with the smallest distance found (see the module docstring)."""
         self._check_pair(a, b)
-        prepared = _Prepared([a, b], self.up)
+        prepared = _Prepared([a, b], self.up, self.velocity_weight)
         distance, assignment, rotation = self._search(prepared, np.array([0]), np.array([1]))
         rotation = rotation[0]
         return flockkit.Alignment(
@@ -112,7 +113,7 @@ class IcpHungarian:
         configurations = self._check_many(configurations)
         k = len(configurations)
         pairs = np.column_stack(np.triu_indices(k, 1)) if pairs is None else _checked_pairs(pairs, k)
-        prepared = _Prepared(configurations, self.up)
+        prepared = _Prepared(configurations, self.up, self.velocity_weight)
         distances = np.empty(len(pairs))
         for start in range(0, len(pairs), _CHUNK):
             chunk = pairs[start : start + _CHUNK]
@@ -128,7 +129,7 @@ class IcpHungarian:
         is bounded the same way with the deviation speeds, plus the mean speeds' difference.
         """
         self._check_pair(a, b)
-        prepared = _Prepared([a, b], self.up)
+        prepared = _Prepared([a, b], self.up, self.velocity_weight)
         return float(self._rotation_free_bound(prepared, np.array([0]), np.array([1]))[0])
 
     def pairs_within(self, configurations, threshold: float, *, rows=None) -> np.ndarray:
@@ -150,7 +151,7 @@ class IcpHungarian:
             raise ValidationError(
                 f"icp-hungarian.pairs_within: rows must be (start, stop) with 0 <= start <= stop <= {k}; got {rows!r}"
             )
-        prepared = _Prepared(configurations, self.up)
+        prepared = _Prepared(configurations, self.up, self.velocity_weight)
         limit = float(threshold)
         if prepared.dims == 3:
             i, j = np.triu_indices(k, 1)
@@ -196,11 +197,7 @@ class IcpHungarian:
             mean_part = self.velocity_weight * (prepared.mean_speed[ia[part]] - prepared.mean_speed[ib[part]]) ** 2
             kept = np.flatnonzero(floor + mean_part <= limit[part])
             if prepared.dims == 2 and len(kept):
-                kept = kept[
-                    _branch_and_bound(
-                        prepared, ia[part][kept], ib[part][kept], self.velocity_weight, limit[part][kept], floor[kept]
-                    )
-                ]
+                kept = kept[_branch_and_bound(prepared, ia[part][kept], ib[part][kept], limit[part][kept], floor[kept])]
             keep[s + kept] = True
         labels = (ia, ib) if blocks is None else blocks
         return np.column_stack([labels[0][keep], labels[1][keep]]).astype(int)
@@ -386,7 +383,8 @@ class _Solved:
 class _Prepared:
     """Per-configuration arrays for a list of same-sized configurations."""
 
-    def __init__(self, configurations, up):
+    def __init__(self, configurations, up, velocity_weight):
+        self.velocity_weight = velocity_weight
         positions = np.stack([c.positions for c in configurations])
         self.n_agents, self.dims = positions.shape[1], positions.shape[2]
         self.com = positions.mean(axis=1)
@@ -405,14 +403,14 @@ class _Prepared:
         self.scale = (self.centered**2).sum(axis=(1, 2)) / self.n_agents  # mean squared radius
         self.speed_scale = (self.velocities**2).sum(axis=(1, 2)) / self.n_agents
         self.static = ~self.velocities.any(axis=(1, 2))  # no heading: its frame is the world's axes
-        self._turned = None
 
-    def turned_together(self, w) -> np.ndarray:
-        """Positions and sqrt(w) * velocity deviations side by side (K, N, 4), as the branch and
-        bound turns them; made once per weight."""
-        if self._turned is None or self._turned[0] != w:
-            self._turned = (w, np.concatenate([self.centered, math.sqrt(w) * self.deviations], axis=2))
-        return self._turned[1]
+    @functools.cached_property
+    def turned_together(self) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and sqrt(velocity_weight) * velocity deviations side by side (K, N, 4), as the
+        branch and bound turns them, and each configuration's sum of their squares (K,): made once
+        for all the bounding calls of a `pairs_within`."""
+        stacked = np.concatenate([self.centered, math.sqrt(self.velocity_weight) * self.deviations], axis=2)
+        return stacked, (stacked**2).sum(axis=(1, 2))
 
     def starts(self, ia, ib, static=False) -> np.ndarray:
         """Start rotations (P, S, D, D): the configuration frames aligned, then the principal axes
@@ -492,7 +490,7 @@ def _gather(points, assignment):
     return np.take_along_axis(points, assignment[:, :, None], axis=1)
 
 
-def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=12) -> np.ndarray:
+def _branch_and_bound(prepared, ia, ib, limit, floor, levels=12) -> np.ndarray:
     """Mask over pairs (ia, ib) (2D): True where some rotation may keep E <= limit (one limit per
     pair). `floor` bounds the position and deviation part for every rotation.
 
@@ -505,8 +503,8 @@ def _branch_and_bound(prepared, ia, ib, w, limit, floor, levels=12) -> np.ndarra
     the same optimal assignment (that vertex is then the apex), so intervals are halved until
     their bound exceeds the limit, or their ends agree, or a sampled E(theta) is within it (pair by
     pair, compiled: `_bound_pairs`)."""
-    stacked = prepared.turned_together(w)
-    squares = (stacked**2).sum(axis=(1, 2))
+    stacked, squares = prepared.turned_together
+    w = prepared.velocity_weight
     # the mean-velocity term w |Va - R Vb|^2 = a0 - 2 (p0 cos(theta) + q0 sin(theta))
     va, vb = prepared.mean_velocity[ia], prepared.mean_velocity[ib]
     p0, q0 = w * (va[:, 0] * vb[:, 0] + va[:, 1] * vb[:, 1]), w * (va[:, 1] * vb[:, 0] - va[:, 0] * vb[:, 1])
@@ -539,10 +537,11 @@ def _sample(left, right, theta, a0, p0, q0, assignment, turned, duals, work):
 
 @numba.njit(cache=True, nogil=True)
 def _bound_pairs(stacked, ia, ib, total, a0, p0, q0, phi, reach, pieces, limit, levels, passed):
-    """The branch and bound of `_branch_and_bound`, pair by pair: a sample at phi, then at the
-    pieces' ends, then the pieces halved depth first (lower half first) until a sample is within
-    the limit, an interval's ends agree with its bound within it, or an interval is `levels`
-    halvings deep with its bound within it (listed: undecided); a pair is listed on the first."""
+    """The branch and bound of `_branch_and_bound`, pair by pair: a sample at phi (a pair within
+    the limit nearly always is within there, so one assignment lists it), then at the pieces'
+    ends, then the pieces halved depth first (lower half first) until a sample is within the
+    limit, an interval's ends agree with its bound within it, or an interval is `levels` halvings
+    deep with its bound within it (listed: undecided); a pair is listed on the first."""
     n = stacked.shape[1]
     work, turned, duals = workspace(n), np.empty((n, 4)), np.empty(n)
     most = max(1, pieces.max())
