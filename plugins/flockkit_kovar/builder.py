@@ -27,9 +27,9 @@ neither be a transition nor keep a computed cell under the threshold from being 
 The adaptive rule is decided by probing: the minima under a probe threshold are exactly the
 lowest minima of the full matrix, so the probe goes up until they decide the rule. The first
 probe comes from thin strips of rows (a tenth of the rows, one in the middle of each of equal
-parts of the recording), probed from 0.04 times the mean squared radius upwards, doubling: the
-value under which the strips' minima, scaled to the whole matrix, number twice those wanted. It usually
-decides at once; if not, the probe goes up by a tenth at a time. Rows are never listed twice at
+parts of the recording; more strips where they would hold fewer than 8 of the minima needed),
+probed from 0.04 times the mean squared radius upwards, doubling: the value under which the
+strips' minima, scaled to the whole matrix, number twice those wanted. It usually decides at once; if not, the probe goes up by a tenth at a time. Rows are never listed twice at
 the same probe, and cells nearer the diagonal than any transition's neighbors are never computed.
 ``prune=True`` and ``prune=False`` give the identical graph. The `per_second` rule needs every
 value and never prunes.
@@ -51,6 +51,12 @@ from flockkit.errors import ValidationError
 # 1 000 to 18 000 candidates), so starting at 0.04 skips a doubling that never decided (5-10% of
 # a build, the same evaluations; from 0.02 until 2026-12-02).
 _FIRST_PROBE = 0.04
+# The strips are made many enough to be expected to hold this many of the minima their estimate
+# needs. A 60 s recording (30 transitions wanted) with four strips expected to hold 3: at 100 boids
+# the estimate fell 6% short and every row was listed twice (21.1 s); at 20 it overshot (2.9 s).
+# With twelve strips (8): 13.1-14.5 and 1.1-1.2 s, 50 boids 7.5 -> 4.9-5.7 s; 5, 6, 7 and 10
+# were each worse on one of these; 1 003 candidates need 14 strips instead of 10, no change.
+_STRIP_MINIMA = 8
 
 
 @attrs.frozen(kw_only=True)
@@ -203,14 +209,11 @@ class Kovar:
         count = max(3, round(k / (10 * length)))
         if not matrix.offers.pairs_within or k < 2 * count * length:
             return _FIRST_PROBE * spread, 2
-        # a strip in the middle of each of `count` equal parts of the recording
-        strips = [(int(m) - length // 2, int(m) - length // 2 + length) for m in (np.arange(count) + 0.5) * k / count]
-        interior = np.zeros(k, dtype=bool)
-        for a, b in strips:
-            interior[a + 1 : b - 1] = True
-        far_in_row = np.maximum(k - np.arange(k) - far, 0)  # cells (i, j > i) far enough, per row i
-        scale = 2 * far_in_row.sum() / max(far_in_row[interior].sum(), 1)  # both directions
-        needed = math.ceil(2 * wanted / scale)
+        strips, interior, needed = _strips(k, far, wanted, length, count)
+        # more strips until they should hold enough of the minima wanted for a steady estimate
+        while needed < _STRIP_MINIMA and k >= 2 * (count + 1) * length:
+            count += 1
+            strips, interior, needed = _strips(k, far, wanted, length, count)
         probe = _FIRST_PROBE * spread
         while True:
             matrix.fill_within(probe, ranges=strips)
@@ -253,6 +256,19 @@ class Kovar:
             f"do not resemble each other) gives a walkable graph: {found}; record longer motion, or lower min_gap "
             "or blend_time"
         )
+
+
+def _strips(k, far, wanted, length, count):
+    """`count` strips of `length` rows, one in the middle of each of equal parts of the K rows, the
+    mask of their interior rows (whose cells have all their neighbors in the strip), and how many
+    of the minima wanted their interior should hold (twice its share of the far cells)."""
+    strips = [(int(m) - length // 2, int(m) - length // 2 + length) for m in (np.arange(count) + 0.5) * k / count]
+    interior = np.zeros(k, dtype=bool)
+    for a, b in strips:
+        interior[a + 1 : b - 1] = True
+    far_in_row = np.maximum(k - np.arange(k) - far, 0)  # cells (i, j > i) far enough, per row i
+    scale = 2 * far_in_row.sum() / max(far_in_row[interior].sum(), 1)  # both directions
+    return strips, interior, math.ceil(2 * wanted / scale)
 
 
 def _transitions(frames, chosen, matrix, blend):
