@@ -29,10 +29,10 @@ lowest minima of the full matrix, so the probe goes up until they decide the rul
 probe comes from thin strips of rows (a tenth of the rows, one in the middle of each of equal
 parts of the recording; more strips where they would hold fewer than 8 of the minima needed),
 probed from 0.04 times the mean squared radius upwards, doubling: the value under which the
-strips' minima, scaled to the whole matrix, number twice those wanted. It usually decides at once; if not, the probe goes up by a tenth at a time. Rows are never listed twice at
-the same probe, and cells nearer the diagonal than any transition's neighbors are never computed.
-``prune=True`` and ``prune=False`` give the identical graph. The `per_second` rule needs every
-value and never prunes.
+strips' minima, scaled to the whole matrix, number twice those wanted. It usually decides at
+once; if not, the probe goes up by a tenth at a time. Rows are never listed twice at the same probe,
+and cells nearer the diagonal than any transition's neighbors are never computed. ``prune=True``
+and ``prune=False`` give the identical graph. The `per_second` rule needs every value and never prunes.
 """
 
 from __future__ import annotations
