@@ -55,7 +55,8 @@ _FIRST_PROBE = 0.04
 # needs. A 60 s recording (30 transitions wanted) with four strips expected to hold 3: at 100 boids
 # the estimate fell 6% short and every row was listed twice (21.1 s); at 20 it overshot (2.9 s).
 # With twelve strips (8): 13.1-14.5 and 1.1-1.2 s, 50 boids 7.5 -> 4.9-5.7 s; 5, 6, 7 and 10
-# were each worse on one of these; 1 003 candidates need 14 strips instead of 10, no change.
+# were each worse on one of these. Longer recordings need only 3 (4 003 candidates: 23.7 s
+# against 35.8 with a tenth of the rows in strips; bench/README.md).
 _STRIP_MINIMA = 8
 
 
@@ -206,11 +207,11 @@ class Kovar:
         factor to raise it by if it does not: small after an estimate, 2 without one."""
         k = len(frames)
         length = int(np.clip(k // 100, 8, 48))
-        count = max(3, round(k / (10 * length)))
+        count = 3
         if not matrix.offers.pairs_within or k < 2 * count * length:
             return _FIRST_PROBE * spread, 2
         strips, interior, needed = _strips(k, far, wanted, length, count)
-        # more strips until they should hold enough of the minima wanted for a steady estimate
+        # as few strips as should hold enough of the minima wanted for a steady estimate
         while needed < _STRIP_MINIMA and k >= 2 * (count + 1) * length:
             count += 1
             strips, interior, needed = _strips(k, far, wanted, length, count)
