@@ -26,13 +26,14 @@ where that bound is at most the threshold). A cell left out has E > threshold, s
 neither be a transition nor keep a computed cell under the threshold from being a local minimum.
 The adaptive rule is decided by probing: the minima under a probe threshold are exactly the
 lowest minima of the full matrix, so the probe goes up until they decide the rule. The first
-probe comes from thin strips of rows (a tenth of the rows, one in the middle of each of equal
-parts of the recording; more strips where they would hold fewer than 8 of the minima needed),
-probed from 0.04 times the mean squared radius upwards, doubling: the value under which the
-strips' minima, scaled to the whole matrix, number twice those wanted. It usually decides at
-once; if not, the probe goes up by a tenth at a time. Rows are never listed twice at the same probe,
-and cells nearer the diagonal than any transition's neighbors are never computed. ``prune=True``
-and ``prune=False`` give the identical graph. The `per_second` rule needs every value and never prunes.
+probe comes from thin strips of rows (one in the middle of each of equal parts of the recording;
+as few strips as should hold 8 of the minima needed, at least 3, at most half the rows), probed
+from 0.04 times the mean squared radius upwards, doubling: the value under which the strips'
+minima, scaled to the whole matrix, number twice those wanted. It usually decides at once; if
+not, the probe goes up by a tenth at a time. Rows are never listed twice at the same probe, and
+cells nearer the diagonal than any transition's neighbors are never computed. ``prune=True`` and
+``prune=False`` give the identical graph. The `per_second` rule needs every value and never
+prunes.
 """
 
 from __future__ import annotations
@@ -207,14 +208,15 @@ class Kovar:
         factor to raise it by if it does not: small after an estimate, 2 without one."""
         k = len(frames)
         length = int(np.clip(k // 100, 8, 48))
-        count = 3
-        if not matrix.offers.pairs_within or k < 2 * count * length:
+        counts = range(3, k // (2 * length) + 1)  # strips cover at most half the rows
+        if not matrix.offers.pairs_within or not counts:
             return _FIRST_PROBE * spread, 2
-        strips, interior, needed = _strips(k, far, wanted, length, count)
+        far_in_row = np.maximum(k - np.arange(k) - far, 0)  # cells (i, j > i) far enough, per row i
         # as few strips as should hold enough of the minima wanted for a steady estimate
-        while needed < _STRIP_MINIMA and k >= 2 * (count + 1) * length:
-            count += 1
-            strips, interior, needed = _strips(k, far, wanted, length, count)
+        for count in counts:
+            strips, interior, needed = _strips(far_in_row, wanted, length, count)
+            if needed >= _STRIP_MINIMA:
+                break
         probe = _FIRST_PROBE * spread
         while True:
             matrix.fill_within(probe, ranges=strips)
@@ -259,15 +261,16 @@ class Kovar:
         )
 
 
-def _strips(k, far, wanted, length, count):
+def _strips(far_in_row, wanted, length, count):
     """`count` strips of `length` rows, one in the middle of each of equal parts of the K rows, the
     mask of their interior rows (whose cells have all their neighbors in the strip), and how many
-    of the minima wanted their interior should hold (twice its share of the far cells)."""
+    of the minima wanted their interior should hold (twice its share of the far cells, counted
+    per row by `far_in_row`)."""
+    k = len(far_in_row)
     strips = [(int(m) - length // 2, int(m) - length // 2 + length) for m in (np.arange(count) + 0.5) * k / count]
     interior = np.zeros(k, dtype=bool)
     for a, b in strips:
         interior[a + 1 : b - 1] = True
-    far_in_row = np.maximum(k - np.arange(k) - far, 0)  # cells (i, j > i) far enough, per row i
     scale = 2 * far_in_row.sum() / max(far_in_row[interior].sum(), 1)  # both directions
     return strips, interior, math.ceil(2 * wanted / scale)
 
