@@ -32,7 +32,8 @@ optimal assignment gives E exactly, and over an interval of rotations the values
 bound E (E = S - 2 g with g a support function; see `_branch_and_bound`), exactly once both ends
 have the same assignment. Intervals whose bound exceeds the threshold are dropped and the others
 halved; a pair is listed as soon as a sampled rotation is within the threshold. Blocks of
-neighboring configurations are ruled out together first (the triangle inequality).
+neighboring configurations are ruled out together first (the triangle inequality). From
+SAMPLED_BELOW agents, single pairs are not sampled: an exact evaluation costs less there.
 """
 
 from __future__ import annotations
@@ -64,6 +65,13 @@ KEEP = 2
 # pairs_within rules out pairs of blocks of neighbors, coarse to fine; 9-3-1 measured fastest of
 # the block ladders tried on the 2 000-candidate bench (commit 1dbc1b8)
 _BLOCK_SIZES = (9, 3, 1)
+# Single pairs are branched and bounded only in groups under SAMPLED_BELOW agents. In larger ones
+# the search keeps KEEP starts, so an exact evaluation costs fewer assignments than the branch
+# and bound needs to rule a pair out: at 100 agents 1.12 against 1.65 ms for a pair it rules
+# out, and a pair it lists (0.56 ms) is evaluated anyway (0.48 ms). There, pairs past the
+# rotation-free and mean-velocity bounds are listed as they are: 100 agents, 60 s recording,
+# 13.3 -> 10.4 s a build; 50 agents 7.2 -> 6.1 s; 40 agents 3.3 -> 4.1 s, hence 50 (bench/README.md).
+SAMPLED_BELOW = 50
 
 
 @attrs.frozen(kw_only=True)
@@ -197,7 +205,10 @@ class IcpHungarian:
             mean_part = self.velocity_weight * (prepared.mean_speed[ia[part]] - prepared.mean_speed[ib[part]]) ** 2
             kept = np.flatnonzero(floor + mean_part <= limit[part])
             if prepared.dims == 2 and len(kept):
-                kept = kept[_branch_and_bound(prepared, ia[part][kept], ib[part][kept], limit[part][kept], floor[kept])]
+                sample = blocks is not None or prepared.n_agents < SAMPLED_BELOW
+                kept = kept[
+                    _branch_and_bound(prepared, ia[part][kept], ib[part][kept], limit[part][kept], floor[kept], sample)
+                ]
             keep[s + kept] = True
         labels = (ia, ib) if blocks is None else blocks
         return np.column_stack([labels[0][keep], labels[1][keep]]).astype(int)
@@ -490,9 +501,10 @@ def _gather(points, assignment):
     return np.take_along_axis(points, assignment[:, :, None], axis=1)
 
 
-def _branch_and_bound(prepared, ia, ib, limit, floor, levels=12) -> np.ndarray:
+def _branch_and_bound(prepared, ia, ib, limit, floor, sample=True, levels=12) -> np.ndarray:
     """Mask over pairs (ia, ib) (2D): True where some rotation may keep E <= limit (one limit per
-    pair). `floor` bounds the position and deviation part for every rotation.
+    pair). `floor` bounds the position and deviation part for every rotation; without `sample`,
+    only the mean-velocity term's range of rotations (below) is checked.
 
     At a fixed rotation theta, E(theta) = S - 2 g(theta), where S does not depend on theta and
     g(theta) = max over assignments s of <z_s, u(theta)>, z_s the 2D vector of the assignment's
@@ -516,6 +528,8 @@ def _branch_and_bound(prepared, ia, ib, limit, floor, levels=12) -> np.ndarray:
         cosine = np.where(h0 > 0, (a0 - (limit - floor)) / (2 * h0), -1.0)
     reach, phi = np.arccos(np.clip(cosine, -1.0, 1.0)), np.arctan2(q0, p0)
     pieces = np.where(cosine > 1, 0, 2 * np.maximum(1, np.ceil(reach / (math.pi / 2)))).astype(np.int64)
+    if not sample:
+        return pieces > 0
     passed = np.zeros(len(ia), dtype=bool)
     _bound_pairs(stacked, ia, ib, total, a0, p0, q0, phi, reach, pieces, np.asarray(limit, float), levels, passed)
     return passed

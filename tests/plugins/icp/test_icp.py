@@ -149,6 +149,25 @@ def test_pairs_within_on_a_recording_is_exact_and_prunes(dims):
         assert len(listed) < 0.5 * len(pairs)
 
 
+def test_pairs_within_in_large_groups_lists_every_close_pair_without_sampling(monkeypatch):
+    """From SAMPLED_BELOW agents single pairs are not branched and bounded: the listing holds every
+    pair within and what the sampled listing holds, and the bounds before sampling still rule
+    pairs out."""
+    import flockkit_icp.metric as icp
+
+    motion = flockkit.simulate(n_agents=icp.SAMPLED_BELOW, steps=300, seed=4)
+    configs = [motion.configuration(t) for t in range(0, 300, 6)]
+    metric = IcpHungarian()
+    distances = metric.pairwise(configs)
+    threshold = float(np.quantile(distances, 0.1))
+    listed = {tuple(p) for p in metric.pairs_within(configs, threshold)}
+    monkeypatch.setattr(icp, "SAMPLED_BELOW", icp.SAMPLED_BELOW + 1)
+    sampled = {tuple(p) for p in metric.pairs_within(configs, threshold)}
+    pairs = np.column_stack(np.triu_indices(len(configs), 1))
+    assert {tuple(p) for p in pairs[distances <= threshold]} <= sampled < listed
+    assert len(listed) < 0.75 * len(pairs)
+
+
 def test_pairwise_equals_compare_bit_for_bit():
     motion = flockkit.simulate(n_agents=9, steps=60, seed=3)
     configs = [motion.configuration(t) for t in range(0, 60, 6)]

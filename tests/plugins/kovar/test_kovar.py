@@ -60,6 +60,18 @@ def test_pruned_probing_upwards_gives_the_identical_graph(recording, graph, monk
     )
 
 
+def test_pruning_gives_the_identical_graph_in_a_large_group():
+    """From SAMPLED_BELOW agents the metric lists single pairs without sampling rotations."""
+    import flockkit_icp.metric as icp
+
+    recording = flockkit.simulate(n_agents=icp.SAMPLED_BELOW, steps=500, seed=6)
+    pruned, full = (
+        flockkit.get("builder", "kovar", prune=prune).build(recording, METRIC, np.random.default_rng(0))
+        for prune in (True, False)
+    )
+    assert structure(pruned) == structure(full) and pruned.params["evaluated"] < full.params["evaluated"]
+
+
 def test_pruned_build_probing_from_strips_is_identical(monkeypatch):
     """A recording long enough for the first probe to come from strips of rows (here a little low:
     the probe goes up from it)."""
