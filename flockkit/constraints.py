@@ -423,8 +423,11 @@ class PointConstraint:
 class ComConstraint:
     """The center of mass of `agents` (None: all) is at `position` at `time` seconds.
 
-    Met exactly by the initial trajectories, then kept by the objective's Gaussian term
-    (standard deviation ``Problem.sigma_com``). `velocity` as for PointConstraint.
+    A Gaussian term of the objective (standard deviation ``Problem.sigma_com``); a solution meets
+    it within 3 sigma_com. ``solve`` meets it exactly at its aim (``flockkit.solve.com_aims``: for
+    a track of them, the point within 2.7 sigma_com that lets the group's path ask least of the
+    model), then keeps it by the objective; a small sigma_com holds it where it is. `velocity` as
+    for PointConstraint.
     """
 
     agents: tuple[int, ...] | None = attrs.field(

@@ -1,5 +1,6 @@
 """Constrained animation (paper 004): windows, initial trajectories, objective and sampler."""
 
+from .aims import com_aims
 from .initial import initial_trajectories, regenerate
 from .refine import refine
 from .sampler import Proposal, ProposalContext, Solution, Trace, residuals, solve
@@ -8,6 +9,7 @@ from .windows import windows
 
 __all__ = [
     "windows",
+    "com_aims",
     "initial_trajectories",
     "regenerate",
     "refine",

@@ -32,6 +32,7 @@ from ..motion import Motion
 from ..registry import get, label, require_dims, resolve
 from ..validate import allocation, integer, number
 from ..validate import seed as validate_seed
+from .aims import com_aims
 from .initial import initial_trajectories
 from .refine import refine as refine_motion
 from .windows import windows
@@ -55,7 +56,8 @@ class Proposal:
 
 @attrs.frozen(kw_only=True, eq=False)
 class ProposalContext:
-    """What a proposal move may read: the problem, the behavior model, the windows of the initial
+    """What a proposal move may read: the problem (in ``solve``, with its COM constraints at the
+    aims the initial trajectories met, ``flockkit.solve.aims``), the behavior model, the windows of the initial
     trajectories, the current per-frame log g (`scores`), the point-constrained agent-frames
     (`pinned`, boolean (T, N)), which a move must leave exactly where they are, and `scale`, a
     factor for the size of a move's changes that the sampler adapts to how often the move's
@@ -196,11 +198,14 @@ def run_chain(
     callback=None,
     progress=None,
     stable=None,
+    aims=None,
 ):
     """One chain from `initial`: (best motion, its log g, Trace). The best motion is the most
-    plausible sample that is `feasible`. `moves` is a list of (name, move, probability). With
-    `stable`, stop early once the mean log g over the last STABLE_WINDOW iterations differs from
-    the mean over the window before by at most `stable` times its size."""
+    plausible sample that is `feasible`. `moves` is a list of (name, move, probability); they see
+    `aims` (default `problem`: the problem with its COM constraints where the initial trajectories
+    met them, ``com_aims``) as the context's problem. With `stable`, stop early once the mean log
+    g over the last STABLE_WINDOW iterations differs from the mean over the window before by at
+    most `stable` times its size."""
     scorer = Scorer(problem, behavior, objectives)
     names = [name for name, _, _ in moves]
     weights = np.array([p for _, _, p in moves], dtype=float)
@@ -216,7 +221,7 @@ def run_chain(
         chances = weights * shares
         pick = int(rng.choice(len(moves), p=chances / chances.sum()))
         context = ProposalContext(
-            problem=problem, behavior=behavior, windows=spans, scores=_readonly(scores), pinned=pinned,
+            problem=aims or problem, behavior=behavior, windows=spans, scores=_readonly(scores), pinned=pinned,
             scale=float(scales[pick]),
         )  # fmt: skip
         proposal = moves[pick][1].propose(current, context, rng)
@@ -269,6 +274,11 @@ def solve(
 ) -> Solution:
     """Constrained, plausible motion for `problem` (paper 004).
 
+    Point and shape constraints are met exactly; COM constraints within 3 ``problem.sigma_com``:
+    each chain's initial trajectories (refined and regenerated alike) meet the COM constraints of
+    each track at their aims (``flockkit.solve.com_aims``), and the sampler scores every COM
+    against its own position.
+
     Parameters
     ----------
     behavior : str or behavior model
@@ -319,11 +329,15 @@ def solve(
     allocation(4 * chains * problem.n_frames * problem.n_agents * problem.dims, f"solve: {chains} chains of {size}")
     allocation(3 * chains * iterations, f"solve: the trace of {chains} chains of {iterations} iterations")
     model = _behavior(problem, behavior, behavior_params)
-    _warn_implausible(problem, model, seed)
+    aims = problem
+    if problem.tracks:  # a speed given or implied, and COM tracks to aim
+        lowest, highest, fastest = np.percentile(_unconstrained_speeds(problem, model, seed), [10, 90, 99])
+        _warn_implausible(problem, float(fastest))
+        aims = com_aims(problem, (float(lowest), float(highest)))
     moves = _moves(problem, DEFAULT_PROPOSALS if proposals is None else proposals, iterations)
     terms = [_component("objective", spec, problem) for spec in objectives]
     seeds = np.random.SeedSequence(seed).spawn(chains)
-    arguments = (problem, model, moves, terms, iterations, refine, stable)
+    arguments = (problem, aims, model, moves, terms, iterations, refine, stable)
     if n_jobs == 1:
         results = _chains_here(arguments, seeds, iterations, callback, progress)
     else:
@@ -360,18 +374,23 @@ def _chains_here(arguments, seeds, iterations, callback, progress) -> list:
 IMPLAUSIBLE_SPEED = 1.5
 
 
-def _warn_implausible(problem: Problem, model, seed) -> None:
-    """Warn (FlockkitWarning) about each constraint whose speed, given or implied by the one
-    before it on the same agent or subset, is far above what the model's agents do unconstrained:
-    the solve still meets it exactly, at the cost of motion that does not look like the model's."""
+def _unconstrained_speeds(problem: Problem, model, seed) -> np.ndarray:
+    """The speeds of the model's agents, unconstrained: a random flock of the problem's size,
+    over the last 100 of 150 steps (it gathers in the first 3 s, and a flock's own speed wanders
+    for seconds: the median of 60 steps' second half was 0.93-0.98 for boids that cruise at 1.0)."""
     from ..convenience import random_flock
 
-    if not problem.tracks:  # shape constraints alone: no speed given or implied
-        return
     rng = np.random.default_rng(seed)
-    steps = min(max(problem.n_frames - 1, 2), 60)  # long enough for a random flock to gather
+    steps = 150
     simulated = model.forward(random_flock(n_agents=problem.n_agents, dims=problem.dims, rng=rng), steps, rng)
-    fastest = float(np.percentile(np.linalg.norm(simulated.velocities()[steps // 2 :], axis=-1), 99))
+    return np.linalg.norm(simulated.velocities()[50:], axis=-1).ravel()
+
+
+def _warn_implausible(problem: Problem, fastest: float) -> None:
+    """Warn (FlockkitWarning) about each constraint whose speed, given or implied by the one
+    before it on the same agent or subset, is far above `fastest`, what the model's agents do
+    unconstrained (the 99th percentile): the solve still meets it, at the cost of motion that does
+    not look like the model's."""
     index = {id(c): k for k, c in enumerate(problem.constraints)}
     for track in problem.tracks:
         for before, after in zip(track[:-1], track[1:]):
@@ -443,18 +462,30 @@ def _moves(problem: Problem, proposals, iterations) -> list:
     return moves
 
 
-def _chain(problem, behavior, moves, terms, iterations, refine, stable, seed, callback, progress):
+def _chain(problem, aims, behavior, moves, terms, iterations, refine, stable, seed, callback, progress):
+    """One chain: initial trajectories meeting `aims` (`problem` with its COM constraints at
+    their aims, ``com_aims``) exactly, refined, then sampled; scored and judged on `problem`."""
     rng = np.random.default_rng(seed)
-    initial = initial_trajectories(problem, behavior, rng)
+    initial = initial_trajectories(aims, behavior, rng)
     if refine and capabilities(behavior).residuals:
-        refined = refine_motion(problem, behavior, initial, pinned_frames(problem), rng, iterations=refine)
-        if feasible(problem, refined):
+        refined = refine_motion(aims, behavior, initial, pinned_frames(aims), rng, iterations=refine)
+        if feasible(aims, refined):
             initial = refined
     if not iterations:
         scores = Scorer(problem, behavior, terms).frames(initial)
         return initial, float(scores.sum()), Trace(log_g=np.empty(0), proposals=(), accepted=np.zeros(0, dtype=bool))
     return run_chain(
-        problem, behavior, terms, moves, initial, iterations, rng, callback=callback, progress=progress, stable=stable
+        problem,
+        behavior,
+        terms,
+        moves,
+        initial,
+        iterations,
+        rng,
+        callback=callback,
+        progress=progress,
+        stable=stable,
+        aims=aims,
     )
 
 

@@ -19,9 +19,10 @@ from hypothesis import strategies as st
 from hypothesis.errors import InvalidArgument
 from hypothesis.extra import numpy as hnp
 
+from ..constraints import ComConstraint
 from ..motion import Configuration, Motion, State
 
-__all__ = ["configurations", "states", "motions", "difference_matrices", "anything", "damaged"]
+__all__ = ["configurations", "states", "motions", "com_tracks", "difference_matrices", "anything", "damaged"]
 
 
 def _check_count(name, value, low=1):
@@ -138,6 +139,30 @@ def motions(
         )
 
     return draw_motion()
+
+
+def com_tracks(*, min_constraints=2, max_constraints=5, dims=None, max_coordinate=10.0, max_gap=3.0):
+    """Tracks of center-of-mass constraints on all agents, as ``Problem.tracks`` holds them: a
+    tuple of `min_constraints` to `max_constraints` ComConstraints in time order, the first at
+    time 0, each the one before plus a gap in [0.5, max_gap] seconds (whole tenths, so that no two
+    share a frame at the paper's 10 Hz), positions in [-max_coordinate, max_coordinate] and D =
+    `dims` (None: 2 or 3)."""
+    _check_range("min_constraints", min_constraints, "max_constraints", max_constraints)
+    _check_positive("max_coordinate", max_coordinate)
+    _check_positive("max_gap", max_gap)
+    if max_gap < 0.5:
+        raise InvalidArgument(f"max_gap must be >= 0.5 seconds; got {max_gap!r}")
+    dims_strategy = _dims(dims)
+
+    @st.composite
+    def draw_track(draw):
+        count, dims = draw(st.integers(min_constraints, max_constraints)), draw(dims_strategy)
+        gaps = draw(st.lists(st.integers(5, int(max_gap * 10)), min_size=count - 1, max_size=count - 1))
+        times = np.concatenate([[0], np.cumsum(gaps)]) / 10
+        positions = draw(_vectors((count, dims), max_coordinate))
+        return tuple(ComConstraint(time=float(t), position=p) for t, p in zip(times, positions))
+
+    return draw_track()
 
 
 def difference_matrices(*, max_size: int = 12):

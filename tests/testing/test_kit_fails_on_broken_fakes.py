@@ -1,5 +1,6 @@
 """Every check of the kit passes on a correct model and fails on a model broken in its way."""
 
+import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
@@ -88,6 +89,8 @@ def test_parametrize_ids_name_kind_component_and_check():
         (fst.motions, {"min_frames": 0}),
         (fst.motions, {"dt": 0}),
         (fst.motions, {"channels": [3]}),
+        (fst.com_tracks, {"min_constraints": 3, "max_constraints": 2}),
+        (fst.com_tracks, {"max_gap": 0.2}),
     ],
 )
 def test_strategies_reject_bad_arguments_eagerly(factory, kwargs):
@@ -106,3 +109,7 @@ def test_strategies_respect_their_bounds(data):
     motion = data.draw(fst.motions(min_frames=2, max_frames=5, dims=2, dt=0.25, channels=["wander"]))
     assert 2 <= motion.n_frames <= 5 and motion.dims == 2 and motion.dt == 0.25
     assert motion.channels["wander"].shape == motion.positions.shape
+    track = data.draw(fst.com_tracks(min_constraints=3, max_constraints=4, dims=2, max_coordinate=2.0, max_gap=1.0))
+    times = np.array([c.time for c in track])
+    assert 3 <= len(track) <= 4 and times[0] == 0 and np.all(np.diff(times) >= 0.5 - 1e-12)
+    assert np.all(np.diff(times) <= 1.0 + 1e-12) and all(abs(c.position).max() <= 2.0 for c in track)
