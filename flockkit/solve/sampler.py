@@ -56,12 +56,13 @@ class Proposal:
 
 @attrs.frozen(kw_only=True, eq=False)
 class ProposalContext:
-    """What a proposal move may read: the problem (in ``solve``, with its COM constraints at the
-    aims the initial trajectories met, ``flockkit.solve.aims``), the behavior model, the windows of the initial
-    trajectories, the current per-frame log g (`scores`), the point-constrained agent-frames
-    (`pinned`, boolean (T, N)), which a move must leave exactly where they are, and `scale`, a
-    factor for the size of a move's changes that the sampler adapts to how often the move's
-    proposals are accepted (a motion near its most plausible takes only small changes)."""
+    """What a proposal move may read: the problem (in ``solve``, with its COM constraints at
+    the aims the initial trajectories met, ``flockkit.solve.com_aims``), the behavior model, the
+    windows of the initial trajectories, the current per-frame log g (`scores`), the
+    point-constrained agent-frames (`pinned`, boolean (T, N)), which a move must leave exactly
+    where they are, and `scale`, a factor for the size of a move's changes that the sampler adapts
+    to how often the move's proposals are accepted (a motion near its most plausible takes only
+    small changes)."""
 
     problem: Problem
     behavior: object
@@ -221,8 +222,8 @@ def run_chain(
         chances = weights * shares
         pick = int(rng.choice(len(moves), p=chances / chances.sum()))
         context = ProposalContext(
-            problem=aims or problem, behavior=behavior, windows=spans, scores=_readonly(scores), pinned=pinned,
-            scale=float(scales[pick]),
+            problem=problem if aims is None else aims, behavior=behavior, windows=spans,
+            scores=_readonly(scores), pinned=pinned, scale=float(scales[pick]),
         )  # fmt: skip
         proposal = moves[pick][1].propose(current, context, rng)
         if proposal is not None:
@@ -469,7 +470,7 @@ def _chain(problem, aims, behavior, moves, terms, iterations, refine, stable, se
     initial = initial_trajectories(aims, behavior, rng)
     if refine and capabilities(behavior).residuals:
         refined = refine_motion(aims, behavior, initial, pinned_frames(aims), rng, iterations=refine)
-        if feasible(aims, refined):
+        if feasible(problem, refined):
             initial = refined
     if not iterations:
         scores = Scorer(problem, behavior, terms).frames(initial)
