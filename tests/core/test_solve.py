@@ -324,3 +324,24 @@ def test_a_com_track_faster_than_the_model_is_met_within_its_tolerance_and_more_
     aimed, exact = solved(0.1), solved(1e-4)
     assert min(aimed.residuals) > 0.1  # the aims use the tolerance
     assert per_agent_step(aimed.motion) > per_agent_step(exact.motion) + 20
+
+
+def test_velocities_inferred_from_a_com_track_follow_its_aims_and_given_ones_stay():
+    """Problem fills a missing velocity from the spline through the positions; at the aims, the
+    group must leave at the aimed path's velocity instead (obstacle-squeeze's first COM was placed
+    at 1.39 m/s where its aimed path runs at 1.16), while a velocity the user gave is kept."""
+    from scipy.interpolate import make_interp_spline
+
+    from flockkit.solve.aims import com_aims
+
+    given = np.array([0.5, 0.5])
+    track = [
+        ComConstraint(time=0.5, position=[0.0, 0.0]),
+        ComConstraint(time=2.5, position=[2.5, -0.6], velocity=given),
+        ComConstraint(time=4.5, position=[5.0, 0.0]),
+    ]
+    aimed = com_aims(Problem(n_agents=6, duration=5.0, constraints=track), (0.9, 1.1)).constraints
+    path = make_interp_spline([0.5, 2.5, 4.5], np.array([c.position for c in aimed]), k=2).derivative()
+    assert np.allclose(aimed[0].velocity, path(0.5)) and np.allclose(aimed[2].velocity, path(4.5))
+    assert np.linalg.norm(aimed[0].velocity) < 1.25  # the positions' own path leaves at 1.39
+    assert np.array_equal(aimed[1].velocity, given)
