@@ -515,6 +515,17 @@ def _regions(value) -> tuple:
     return items
 
 
+def track_path(times, positions):
+    """The B-spline through a track's positions at its times (``make_interp_spline``, cubic
+    where there are four or more): the path the initial trajectories follow, and whose derivative
+    gives a track's missing velocities."""
+    from scipy.interpolate import make_interp_spline
+
+    return make_interp_spline(
+        np.asarray(times, dtype=float), np.asarray(positions, dtype=float), k=min(3, len(times) - 1)
+    )
+
+
 def _track_key(constraint):
     if isinstance(constraint, PointConstraint):
         return ("point", constraint.agent)
@@ -639,8 +650,6 @@ class Problem:
             )
 
     def _with_velocities(self) -> tuple:
-        from scipy.interpolate import make_interp_spline
-
         filled = {}
         for track in self.tracks:
             frames = [self.frame(c.time) for c in track]
@@ -663,10 +672,7 @@ class Problem:
                 raise ValidationError(
                     f"the only {what} (t={c.time:g}) has no path to infer its velocity from; give it a velocity"
                 )
-            times = np.array([c.time for c in track])
-            spline = make_interp_spline(
-                times, np.array([c.position for c in track]), k=min(3, len(track) - 1)
-            ).derivative()
+            spline = track_path([c.time for c in track], [c.position for c in track]).derivative()
             for c in missing:
                 filled[id(c)] = attrs.evolve(c, velocity=spline(c.time))
         return tuple(filled.get(id(c), c) for c in self.constraints)

@@ -12,25 +12,24 @@ least, the integral over the track of
     |path acceleration|^2 + (how far |path velocity| lies outside the model's speeds)^2 / TAU^2
 
 for the same interpolating spline the initial trajectories follow, where the model's speeds are
-the 10th to 90th percentile of its agents' speeds unconstrained. A velocity ``Problem`` inferred
-from the path through the positions is inferred again from the path through the aims (a group
-placed at the old one, 1.39 m/s on obstacle-squeeze where the aimed path runs at 1.16, spent its
-first seconds slowing down). A straight path within them
+the 10th to 90th percentile of its agents' speeds unconstrained. A straight path within them
 stays where it is: on a straight 10 s track, aiming a group at 0.95 where the model's agents
 cruise at 0.93-1.07 made the initial trajectories' impulses 1.8x larger for one seed in four (and
-0.75x for another): the speed rule is stiff, and a flock's own speed wanders that much. The
-sampler still scores every COM against its own position (the objective's term), and the best
-sample is one within 3 sigma_com of it.
+0.75x for another): the speed rule is stiff, and a flock's own speed wanders that much. A
+velocity ``Problem`` inferred from the path through the positions is inferred again from the path
+through the aims (placed at the old one, 1.39 m/s where its aimed path runs at 1.16,
+obstacle-squeeze's group spent its first seconds slowing down). The sampler still scores every
+COM against its own position (the objective's term), and the best sample is one within 3
+sigma_com of it.
 """
 
 from __future__ import annotations
 
 import attrs
 import numpy as np
-from scipy.interpolate import make_interp_spline
 from scipy.optimize import minimize
 
-from ..constraints import ComConstraint, Problem
+from ..constraints import ComConstraint, Problem, track_path
 
 __all__ = ["com_aims", "PathCost"]
 
@@ -55,9 +54,9 @@ def com_aims(problem: Problem, speeds: tuple[float, float]) -> Problem:
         if isinstance(track[0], ComConstraint) and len(track) >= 2:
             times = [c.time for c in track]
             aims = _aims(track, speeds, reach)
-            # a velocity the problem inferred from the path through the positions (its B-spline's
-            # derivative, ``Problem``) is inferred again from the path through the aims
-            inferred, aimed = (_spline(times, knots).derivative() for knots in ([c.position for c in track], aims))
+            # a velocity the problem inferred from the path through the positions is inferred again
+            # from the path through the aims
+            inferred, aimed = (track_path(times, knots).derivative() for knots in ([c.position for c in track], aims))
             for c, aim in zip(track, aims):
                 was_inferred = np.allclose(c.velocity, inferred(c.time), rtol=1e-9, atol=1e-12)
                 moved[id(c)] = attrs.evolve(c, position=aim, velocity=aimed(c.time) if was_inferred else c.velocity)
@@ -101,22 +100,16 @@ def _aims(track, speeds, reach: float) -> np.ndarray:
     return positions + shift
 
 
-def _spline(times, knots):
-    """The interpolating spline through `knots` at `times` that ``Problem`` and the initial
-    trajectories follow."""
-    return make_interp_spline(times, np.asarray(knots, dtype=float), k=min(3, len(times) - 1))
-
-
 class PathCost:
-    """The cost of the path through knots at `times` (the initial trajectories' interpolating
-    spline): the integral of |acceleration|^2 + (speed outside `speeds`)^2 / TAU^2. The spline is
+    """The cost of the path through knots at `times` (``flockkit.constraints.track_path``): the
+    integral of |acceleration|^2 + (speed outside `speeds`)^2 / TAU^2. The spline is
     linear in its knots, so velocity and acceleration at the quadrature samples are matrices
     (samples x knots) times the knots."""
 
     def __init__(self, times, speeds):
         times = np.asarray(times, dtype=float)
         count = len(times)
-        basis = _spline(times, np.eye(count))
+        basis = track_path(times, np.eye(count))
         span = times[-1] - times[0]
         samples = np.linspace(times[0], times[-1], max(2, int(np.ceil(span * _SAMPLES_PER_SECOND)) + 1))
         self.weight = span / len(samples)

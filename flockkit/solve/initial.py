@@ -36,12 +36,12 @@ nearest (or, with ``Problem.follow = "random"``, a random) constrained agent in 
 from __future__ import annotations
 
 import numpy as np
-from scipy.interpolate import CubicHermiteSpline, CubicSpline, make_interp_spline
+from scipy.interpolate import CubicHermiteSpline, CubicSpline
 from scipy.ndimage import gaussian_filter1d
 from scipy.optimize import linear_sum_assignment
 
 from .. import rigid
-from ..constraints import ComConstraint, PointConstraint, Problem, ShapeConstraint
+from ..constraints import ComConstraint, PointConstraint, Problem, ShapeConstraint, track_path
 from ..convenience import random_flock
 from ..interfaces import capabilities
 from ..motion import Motion, State
@@ -98,7 +98,7 @@ class _Path:
     def __init__(self, track, problem):
         times = np.array([c.time for c in track])
         self.first, self.last = problem.frame(times[0]), problem.frame(times[-1])
-        self.spline = make_interp_spline(times, np.array([c.position for c in track]), k=min(3, len(track) - 1))
+        self.spline = track_path(times, [c.position for c in track])
         self.agents = problem.agents_of(track[0])
         self.is_point = isinstance(track[0], PointConstraint)
         self.members = {id(c) for c in track}
