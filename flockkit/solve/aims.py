@@ -52,11 +52,11 @@ def com_aims(problem: Problem, speeds: tuple[float, float]) -> Problem:
     moved = {}
     for track in problem.tracks:
         if isinstance(track[0], ComConstraint) and len(track) >= 2:
-            times = [c.time for c in track]
-            aims = _aims(track, speeds, reach)
+            times, positions = [c.time for c in track], np.array([c.position for c in track])
+            aims = _aims(times, positions, speeds, reach)
             # a velocity the problem inferred from the path through the positions is inferred again
             # from the path through the aims
-            inferred, aimed = (track_path(times, knots).derivative() for knots in ([c.position for c in track], aims))
+            inferred, aimed = (track_path(times, knots).derivative() for knots in (positions, aims))
             for c, aim in zip(track, aims):
                 was_inferred = np.allclose(c.velocity, inferred(c.time), rtol=1e-9, atol=1e-12)
                 moved[id(c)] = attrs.evolve(c, position=aim, velocity=aimed(c.time) if was_inferred else c.velocity)
@@ -65,12 +65,11 @@ def com_aims(problem: Problem, speeds: tuple[float, float]) -> Problem:
     return attrs.evolve(problem, constraints=[moved.get(id(c), c) for c in problem.constraints])
 
 
-def _aims(track, speeds, reach: float) -> np.ndarray:
-    """(K, D) aims of one track: its positions moved by at most `reach` each to lower the path's
-    cost (``PathCost``)."""
-    positions = np.array([c.position for c in track])
+def _aims(times, positions: np.ndarray, speeds, reach: float) -> np.ndarray:
+    """(K, D) aims of one track: its `positions` (at `times`) moved by at most `reach` each to
+    lower the path's cost (``PathCost``)."""
     count, dims = positions.shape
-    cost = PathCost([c.time for c in track], speeds)
+    cost = PathCost(times, speeds)
 
     def shifted(flat):
         value, gradient = cost(positions + flat.reshape(count, dims))
