@@ -60,7 +60,7 @@ def scenarios(folder: Path, iterations: int, seed: int) -> None:
         problem, settings = load_scenario(path)
         settings.update(iterations=iterations, seed=seed)
         model = flockkit.get("behavior", "boids", dt=problem.dt, obstacles=problem.obstacles)
-        initial = solve(problem, **dict(settings, iterations=0, refine=0)).motion
+        initial = solve(problem, **dict(settings, iterations=0, refine=0, starts=1)).motion
         refined = solve(problem, **dict(settings, iterations=0)).motion
         begin = time.perf_counter()
         solution = solve(problem, **settings)
@@ -117,10 +117,10 @@ def speed(agents: int, steps: int, iterations: int) -> None:
     for name, behavior in (("incremental", flockkit.get("behavior", "boids", dt=dt)),
                            ("full", NoReach(flockkit.get("behavior", "boids", dt=dt)))):  # fmt: skip
         begin = time.perf_counter()
-        solve(problem, behavior=behavior, iterations=0, refine=0, seed=1)
+        solve(problem, behavior=behavior, iterations=0, refine=0, starts=1, seed=1)
         setup = time.perf_counter() - begin
         begin = time.perf_counter()
-        solve(problem, behavior=behavior, iterations=iterations, refine=0, seed=1)
+        solve(problem, behavior=behavior, iterations=iterations, refine=0, starts=1, seed=1)
         rates[name] = iterations / max(time.perf_counter() - begin - setup, 1e-9)
     print(f"{agents:>6} x {steps:<5} {rates['incremental']:>12.0f} {rates['full']:>10.0f} "
           f"{rates['incremental'] / rates['full']:>7.1f}x")  # fmt: skip

@@ -360,7 +360,7 @@ def _cmd_solve(args) -> int:
 
     output = _require_suffix(args.output, (".npz",), "-o")
     problem, settings = load_scenario(args.scenario)
-    for option in ("iterations", "refine", "chains", "seed"):
+    for option in ("iterations", "refine", "starts", "chains", "seed"):
         if getattr(args, option) is not None:
             settings[option] = getattr(args, option)
     from .solve.sampler import unmet
@@ -604,6 +604,11 @@ def _solve_arguments(parser) -> None:
     parser.add_argument("--iterations", type=int, help="sampler iterations (default: the scenario's, else 1000)")
     parser.add_argument(
         "--refine", type=int, help="least-squares steps before sampling (default: the scenario's, else 40)"
+    )
+    parser.add_argument(
+        "--starts",
+        type=int,
+        help="initial trajectories drawn per chain, the best kept (default: the scenario's, else 1)",
     )
     parser.add_argument("--chains", type=int, help="independent chains")
     parser.add_argument("--seed", type=int, help="random seed")

@@ -6,8 +6,8 @@
     agents = 20          # required; dims = 2, dt = 0.1, flocks = 1, sigma_com, shape_weight, flock_weight,
     duration = 8.0       # visibility, clearance and follow are optional (defaults as in Problem)
 
-    [solve]              # optional: behavior, behavior_params = {...}, iterations, refine, chains, seed, stable,
-                         # proposals = {bump = 0.6, ...}, objectives = [...]
+    [solve]              # optional: behavior, behavior_params = {...}, iterations, refine, starts, chains, seed,
+                         # stable, proposals = {bump = 0.6, ...}, objectives = [...]
     iterations = 1000
 
     [[point]]            # agent, time, position, optional velocity
@@ -48,6 +48,7 @@ _SOLVE_KEYS = {
     "behavior_params",
     "iterations",
     "refine",
+    "starts",
     "chains",
     "seed",
     "proposals",
@@ -77,9 +78,11 @@ def load_scenario(path) -> tuple[Problem, dict]:
         _only(settings, _SOLVE_KEYS, f"{path}: [solve]")
         if "seed" in settings:
             validate.seed(settings["seed"], f"{path}: [solve] seed")
-        for key in ("iterations", "refine", "chains"):
+        for key in ("iterations", "refine", "starts", "chains"):
             if key in settings:
-                validate.integer(settings[key], f"{path}: [solve] {key}", minimum=1 if key == "chains" else 0)
+                validate.integer(
+                    settings[key], f"{path}: [solve] {key}", minimum=1 if key in ("starts", "chains") else 0
+                )
         constraints = []
         for kind, build in (("point", _point), ("com", _com), ("shape", _shape)):
             for index, entry in enumerate(_array(data, kind, path)):

@@ -3,7 +3,7 @@
 Each check is ``check_<property>(name, model)`` and raises AssertionError saying what is wrong.
 They run on a few fixed flocks (one agent to a hundred) in the dimensions the model declares, so
 results are reproducible; the checks of ``guide``, ``group_guide``, ``progress``,
-``plausibility_reach`` and ``residuals`` run only for models that declare them.
+``plausibility_reach``, ``residuals`` and ``coupling`` run only for models that declare them.
 """
 
 from __future__ import annotations
@@ -322,6 +322,52 @@ def check_residuals(name, model):
     )
 
 
+@applies_when("coupling")
+def check_coupling(name, model):
+    """plausibility_coupling gives a scipy sparse (T N K, T N D) matrix with no entry for an
+    agent's own positions, and where it gives an agent's residuals against another agent's
+    position at a frame, they are the derivatives finite differences measure (the other agent
+    moved alone), on a flock drawn closer together than it keeps itself, so short-range rules act."""
+    from scipy import sparse
+
+    motion = _forward(model, _flock(model), steps=STEPS)
+    centre = motion.positions.mean(axis=1, keepdims=True)
+    x = centre + 0.35 * (motion.positions - centre)
+    channels = motion.channels
+
+    def residuals(positions):
+        return np.asarray(model.plausibility_residuals(Motion(positions=positions, dt=motion.dt, channels=channels)))
+
+    base = residuals(x)
+    frames, n, k = base.shape
+    d = x.shape[2]
+    coupling = model.plausibility_coupling(Motion(positions=x, dt=motion.dt, channels=channels))
+    assert sparse.issparse(coupling) and coupling.shape == (frames * n * k, frames * n * d), (
+        f"{name}.plausibility_coupling must be a scipy sparse matrix of shape {(frames * n * k, frames * n * d)}; "
+        f"got {type(coupling).__name__} of shape {getattr(coupling, 'shape', None)}"
+    )
+    given = sparse.csc_matrix(coupling)
+    given.eliminate_zeros()
+    row_agent = (np.arange(frames * n * k) // k) % n
+    step = 1e-6
+    for column in np.unique(given.nonzero()[1]):
+        frame, agent, dim = np.unravel_index(column, (frames, n, d))
+        entries = given[:, column].toarray().ravel()
+        assert not np.any(entries[row_agent == agent]), (
+            f"{name}.plausibility_coupling has entries for agent {agent}'s own position (frame {frame}); it "
+            "gives how residuals follow other agents' positions"
+        )
+        moved = x.copy()
+        moved[frame, agent, dim] += step
+        measured = ((residuals(moved) - base) / step).ravel()
+        rows = np.isin(row_agent, np.unique(row_agent[entries != 0]))  # the agents it gives, whole
+        error = np.max(np.abs(measured[rows] - entries[rows]))
+        assert error <= 1e-3 * max(1.0, np.max(np.abs(measured[rows]))), (
+            f"{name}.plausibility_coupling differs from finite differences by {error:.3g} for agent {agent}'s "
+            f"position at frame {frame} (dimension {dim})"
+        )
+
+
 CHECKS = (
     check_forward_shape,
     check_backward_shape,
@@ -339,4 +385,5 @@ CHECKS = (
     check_progress,
     check_plausibility_reach,
     check_residuals,
+    check_coupling,
 )

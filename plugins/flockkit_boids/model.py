@@ -31,6 +31,7 @@ import math
 
 import attrs
 import numpy as np
+from scipy.sparse import coo_matrix
 from scipy.spatial import cKDTree
 
 import flockkit
@@ -121,7 +122,13 @@ class Boids:
     # A change at frame f alters the inferred impulses at frames f - 1 .. f + 2 (see
     # log_plausibility), so scores within 2 frames of a change.
     capabilities = flockkit.Capabilities(
-        guide=True, group_guide=True, obstacles=True, plausibility_reach=2, residuals=True, progress=True
+        guide=True,
+        group_guide=True,
+        obstacles=True,
+        plausibility_reach=2,
+        residuals=True,
+        coupling=True,
+        progress=True,
     )
 
     def __attrs_post_init__(self):
@@ -206,6 +213,66 @@ class Boids:
         """The wander impulses over wander_sigma (stop - start, N, D): log_plausibility is minus
         half their summed squares, less the normalization."""
         return self.wander_impulses(motion, start, stop) / self.wander_sigma
+
+    def plausibility_coupling(self, motion: flockkit.Motion) -> coo_matrix:
+        """How each agent's residuals follow its neighbors' positions (Capabilities.coupling): a
+        sparse (T N D, T N D) matrix, rows the residuals and columns the positions, both
+        flattened (frame, agent, component).
+
+        The contribution w_t of agent i (see log_plausibility) is (velocity change / gain - steering)
+        / wander_weight, and the residual at t is (w_t - unit(w_{t-1})) / wander_sigma. Its
+        steering at t reads each seen neighbor j's position at t (cohesion: + cohesion_weight /
+        perception_radius / neighbors; separation: - separation_weight d g / d x_j, g(e) = (1/|e| -
+        1/separation_radius) e within separation_radius) and velocity from t - 1 to t (alignment:
+        alignment_weight / target_speed / neighbors). The residual at t + 1 takes the same through
+        unit(w_t), whose derivative is (I - u u^T) / |w_t|. Which neighbors an agent sees and how
+        many it sees are held fixed (they change only in jumps)."""
+        self._window(motion, 0, None)
+        x, dt = motion.positions, motion.dt
+        frames, n, d = x.shape
+        size = frames * n * d
+        rows, columns, values = [], [], []
+        wander = self._infer_wander(x, dt, 1, frames - 1) if frames > 2 else None  # frames 1 .. T - 2
+        scale = 1.0 / (self.wander_weight * self.wander_sigma)
+        cos_half = math.cos(math.radians(self.field_of_view) / 2)
+        eye = np.eye(d)
+        for t in range(1, frames - 1):
+            pairs = cKDTree(x[t]).query_pairs(self.perception_radius, output_type="ndarray")
+            i, j = np.concatenate([pairs[:, 0], pairs[:, 1]]), np.concatenate([pairs[:, 1], pairs[:, 0]])
+            offset = x[t, j] - x[t, i]
+            distance = np.linalg.norm(offset, axis=1)
+            if self.field_of_view < 360:  # i sees j; a stationary agent sees all round
+                heading = x[t, i] - x[t - 1, i]
+                seen = np.einsum("pk,pk->p", heading, offset) >= distance * np.linalg.norm(heading, axis=1) * cos_half
+                i, j, offset, distance = i[seen], j[seen], offset[seen], distance[seen]
+            share = 1.0 / np.maximum(np.bincount(i, minlength=n), 1)
+            if not len(i):
+                continue
+            pull = (
+                self.cohesion_weight / self.perception_radius + self.alignment_weight / (self.target_speed * dt)
+            ) * share[i]
+            now = -pull[:, None, None] * eye
+            near = distance < self.separation_radius
+            g = (1 / distance[near] - 1 / self.separation_radius)[:, None, None] * eye
+            g -= offset[near, :, None] * offset[near, None, :] / distance[near, None, None] ** 3
+            now[near] += self.separation_weight * g
+            before = (self.alignment_weight / (self.target_speed * dt) * share[i])[:, None, None] * eye
+            blocks = [(t, t, now * scale), (t, t - 1, before * scale)]
+            if t + 1 < frames - 1:  # the residual at t + 1 subtracts unit(w_t)
+                w = wander[t - 1, i]
+                length = np.maximum(np.linalg.norm(w, axis=1), 1e-12)
+                unit = w / length[:, None]
+                turn = (eye - unit[:, :, None] * unit[:, None, :]) / length[:, None, None]
+                blocks += [(t + 1, t, -turn @ (now * scale)), (t + 1, t - 1, -turn @ (before * scale))]
+            for frame, at, b in blocks:
+                row = ((frame * n + i)[:, None] * d + np.arange(d))[:, :, None]  # (P, D, 1)
+                column = ((at * n + j)[:, None] * d + np.arange(d))[:, None, :]  # (P, 1, D)
+                rows.append(np.broadcast_to(row, b.shape).ravel())
+                columns.append(np.broadcast_to(column, b.shape).ravel())
+                values.append(b.ravel())
+        if not rows:
+            return coo_matrix((size, size))
+        return coo_matrix((np.concatenate(values), (np.concatenate(rows), np.concatenate(columns))), shape=(size, size))
 
     def wander_impulses(self, motion: flockkit.Motion, start: int = 0, stop: int | None = None) -> np.ndarray:
         """The wander impulses (stop - start, N, D) a forward simulation would have drawn to produce

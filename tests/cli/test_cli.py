@@ -52,11 +52,11 @@ def test_simulate_writes_motion_and_picture(capsys, tmp_path):
 
 def test_check_runs_the_kit_and_reports_what_it_skipped(capsys, tmp_path):
     code, out, _ = run(capsys, "check", "behavior", "boids")
-    assert code == 0 and "behavior 'boids': 17 passed" in out and "skipped" not in out
+    assert code == 0 and "behavior 'boids': 18 passed" in out and "skipped" not in out
     code, out, _ = run(capsys, "check", "walk", "random")
     assert code == 0 and "passed" in out
     code, out, _ = run(capsys, "check", "behavior", "vicsek")
-    assert code == 0 and "4 skipped (check_guide: the component does not declare Capabilities.guide" in out
+    assert code == 0 and "5 skipped (check_guide: the component does not declare Capabilities.guide" in out
     code, out, _ = run(capsys, "check", "builder", "kovar", "--partner", "metric=icp-hungarian")
     assert code == 0 and "passed" in out
     code, _, err = run(capsys, "check", "builder", "kovar", "--partner", "metric")

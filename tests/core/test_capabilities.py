@@ -82,6 +82,7 @@ def test_capabilities_reads_the_declaration_or_gives_the_defaults():
         "obstacles": True,
         "plausibility_reach": 2,
         "residuals": True,
+        "coupling": True,
         "progress": True,
     }
 
@@ -157,6 +158,7 @@ def test_the_kit_reports_undeclared_operations_as_skipped_with_the_reason():
         "check_progress",
         "check_plausibility_reach",
         "check_residuals",
+        "check_coupling",
     }
     assert all("does not declare Capabilities." in reason for reason in report.skipped.values())
     assert not set(report.passed) & set(report.skipped)
@@ -166,6 +168,7 @@ def test_the_kit_reports_undeclared_operations_as_skipped_with_the_reason():
         "check_progress",
         "check_plausibility_reach",
         "check_residuals",
+        "check_coupling",
     }
     assert skipped_checks("metric", IcpHungarian()) == {}
 

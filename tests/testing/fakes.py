@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.sparse import coo_matrix
 
 import flockkit
 from flockkit.errors import ValidationError
@@ -70,8 +71,13 @@ class Declaring(RandomVelocity):
     its residuals (the inferred noise)."""
 
     capabilities = flockkit.Capabilities(
-        guide=True, group_guide=True, progress=True, plausibility_reach=1, residuals=True
+        guide=True, group_guide=True, progress=True, plausibility_reach=1, residuals=True, coupling=True
     )
+
+    def plausibility_coupling(self, motion):
+        """Its agents move independently: no residual follows another agent."""
+        size = motion.positions.size
+        return coo_matrix((size, size))
 
     def plausibility_residuals(self, motion, start=0, stop=None):
         stop = motion.n_frames if stop is None else stop
@@ -209,6 +215,16 @@ class ResidualsOffScale(Declaring):
         return super().plausibility_residuals(motion, start, stop) / 2
 
 
+class CouplingInvented(Declaring):
+    """Says agent 0's residuals at frame 2 follow agent 1's position there; they do not."""
+
+    def plausibility_coupling(self, motion):
+        size = motion.positions.size
+        n, d = motion.n_agents, motion.dims
+        rows, columns = (2 * n + 0) * d + np.arange(d), (2 * n + 1) * d + np.arange(d)
+        return coo_matrix((np.ones(d), (rows, columns)), shape=(size, size))
+
+
 # check name -> a fake that breaks exactly that check
 BROKEN = {
     "check_interface": MissingMethod,
@@ -228,6 +244,7 @@ BROKEN = {
     "check_progress": SilentProgress,
     "check_plausibility_reach": ReachTooShort,
     "check_residuals": ResidualsOffScale,
+    "check_coupling": CouplingInvented,
 }
 
 
