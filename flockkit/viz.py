@@ -602,6 +602,7 @@ def plot_trace(solution, path=None):
         ax.scatter(iterations[trace.accepted], trace.log_g[trace.accepted], s=4)
     ax.set_xlabel("iteration")
     ax.set_ylabel("log g")
+    ax.ticklabel_format(axis="y", useOffset=False)  # a refined start varies by units on a scale of 1e4
     ax.set_title("sampler trace (dots: accepted proposals)")
     if solution.trace:
         ax.legend(loc="lower right")

@@ -377,3 +377,18 @@ def test_the_model_s_coupling_makes_refine_s_jacobian_exact():
     size = np.linalg.norm(exact)
     assert np.linalg.norm(coupled - exact) < 1e-4 * size
     assert np.linalg.norm(lumped - exact) > 0.02 * size  # 0.045: the agent-to-agent share
+
+
+def test_a_chain_keeps_the_best_of_its_starts():
+    """starts=3 draws three initial trajectories, the first as starts=1 does, and keeps the one
+    that scores highest (without refine, as drawn): never below the single start, and another
+    one on some seed."""
+    problem = small_problem()
+    kept = []
+    for seed in (1, 2, 3):
+        one = flockkit.solve(problem, iterations=0, refine=0, seed=seed)
+        best = flockkit.solve(problem, iterations=0, refine=0, starts=3, seed=seed)
+        assert best.log_g[0] >= one.log_g[0]
+        assert max(best.residuals) <= 1e-9
+        kept.append(best.log_g[0] > one.log_g[0])
+    assert any(kept)
