@@ -305,8 +305,8 @@ def solve(
         holds take on part of the constrained agents' cost: on one-agent (seeds 1-5) the best of
         5 raised log g_w per agent-step from -5.0..-7.3 to -2.6..-6.1, and the free agents'
         impulses were then larger than a free flock's (median 0.11 against 0.086; KS p < 0.005
-        on every seed). So the default is 1; the shipped scenarios whose every agent is in a
-        constrained group ask for 5.
+        on every seed). So the default is 1; obstacle-squeeze and arrows, whose every agent is
+        in a constrained group, ask for 20 and 5 (bench/README.md).
     stable : float, optional
         Stop a chain early once its running mean of log g stabilizes: the mean over the last 100
         iterations within this fraction of the mean over the 100 before.
