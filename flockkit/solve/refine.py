@@ -19,9 +19,9 @@ residual (``plausibility_reach``), so 2 reach + 1 evaluations per dimension meas
 frame's block. Moving agents together credits each agent with how its residuals follow its
 neighbors' positions (cohesion, alignment, separation). A model declaring
 ``Capabilities(coupling=True)`` gives those derivatives (``plausibility_coupling``); they are then
-put where they belong and taken off the agent's own block, so the Jacobian is exact, and the
-normal equations, which then join every agent of a frame to its neighbors, are solved by a banded
-Cholesky factor (reverse Cuthill-McKee order) where that is affordable (COUPLING_BUDGET). On
+put where they belong and taken off the agent's own block, so the Jacobian is exact, where the
+normal equations, which then join every agent of a frame to its neighbors, are affordable to
+solve (COUPLING_BUDGET; a banded Cholesky factor, see ``_step``). On
 obstacle-squeeze (seeds 1-10, 40 steps) that took refined starts from a mean log g_w per
 agent-step of -57.4 to -50.1, on looping-3d (seeds 1-3) from -115.7 to -109.6.
 """
@@ -30,8 +30,9 @@ from __future__ import annotations
 
 import numpy as np
 from scipy.linalg import cho_solve_banded, cholesky_banded
-from scipy.sparse import coo_matrix, diags, tril
+from scipy.sparse import bmat, coo_matrix, diags, tril
 from scipy.sparse.csgraph import reverse_cuthill_mckee
+from scipy.sparse.linalg import spsolve
 
 from ..constraints import ComConstraint, Problem, ShapeConstraint
 from ..errors import ValidationError
@@ -201,7 +202,7 @@ class _Refinement:
             scale = normal.diagonal()
             equalities = self._equalities(positions)
             for _ in range(10):
-                step = _step(normal + diags(damping * scale + 1e-12), gradient, equalities)
+                step = _step(normal + diags(damping * scale + 1e-12), gradient, equalities, self.coupled)
                 if not np.all(np.isfinite(step)):
                     damping *= 4
                     continue
@@ -240,11 +241,19 @@ class _Refinement:
         return positions
 
 
-def _step(matrix, gradient, equalities) -> np.ndarray:
-    """The damped Gauss-Newton step meeting the linear equalities. `matrix` (J^T J, damped) is
-    banded, positions ordered by frame and a residual reaching a few frames: a banded Cholesky
-    factor solves it (several times faster than a general sparse LU once neighbors couple
-    agents), and the equalities' multipliers come from their small Schur complement."""
+def _step(matrix, gradient, equalities, banded: bool) -> np.ndarray:
+    """The damped Gauss-Newton step meeting the linear equalities. Without the coupling, `matrix`
+    (J^T J, damped) holds one chain of frames per agent, and a sparse LU of the KKT system keeps
+    it sparse. With it, every agent of a frame meets its neighbors; ordered by frame (reverse
+    Cuthill-McKee) the matrix is banded, and a banded Cholesky factor solves it several times
+    faster than the LU (0.8 s a solve on arrows' 50 agents), the equalities' multipliers coming
+    from their Schur complement (dense, one column per equality: small where steps are coupled)."""
+    if not banded:
+        if equalities is None:
+            return spsolve(matrix, -gradient)
+        rows, targets = equalities
+        system = bmat([[matrix, rows.T], [rows, None]], format="csc")
+        return spsolve(system, np.concatenate([-gradient, targets]))[: matrix.shape[0]]
     order = reverse_cuthill_mckee(matrix.tocsr(), symmetric_mode=True)
     back = np.argsort(order)
     lower = tril(matrix.tocsr()[order][:, order]).tocoo()
