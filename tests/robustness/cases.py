@@ -110,6 +110,7 @@ def cli(tmp) -> list[tuple[str, list[str]]]:
         ("simulate --seed -1", [*sim, "--seed", "-1"]),
         ("walk --seed -1", ["walk", str(graph), "--duration", "5", "--seed", "-1", "-o", out]),
         ("solve --seed -1", ["solve", str(infeasible), "--seed", "-1", "-o", out]),
+        ("solve --starts 0", ["solve", str(infeasible), "--starts", "0", "-o", out]),
         *((f"simulate --param {k}", [*sim, "--param", f"{k}=5"]) for k in RESERVED),
         ("simulate --param obstacles=5", [*sim, "--param", "obstacles=5"]),
         ("build --param metric", ["build", str(motion), "-o", str(tmp / "g2.npz"), "--param", "metric=x"]),
