@@ -131,6 +131,10 @@ class Capabilities:
     pairs_within: bool = attrs.field(default=False, validator=_flag("pairs_within"))
     pairwise: bool = attrs.field(default=False, validator=_flag("pairwise"))
 
+    def __attrs_post_init__(self):
+        if self.coupling and not self.residuals:
+            raise ValidationError("Capabilities.coupling needs residuals=True: it gives the residuals' derivatives")
+
     def declared(self) -> dict:
         """The fields that differ from the defaults."""
         default = Capabilities()

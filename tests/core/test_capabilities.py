@@ -64,6 +64,7 @@ class Plugin:
         ({"guide": 1}, "Capabilities.guide must be True or False"),
         ({"plausibility_reach": -1}, "Capabilities.plausibility_reach"),
         ({"plausibility_reach": 1.5}, "Capabilities.plausibility_reach"),
+        ({"coupling": True}, "Capabilities.coupling needs residuals=True"),
     ],
 )
 def test_bad_declarations_are_refused(fields, message):
