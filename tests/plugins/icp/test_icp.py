@@ -28,9 +28,18 @@ def general_position(config):
     return spreads[0] > 1e-3 * spreads[-1] and gaps.min() > 0.05 and close.min() > 1e-2
 
 
+# A fixed spread of 12 points, wider along x than y than z: added to a drawn configuration, it keeps
+# most draws in general position (hypothesis likes all agents at one point, which no test of a
+# unique alignment can use: assume() alone filtered out 50 of 59 draws in one CI run).
+SPREAD = np.random.default_rng(0).normal(0.0, 1.0, (12, 3)) * [12.0, 6.0, 3.0]
+
+
 @settings(max_examples=60, deadline=None)
 @given(fst.configurations(min_agents=3, max_agents=12, max_coordinate=10.0), st.integers(0, 2**31), st.data())
 def test_rigid_reordered_copies_are_found(config, seed, data):
+    config = flockkit.Configuration(
+        positions=config.positions + SPREAD[: config.n_agents, : config.dims], velocities=config.velocities
+    )
     assume(general_position(config))
     rotation = random_rotation(config.dims, seed)
     order = np.array(data.draw(st.permutations(range(config.n_agents))))
