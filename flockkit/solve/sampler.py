@@ -515,6 +515,7 @@ def _start(problem, aims, behavior, terms, refine, starts, rng) -> Motion:
     best, best_score = None, -math.inf
     for _ in range(starts):
         initial = initial_trajectories(aims, behavior, rng)
+        score = 0.0  # one start: nothing to rank
         if starts > 1:
             screened = initial
             if refines:
@@ -522,10 +523,10 @@ def _start(problem, aims, behavior, terms, refine, starts, rng) -> Motion:
                                          coupling=False)  # fmt: skip
                 screened = screened if feasible(problem, screened) else initial
             score = float(scorer.frames(screened).sum())
-            if best is not None and not score > best_score:
-                continue
-            best_score = score
-        best = initial
+        if best is None or score > best_score:
+            best, best_score = initial, score
+    # the full refine starts again from the draw: its targets are drawn from the motion it starts
+    # from, and from a screened one (residuals already model-like) it would keep them as they are
     if refines:
         refined = refine_motion(aims, behavior, best, pinned, rng, iterations=refine)
         if feasible(problem, refined):

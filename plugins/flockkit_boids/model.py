@@ -237,13 +237,13 @@ class Boids:
         cos_half = math.cos(math.radians(self.field_of_view) / 2)
         eye = np.eye(d)
         for t in range(1, frames - 1):
-            pairs = cKDTree(x[t]).query_pairs(self.perception_radius, output_type="ndarray")
-            i, j = np.concatenate([pairs[:, 0], pairs[:, 1]]), np.concatenate([pairs[:, 1], pairs[:, 0]])
-            offset = x[t, j] - x[t, i]
-            distance = np.linalg.norm(offset, axis=1)
-            if self.field_of_view < 360:  # i sees j; a stationary agent sees all round
-                heading = x[t, i] - x[t - 1, i]
-                seen = np.einsum("pk,pk->p", heading, offset) >= distance * np.linalg.norm(heading, axis=1) * cos_half
+            pairs = _SparsePairs(x[t], self.perception_radius)  # who sees whom, as _steer finds it
+            i, j, offset, distance = pairs.i, pairs.j, np.stack(pairs.offsets, axis=1), pairs.distances(None)
+            if self.field_of_view < 360:  # a stationary agent sees all round
+                step = x[t] - x[t - 1]
+                length = np.linalg.norm(step, axis=1, keepdims=True)
+                heading = np.divide(step, length, out=np.zeros_like(step), where=length > 0)
+                seen = pairs.along(heading) >= distance * pairs.rows(cos_half * (length[:, 0] > 0))
                 i, j, offset, distance = i[seen], j[seen], offset[seen], distance[seen]
             share = 1.0 / np.maximum(np.bincount(i, minlength=n), 1)
             if not len(i):
@@ -529,25 +529,25 @@ class _SparsePairs:
 
     def __init__(self, x, radius):
         pairs = cKDTree(x).query_pairs(radius, output_type="ndarray")
-        self._i = np.concatenate([pairs[:, 0], pairs[:, 1]])
-        self._j = np.concatenate([pairs[:, 1], pairs[:, 0]])
+        self.i = np.concatenate([pairs[:, 0], pairs[:, 1]])
+        self.j = np.concatenate([pairs[:, 1], pairs[:, 0]])
         self._x = x
-        self._offsets = [c[self._j] - c[self._i] for c in x.T]
+        self.offsets = [c[self.j] - c[self.i] for c in x.T]
 
     def distances(self, beyond):
-        return np.sqrt(sum(o * o for o in self._offsets))  # no pair of an agent and itself
+        return np.sqrt(sum(o * o for o in self.offsets))  # no pair of an agent and itself
 
     def along(self, direction):
-        return sum(o * direction[self._i, k] for k, o in enumerate(self._offsets))
+        return sum(o * direction[self.i, k] for k, o in enumerate(self.offsets))
 
     def rows(self, values):
-        return values[self._i]
+        return values[self.i]
 
     def total(self, values):
-        return np.bincount(self._i, values, minlength=len(self._x))
+        return np.bincount(self.i, values, minlength=len(self._x))
 
     def weighted_sum(self, weights, y):
-        return np.stack([self.total(weights * c[self._j]) for c in y.T], axis=1)
+        return np.stack([self.total(weights * c[self.j]) for c in y.T], axis=1)
 
 
 def _checked_path(path, steps, state, where) -> np.ndarray:
