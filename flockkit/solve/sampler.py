@@ -16,7 +16,6 @@ does not declare one); objective terms depend on their own frame only.
 from __future__ import annotations
 
 import math
-import warnings
 from collections import Counter
 from collections.abc import Mapping
 
@@ -26,7 +25,7 @@ import numpy as np
 from .. import parallel
 from .._progress import progress_bar
 from ..constraints import ComConstraint, PointConstraint, Problem
-from ..errors import FlockkitWarning, ValidationError
+from ..errors import ValidationError
 from ..interfaces import capabilities
 from ..motion import Motion
 from ..registry import get, label, require_dims, resolve
@@ -34,6 +33,7 @@ from ..validate import allocation, integer, number
 from ..validate import seed as validate_seed
 from .aims import com_aims
 from .initial import initial_trajectories
+from .reach import speeds, unconstrained, warn_beyond
 from .refine import refine as refine_motion
 from .windows import windows
 
@@ -345,8 +345,9 @@ def solve(
     model = _behavior(problem, behavior, behavior_params)
     aims = problem
     if problem.tracks:  # a speed given or implied, and COM tracks to aim
-        lowest, highest, fastest = np.percentile(_unconstrained_speeds(problem, model, seed), [10, 90, 99])
-        _warn_implausible(problem, float(fastest))
+        free = unconstrained(problem, model, seed)
+        lowest, highest, fastest = np.percentile(speeds(free), [10, 90, 99])
+        warn_beyond(problem, free, float(fastest))
         aims = com_aims(problem, (float(lowest), float(highest)))
     moves = _moves(problem, DEFAULT_PROPOSALS if proposals is None else proposals, iterations)
     terms = [_component("objective", spec, problem) for spec in objectives]
@@ -381,52 +382,6 @@ def _chains_here(arguments, seeds, iterations, callback, progress) -> list:
             chain_callback = None if callback is None else (lambda i, g, a, chain=index: callback(chain, i, g, a))
             results.append(_chain(*arguments, chain_seed, chain_callback, tick))
     return results
-
-
-# A constraint asking for more than this many times the fastest speeds (99th percentile) of an
-# unconstrained simulation is one no model-like motion meets.
-IMPLAUSIBLE_SPEED = 1.5
-
-
-def _unconstrained_speeds(problem: Problem, model, seed) -> np.ndarray:
-    """The speeds of the model's agents, unconstrained: a random flock of the problem's size,
-    over the last 100 of 150 steps (it gathers in the first 3 s, and a flock's own speed wanders
-    for seconds: the median of 60 steps' second half was 0.93-0.98 for boids that cruise at 1.0)."""
-    from ..convenience import random_flock
-
-    rng = np.random.default_rng(seed)
-    steps = 150
-    simulated = model.forward(random_flock(n_agents=problem.n_agents, dims=problem.dims, rng=rng), steps, rng)
-    return np.linalg.norm(simulated.velocities()[50:], axis=-1).ravel()
-
-
-def _warn_implausible(problem: Problem, fastest: float) -> None:
-    """Warn (FlockkitWarning) about each constraint whose speed, given or implied by the one
-    before it on the same agent or subset, is far above `fastest`, what the model's agents do
-    unconstrained (the 99th percentile): the solve still meets it, at the cost of motion that does
-    not look like the model's."""
-    index = {id(c): k for k, c in enumerate(problem.constraints)}
-    for track in problem.tracks:
-        for before, after in zip(track[:-1], track[1:]):
-            speed = np.linalg.norm(np.asarray(after.position) - before.position) / max(after.time - before.time, 1e-12)
-            if speed > IMPLAUSIBLE_SPEED * fastest:
-                warnings.warn(
-                    f"constraint {index[id(after)]} ({type(after).__name__} at t={after.time:g}) is "
-                    f"{speed:.3g} length units per second from constraint {index[id(before)]} at "
-                    f"t={before.time:g}; the model's agents move at up to {fastest:.3g} unconstrained, so the "
-                    "solution meets it with motion that does not look like the model's",
-                    FlockkitWarning,
-                    stacklevel=3,
-                )
-        for c in track[:1] if len(track) == 1 else ():  # a lone constraint's speed is its given velocity
-            speed = float(np.linalg.norm(c.velocity))
-            if speed > IMPLAUSIBLE_SPEED * fastest:
-                warnings.warn(
-                    f"constraint {index[id(c)]} ({type(c).__name__} at t={c.time:g}) asks for a speed of "
-                    f"{speed:.3g}; the model's agents move at up to {fastest:.3g} unconstrained",
-                    FlockkitWarning,
-                    stacklevel=3,
-                )
 
 
 def _behavior(problem: Problem, spec, params):

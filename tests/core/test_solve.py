@@ -268,6 +268,39 @@ def test_a_constraint_faster_than_the_model_warns_naming_it_and_is_still_met():
         flockkit.solve(small_problem(), iterations=0, refine=0, starts=1, seed=1)
 
 
+def test_a_track_turning_harder_than_the_model_warns_naming_its_corner_and_is_still_met():
+    """A point track that doubles back at 1 m/s (its legs' mean velocities differ by 2 m/s over
+    4 s: 0.5 m/s^2 on average) warns at its corner; the same corner on a COM track, within what
+    the COM may miss by, does not."""
+    from flockkit.solve.reach import IMPLAUSIBLE, _turning, unconstrained
+
+    corner = [[0.0, 0.0], [2.0, 0.0], [0.0, 0.0]]
+    problem = Problem(
+        n_agents=8,
+        duration=5.0,
+        constraints=[PointConstraint(agent=0, time=t, position=p) for t, p in zip((1.0, 3.0, 5.0), corner)],
+    )
+    pattern = (r"constraint 1 \(PointConstraint at t=3\) turns its agent at 0.5 length units per second squared on "
+               r"average between t=1 and t=5")  # fmt: skip
+    with pytest.warns(FlockkitWarning, match=pattern):
+        solution = flockkit.solve(problem, iterations=0, refine=0, seed=1)
+    assert max(solution.residuals) <= 1e-9
+    # the model's agents turn at well under 0.5 / IMPLAUSIBLE over 4 s, and at more than nothing
+    usual = np.percentile(_turning(unconstrained(problem, flockkit.get("behavior", "boids"), 1), [0], (20, 20)), 99)
+    assert 0 < usual < 0.5 / IMPLAUSIBLE
+    # a COM track may miss each of its constraints by 3 sigma_com: a corner of 2 sigma_com asks for
+    # nothing, though the legs' mean velocities through the constraints differ by 0.15 m/s^2, well
+    # above what the center of 8 boids does
+    sigma = 0.3
+    track = [ComConstraint(time=t, position=[t, 2 * sigma * (t == 3.0)]) for t in (1.0, 3.0, 5.0)]
+    bent = Problem(n_agents=8, duration=5.0, sigma_com=sigma, constraints=track)
+    free = unconstrained(bent, flockkit.get("behavior", "boids"), 1)
+    assert 0.15 > IMPLAUSIBLE * np.percentile(_turning(free, range(8), (20, 20)), 99)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        flockkit.solve(bent, iterations=0, refine=0, seed=1)
+
+
 @settings(max_examples=40, deadline=None)
 @given(track=fst.com_tracks(max_constraints=5, max_coordinate=5.0), extra=st.sampled_from([None, "point", "lone"]))
 def test_com_aims_stay_within_reach_and_never_make_a_path_ask_more(track, extra):

@@ -1,0 +1,124 @@
+"""What the model's agents do unconstrained, and the constraints that ask for more (issue 18).
+
+``solve`` simulates a random flock of the problem's size with the behavior model, unconstrained,
+and reads two things from it:
+
+- the model's speeds (the 10th, 90th and 99th percentiles of every agent's speed), which aim the
+  COM tracks (``com_aims``) and judge each constraint's speed, given or implied by the constraint
+  before it on the same agent or subset;
+- how fast the model's agents, or its groups of a track's size, turn: for three consecutive
+  constraints of a track at t0 < t1 < t2, the two legs' mean velocities differ by
+  |dv| = |(p2 - p1) / (t2 - t1) - (p1 - p0) / (t1 - t0)|, and somewhere within [t0, t2] the agent
+  (or the group's center) must accelerate by at least |dv| / (t2 - t0) on average. The same figure,
+  measured on the simulation over every window of the same legs, says what the model does.
+
+A constraint asking for more than IMPLAUSIBLE times the model's 99th percentile gets a
+FlockkitWarning naming it and both figures: the solve still meets it, with motion that does not
+look like the model's. (On the shipped examples, seed 1: one-agent's S turns its agent at 0.2
+length units per second squared over 4 s, 2.1 times the 99th percentile of the model's agents,
+and looping-3d's loop turns its group at up to 0.29, 9.7 times its; no default solve there comes
+near a forward simulation's log plausibility.)
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+
+from ..constraints import ComConstraint, Problem
+from ..convenience import random_flock
+from ..errors import FlockkitWarning
+from ..motion import Motion
+
+# A constraint asking for more than this many times the model's 99th percentile (of speed, or of
+# a track's turn) is one no model-like motion meets.
+IMPLAUSIBLE = 1.5
+# Steps a random flock takes to gather (3 s at 10 Hz) before its speeds are read, and the steps
+# read: a flock's own speed wanders for seconds (the median of 60 steps' second half was
+# 0.93-1.07 for boids that cruise at 1.0).
+WARM_UP = 50
+MEASURED = 100
+
+
+def unconstrained(problem: Problem, model, seed) -> Motion:
+    """A random flock of the problem's size simulated by `model` for WARM_UP + MEASURED steps, and
+    on for as long as the problem's longest turn (three consecutive constraints of a track) takes
+    MEASURED windows of it."""
+    rng = np.random.default_rng(seed)
+    steps = WARM_UP + MEASURED
+    motion = model.forward(random_flock(n_agents=problem.n_agents, dims=problem.dims, rng=rng), steps, rng)
+    more = WARM_UP + max((sum(legs) for *_, legs in _turns(problem)), default=0) + MEASURED - steps
+    if more > 0:
+        tail = model.forward(motion.state(-1), more, rng)
+        motion = Motion(positions=np.concatenate([motion.positions, tail.positions[1:]]), dt=motion.dt)
+    return motion
+
+
+def speeds(free: Motion) -> np.ndarray:
+    """Every agent's speed over the MEASURED steps after the warm-up."""
+    measured = Motion(positions=free.positions[: WARM_UP + MEASURED + 1], dt=free.dt)
+    return np.linalg.norm(measured.velocities()[WARM_UP:], axis=-1).ravel()
+
+
+def warn_beyond(problem: Problem, free: Motion, fastest: float) -> None:
+    """Warn (FlockkitWarning) about each constraint whose speed (given, or implied by the one
+    before it on the same agent or subset) is above IMPLAUSIBLE x `fastest`, and each whose track
+    turns there harder than IMPLAUSIBLE x what `free`'s agents (or groups of the track's size) do."""
+    index = {id(c): k for k, c in enumerate(problem.constraints)}
+
+    def warn(constraint, text):
+        where = f"constraint {index[id(constraint)]} ({type(constraint).__name__} at t={constraint.time:g})"
+        warnings.warn(f"{where} {text}", FlockkitWarning, stacklevel=4)
+
+    for track in problem.tracks:
+        for before, after in zip(track[:-1], track[1:]):
+            speed = np.linalg.norm(np.asarray(after.position) - before.position) / max(after.time - before.time, 1e-12)
+            if speed > IMPLAUSIBLE * fastest:
+                warn(after, f"is {speed:.3g} length units per second from constraint {index[id(before)]} at "
+                            f"t={before.time:g}; the model's agents move at up to {fastest:.3g} unconstrained, so "
+                            "the solution meets it with motion that does not look like the model's")  # fmt: skip
+        for c in track[:1] if len(track) == 1 else ():  # a lone constraint's speed is its given velocity
+            speed = float(np.linalg.norm(c.velocity))
+            if speed > IMPLAUSIBLE * fastest:
+                warn(
+                    c, f"asks for a speed of {speed:.3g}; the model's agents move at up to {fastest:.3g} unconstrained"
+                )
+    for (first, middle, last), needed, legs in _turns(problem):
+        group = problem.agents_of(middle)
+        usual = np.percentile(_turning(free, group, legs), 99)
+        if needed > IMPLAUSIBLE * usual:
+            who = "its agent" if len(group) == 1 else f"its {len(group)} agents' center"
+            peers = "agents" if len(group) == 1 else f"groups of {len(group)}"
+            warn(middle, f"turns {who} at {needed:.3g} length units per second squared on average between "
+                         f"t={first.time:g} and t={last.time:g} (the change of its legs' mean velocities over "
+                         f"{last.time - first.time:g} s); unconstrained, the model's {peers} turn at up to "
+                         f"{usual:.3g} over as long, so the solution meets it with motion that does not look like "
+                         "the model's")  # fmt: skip
+
+
+def _turns(problem: Problem):
+    """Per three consecutive constraints of a track: the three, the acceleration they ask for on
+    average (less what COM constraints may miss by, 3 sigma_com at each), and the two legs' frames."""
+    for track in problem.tracks:
+        for first, middle, last in zip(track, track[1:], track[2:]):
+            legs = (problem.frame(middle.time) - problem.frame(first.time),
+                    problem.frame(last.time) - problem.frame(middle.time))  # fmt: skip
+            if min(legs) < 1:
+                continue
+            a, b = (leg * problem.dt for leg in legs)
+            change = np.linalg.norm((last.position - middle.position) / b - (middle.position - first.position) / a)
+            slack = 2 * 3 * problem.sigma_com * (1 / a + 1 / b) if isinstance(middle, ComConstraint) else 0.0
+            yield (first, middle, last), max(0.0, change - slack) / (a + b), legs
+
+
+def _turning(free: Motion, group, legs) -> np.ndarray:
+    """The `_turns` figure over every window of `legs` frames after the warm-up, for each agent
+    of `free` (a group of one) or the center of its first len(group) agents."""
+    positions = free.positions[WARM_UP:]
+    centers = positions if len(group) == 1 else positions[:, : len(group)].mean(axis=1, keepdims=True)
+    a, b = legs
+    count = len(centers) - a - b
+    first, middle, last = centers[:count], centers[a : a + count], centers[a + b : a + b + count]
+    change = (last - middle) / (b * free.dt) - (middle - first) / (a * free.dt)
+    return np.linalg.norm(change, axis=-1).ravel() / ((a + b) * free.dt)
