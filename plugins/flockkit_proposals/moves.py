@@ -9,6 +9,7 @@ import math
 
 import attrs
 import numpy as np
+from scipy.interpolate import CubicSpline
 
 import flockkit
 from flockkit import validate
@@ -100,11 +101,21 @@ class Retime:
         if np.any(np.diff(target) < 0):
             return None
         target[0], target[-1] = 0.0, length
-        retimed = np.stack([np.interp(target, travelled, path[:, k]) for k in range(path.shape[1])], axis=1)
+        retimed = _along(path, travelled, target)
         positions = np.array(current.positions)
         positions[first + 1 : last, agent] = retimed[1:-1]
         motion = flockkit.Motion(positions=positions, dt=current.dt, channels=dict(current.channels))
         return Proposal(motion=motion, start=first + 1, stop=last, agents=(agent,))
+
+
+def _along(path: np.ndarray, travelled: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The points of `path` (samples at arc lengths `travelled`) at arc lengths `target`, on the
+    cubic spline through its samples: on the chords between samples, every retimed frame bent the
+    path by up to a few tenths of a millimetre, which a model that reads impulses from third
+    differences of positions (boids: about 900 x the offset) charges as a wander impulse."""
+    if np.all(np.diff(travelled) > 0):
+        return CubicSpline(travelled, path)(target)
+    return np.stack([np.interp(target, travelled, path[:, k]) for k in range(path.shape[1])], axis=1)
 
 
 @attrs.frozen(kw_only=True)

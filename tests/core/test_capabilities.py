@@ -294,7 +294,7 @@ def test_solve_takes_behavior_parameters_and_instances_of_every_component():
     problem = small_problem()
     by_name = flockkit.solve(problem, behavior_params={"cohesion_weight": 1.0}, iterations=10, seed=1)
     instance = flockkit.get("behavior", "boids", dt=problem.dt, cohesion_weight=1.0)
-    moves = [(flockkit.get("proposal", "bump"), 0.6), ("velocity", 0.3), (flockkit.get("proposal", "regenerate"), 0.1)]
+    moves = [(flockkit.get("proposal", "bump"), 0.6), ("velocity", 0.1), (flockkit.get("proposal", "regenerate"), 0.1)]
     objectives = [flockkit.get("objective", name) for name in ("com", "shape", "flocks")]
     given = flockkit.solve(problem, behavior=instance, proposals=moves, objectives=objectives, iterations=10, seed=1)
     assert given.motion == by_name.motion and given.log_g == by_name.log_g

@@ -1,10 +1,13 @@
 import numpy as np
 import pytest
+from hypothesis import given, settings
 
 import flockkit
 from flockkit import ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
+from flockkit.constraints import track_path
 from flockkit.errors import ValidationError
 from flockkit.solve import windows
+from flockkit.testing import strategies as fst
 
 
 def point(agent, time, position, velocity=None):
@@ -17,11 +20,31 @@ def test_frames_follow_round_time_over_dt():
 
 
 def test_velocities_come_from_the_spline_through_a_sequence():
-    # positions on x = t^2 (a quadratic, which the cubic spline through four points reproduces)
-    track = [point(0, t, [t**2, 1.0]) for t in (0.0, 1.0, 2.0, 3.0)]
+    # positions on a line at constant velocity, which the spline through four points reproduces
+    track = [point(0, t, [2.0 * t, 1.0 - t]) for t in (0.0, 1.0, 2.0, 3.0)]
     problem = Problem(n_agents=2, duration=3.0, constraints=track)
-    for given, filled in zip(track, problem.constraints):
-        np.testing.assert_allclose(filled.velocity, [2 * given.time, 0.0], atol=1e-9)
+    for filled in problem.constraints:
+        np.testing.assert_allclose(filled.velocity, [2.0, -1.0], atol=1e-9)
+
+
+@settings(max_examples=40, deadline=None)
+@given(track=fst.com_tracks(min_constraints=4, max_constraints=6, max_coordinate=5.0))
+def test_a_track_path_through_four_or_more_bends_least(track):
+    """Through four or more positions the path is the natural cubic: no acceleration at its ends,
+    and no more integrated squared acceleration than scipy's default (not-a-knot) cubic."""
+    from scipy.interpolate import make_interp_spline
+
+    times, positions = [c.time for c in track], np.array([c.position for c in track])
+    path = track_path(times, positions)
+    np.testing.assert_allclose(path(times), positions, atol=1e-9)
+    scale = 1 + np.abs(positions).max()
+    np.testing.assert_allclose(path([times[0], times[-1]], 2), 0.0, atol=1e-9 * scale)
+    samples = np.linspace(times[0], times[-1], 2001)
+
+    def bending(spline):
+        return float(np.sum(spline(samples, 2) ** 2))
+
+    assert bending(path) <= bending(make_interp_spline(times, positions, k=3)) * (1 + 1e-9) + 1e-9
 
 
 def test_a_given_velocity_is_kept_and_two_constraints_give_the_chord():
