@@ -37,24 +37,23 @@ def test_a_bump_keeps_the_ends_and_has_the_asked_height_on_a_straight_line():
     assert np.all(bumped[1:-1, 1] > 0)
 
 
+def retimings(problem, motion, seed, tries):
+    """(agent, proposal) of each of `tries` velocity proposals that is not None."""
+    context, rng = context_for(problem, motion), np.random.default_rng(seed)
+    move = flockkit.get("proposal", "velocity")
+    proposals = (move.propose(motion, context, rng) for _ in range(tries))
+    return [(p.agents[0], p) for p in proposals if p is not None]
+
+
 def test_retiming_keeps_the_path_and_the_distance():
     """Re-timed points lie on the cubic spline through the old samples (by arc length), between
     the segment's fixed ends, in order."""
     from scipy.interpolate import CubicSpline
     from scipy.optimize import minimize_scalar
 
-    problem = Problem(n_agents=5, duration=4.0)
     motion = flockkit.simulate(n_agents=5, steps=40, seed=2)
-    context = context_for(problem, motion)
-    rng = np.random.default_rng(1)
-    move = flockkit.get("proposal", "velocity")
-    retimed = 0
-    for _ in range(20):
-        proposal = move.propose(motion, context, rng)
-        if proposal is None:
-            continue
-        retimed += 1
-        agent = proposal.agents[0]
+    retimed = retimings(Problem(n_agents=5, duration=4.0), motion, 1, 20)
+    for agent, proposal in retimed:
         old, new = motion.positions[:, agent], proposal.motion.positions[:, agent]
         first, last = proposal.start - 1, proposal.stop
         np.testing.assert_array_equal(new[[first, last]], old[[first, last]])
@@ -71,7 +70,7 @@ def test_retiming_keeps_the_path_and_the_distance():
             assert fit.fun < 1e-7
             where.append(fit.x)
         assert np.all(np.diff(where) > 0)  # no agent goes back
-    assert retimed >= 5
+    assert len(retimed) >= 5
 
 
 def test_retiming_a_circle_keeps_its_points_on_it():
@@ -82,15 +81,8 @@ def test_retiming_a_circle_keeps_its_points_on_it():
     circle = np.stack([np.cos(angles), np.sin(angles)], axis=-1)
     positions = np.stack([circle + [3.0 * k, 0.0] for k in range(3)], axis=1)
     motion = flockkit.Motion(positions=positions, dt=0.1)
-    context = context_for(Problem(n_agents=3, duration=4.0), motion)
-    rng = np.random.default_rng(3)
-    move = flockkit.get("proposal", "velocity")
     moved = 0.0
-    for _ in range(30):
-        proposal = move.propose(motion, context, rng)
-        if proposal is None:
-            continue
-        agent = proposal.agents[0]
+    for agent, proposal in retimings(Problem(n_agents=3, duration=4.0), motion, 3, 30):
         new = proposal.motion.positions[:, agent] - [3.0 * agent, 0.0]
         np.testing.assert_allclose(np.linalg.norm(new, axis=1), 1.0, atol=1e-5)
         moved = max(moved, float(np.max(np.linalg.norm(proposal.motion.positions - positions, axis=-1))))
