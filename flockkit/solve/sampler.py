@@ -40,7 +40,7 @@ from .windows import windows
 # Paper 004 draws velocity (re-timing) moves with weight 0.3. Accepted most often (a quarter of
 # tries), they leave the free agents' impulses a little larger than a forward simulation's: on
 # one-agent (seeds 1-10) the KS test of them rejected at 1% on 2 seeds at 0.3 and on none at 0.1
-# (log g_w per agent-step, mean -1.5 -> -1.15; obstacle-squeeze seeds 1-3 -3.2, -12.7, -4.4 ->
+# (log g_w per agent-step, mean -1.43 -> -1.15; obstacle-squeeze seeds 1-3 -3.2, -12.7, -4.4 ->
 # -4.1, -12.8, -4.8; the other shipped scenarios within 1.5 either way).
 DEFAULT_PROPOSALS = {"bump": 0.6, "velocity": 0.1, "regenerate": 0.1}
 DEFAULT_OBJECTIVES = ("com", "shape", "flocks")
