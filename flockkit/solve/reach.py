@@ -115,9 +115,9 @@ def _turns(problem: Problem):
             if min(legs) < 1:
                 continue
             a, b = (leg * problem.dt for leg in legs)
-            change = np.linalg.norm((last.position - middle.position) / b - (middle.position - first.position) / a)
             slack = 2 * 3 * problem.sigma_com * (1 / a + 1 / b) if isinstance(middle, ComConstraint) else 0.0
-            yield (first, middle, last), max(0.0, change - slack) / (a + b), legs
+            rate = _turn_rate(first.position, middle.position, last.position, a, b, slack)
+            yield (first, middle, last), float(rate), legs
 
 
 def _turning(free: Motion, group, legs) -> np.ndarray:
@@ -128,5 +128,11 @@ def _turning(free: Motion, group, legs) -> np.ndarray:
     a, b = legs
     count = len(centers) - a - b
     first, middle, last = centers[:count], centers[a : a + count], centers[a + b : a + b + count]
-    change = (last - middle) / (b * free.dt) - (middle - first) / (a * free.dt)
-    return np.linalg.norm(change, axis=-1).ravel() / ((a + b) * free.dt)
+    return _turn_rate(first, middle, last, a * free.dt, b * free.dt).ravel()
+
+
+def _turn_rate(first, middle, last, a, b, slack=0.0):
+    """How fast the mean velocity turns from the leg first -> middle (`a` seconds) to middle ->
+    last (`b` seconds): the change of the two, less `slack`, over a + b seconds."""
+    change = np.linalg.norm((last - middle) / b - (middle - first) / a, axis=-1)
+    return np.maximum(0.0, change - slack) / (a + b)
