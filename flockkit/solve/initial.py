@@ -135,15 +135,8 @@ class _Initial:
         if first_constrained > 0:
             lead = self.behavior.backward(state, first_constrained, self.rng)
             pinned = self.by_frame[first_constrained]
-            if self.guided and all(isinstance(c, PointConstraint) for c in pinned):
-                # simulate the lead-in forward (backward simulation is not forward-plausible),
-                # keeping the constrained agents on the backward path to their constraints
-                lead = self.behavior.forward(
-                    lead.state(0),
-                    first_constrained,
-                    self.rng,
-                    guide={c.agent: lead.positions[:, c.agent] for c in pinned},
-                )
+            if self._leads_forward(pinned):
+                lead = self._lead_forward(lead, pinned)
                 pieces.append(lead)
                 state = _state_at_end(lead, None)
             else:
@@ -157,6 +150,39 @@ class _Initial:
             pieces.append(piece)
             state, prior = _state_at_end(piece, None), piece.state(-2)
         return self._around_obstacles(_join(pieces, self.dt), -1, self.problem.n_frames)
+
+    def _leads_forward(self, pinned) -> bool:
+        """Whether the lead-in to the first constrained frame can be simulated forward: its
+        constraints are points (for a model declaring ``guide``) and COMs (``group_guide``)."""
+        points = [c for c in pinned if isinstance(c, PointConstraint)]
+        coms = [c for c in pinned if isinstance(c, ComConstraint)]
+        return (
+            len(points) + len(coms) == len(pinned)
+            and (self.guided or not points)
+            and (self.group_guided or not coms)
+        )
+
+    def _lead_forward(self, lead: Motion, pinned) -> Motion:
+        """The lead-in simulated forward from the backward one's first frame (backward simulation
+        is not forward-plausible): point-constrained agents kept on their backward paths, COM
+        groups steered along theirs, then each group's other agents moved by one translation
+        over the whole lead-in, so its center is exactly met (the group's own motion unchanged)."""
+        steps = lead.n_frames - 1
+        points = {c.agent: lead.positions[:, c.agent] for c in pinned if isinstance(c, PointConstraint)}
+        coms = [c for c in pinned if isinstance(c, ComConstraint)]
+        groups = [(list(self.problem.agents_of(c)), lead.positions[:, list(self.problem.agents_of(c))].mean(axis=1))
+                  for c in coms]  # fmt: skip
+        extra = {"guide": points} if points else {}
+        if groups:
+            extra["group_guide"] = groups
+        forward = self.behavior.forward(lead.state(0), steps, self.rng, **extra)
+        positions = np.array(forward.positions)
+        for c, (agents, _) in zip(coms, groups):
+            free = [a for a in agents if a not in points]
+            if free:
+                miss = len(agents) * c.position - positions[-1, agents].sum(axis=0)
+                positions[:, free] += miss / len(free)
+        return Motion(positions=positions, dt=self.dt, channels=_channels(forward))
 
     # -- one window --------------------------------------------------------------------------
 
