@@ -1,8 +1,14 @@
 """Initial trajectories that meet every constraint exactly (paper 004, section 3.3).
 
 The frames before the first constrained frame are simulated backward from the configuration
-there (and, when only point constraints sit there and the model declares ``guide``, simulated again
-forward with those agents guided along that path). Then, window by window (see ``windows``):
+there. When only point and COM constraints sit there, and the model declares ``guide`` (for
+points) and ``group_guide`` (for COMs), they are simulated again forward from the backward
+simulation's first frame: the point-constrained agents kept on their backward paths, each COM
+group steered along its backward path and then translated onto its center (one translation for
+the whole lead-in, which leaves the group's own motion as simulated). A backward simulation is
+not forward-plausible: on come-from-behind's COM constraints alone, it left the lead-in's
+impulses at 32 a frame per agent in -log g, against 0.5 forward. Then, window by window (see
+``windows``):
 
 1. simulate forward from the window's start state (Operation 1). A model that declares
    ``Capabilities(guide=True)`` simulates with the agents of spanning point sequences already on their B-spline paths,
@@ -157,9 +163,7 @@ class _Initial:
         points = [c for c in pinned if isinstance(c, PointConstraint)]
         coms = [c for c in pinned if isinstance(c, ComConstraint)]
         return (
-            len(points) + len(coms) == len(pinned)
-            and (self.guided or not points)
-            and (self.group_guided or not coms)
+            len(points) + len(coms) == len(pinned) and (self.guided or not points) and (self.group_guided or not coms)
         )
 
     def _lead_forward(self, lead: Motion, pinned) -> Motion:
