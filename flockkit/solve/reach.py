@@ -1,7 +1,7 @@
 """What the model's agents do unconstrained, and the constraints that ask for more (issue 18).
 
-``solve`` simulates a random flock of the problem's size with the behavior model, unconstrained,
-and reads two things from it:
+``solve`` simulates a random flock of the problem's size with the behavior model, unconstrained and
+out of reach of the problem's obstacles, and reads two things from it:
 
 - the model's speeds (the 10th, 90th and 99th percentiles of every agent's speed), which aim the
   COM tracks (``com_aims``) and judge each constraint's speed, given or implied by the constraint
@@ -28,7 +28,7 @@ import numpy as np
 from ..constraints import ComConstraint, Problem
 from ..convenience import random_flock
 from ..errors import FlockkitWarning
-from ..motion import Motion
+from ..motion import Motion, State
 
 # A constraint asking for more than this many times the model's 99th percentile of speed, or of a
 # track's turn, is one no model-like motion meets. Turns are told apart less sharply (seeds 1-10):
@@ -45,21 +45,37 @@ MEASURED = 100
 # Windows of a turn read: fewer let the 99th percentile wander with the seed (one-agent's S, seeds
 # 1-10: 2.6-3.8 times it from 500 windows, 2.9-3.5 from 1 500, which take 0.1 s to simulate).
 TURN_WINDOWS = 1500
+# Length units per second no unconstrained agent exceeds: ten times the speed of a random flock,
+# the scale every measure here assumes.
+OPEN_SPEED = 10.0
 
 
 def unconstrained(problem: Problem, model, seed) -> Motion:
     """A random flock of the problem's size simulated by `model` for WARM_UP + MEASURED steps, and,
     where the problem's tracks turn (three consecutive constraints), on for TURN_WINDOWS windows of
-    the longest turn."""
+    the longest turn; in open space, out of reach of the problem's obstacles (see ``_open_space``)."""
     rng = np.random.default_rng(seed)
     steps = WARM_UP + MEASURED
-    motion = model.forward(random_flock(n_agents=problem.n_agents, dims=problem.dims, rng=rng), steps, rng)
     longest = max((sum(legs) for *_, legs in _turns(problem)), default=None)
     more = 0 if longest is None else WARM_UP + longest + TURN_WINDOWS - steps
+    flock = _open_space(problem, random_flock(n_agents=problem.n_agents, dims=problem.dims, rng=rng), steps + more)
+    motion = model.forward(flock, steps, rng)
     if more > 0:
         tail = model.forward(motion.state(-1), more, rng)
         motion = Motion(positions=np.concatenate([motion.positions, tail.positions[1:]]), dt=motion.dt)
     return motion
+
+
+def _open_space(problem: Problem, flock: State, steps: int) -> State:
+    """`flock` moved beyond the problem's obstacles by more than it can travel in `steps`: the model
+    (made with the problem's obstacles) avoids them, and a flock started among them measured the
+    speeds of its avoidance (obstacle-squeeze, seed 6: a 90th percentile of 1.25 where boids cruise
+    at 1.0-1.1, so that its COM track was aimed at 1.25 and its solve ended at -32.8)."""
+    if not problem.obstacles:
+        return flock
+    corner = np.max([obstacle.bounds()[1] for obstacle in problem.obstacles], axis=0)
+    travel = OPEN_SPEED * steps * problem.dt + np.max(np.abs(flock.positions))
+    return State(positions=flock.positions + corner + travel, velocities=flock.velocities)
 
 
 def speeds(free: Motion) -> np.ndarray:

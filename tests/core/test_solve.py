@@ -296,6 +296,23 @@ def test_a_constraint_faster_than_the_model_warns_naming_it_and_is_still_met():
         flockkit.solve(small_problem(), iterations=0, refine=0, starts=1, seed=1)
 
 
+@pytest.mark.parametrize("seed", [1, 6])
+def test_the_model_s_speeds_are_measured_in_open_space(seed):
+    """The unconstrained flock that measures the model's speeds is simulated out of reach of the
+    problem's obstacles (the model avoids them): an obstacle where the flock would start leaves
+    the speeds as they are without one. Started among them, obstacle-squeeze's seed 6 measured a
+    90th percentile of 1.25 and aimed its COM track that fast."""
+    from flockkit.solve.reach import speeds, unconstrained
+
+    ball = flockkit.Ball(center=[0.5, 0.5], radius=1.0)
+    track = [ComConstraint(time=t, position=[t, 0.0]) for t in (0.5, 2.5, 4.5)]
+    problem = Problem(n_agents=20, duration=5.0, constraints=track, obstacles=[ball])
+    avoiding = flockkit.get("behavior", "boids", obstacles=[ball])
+    found = speeds(unconstrained(problem, avoiding, seed))
+    open_space = speeds(unconstrained(attrs.evolve(problem, obstacles=[]), flockkit.get("behavior", "boids"), seed))
+    assert np.allclose(found, open_space, atol=1e-6)
+
+
 def test_a_track_turning_harder_than_the_model_warns_naming_its_corner_and_is_still_met():
     """A point track that doubles back at 1 m/s (its legs' mean velocities differ by 2 m/s over
     4 s: 0.5 m/s^2 on average) warns at its corner; the same corner on a COM track, within what
