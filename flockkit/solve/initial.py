@@ -8,8 +8,7 @@ group steered along its backward path and then translated onto its center (one t
 the whole lead-in, which leaves the group's own motion as simulated). A backward simulation is
 not forward-plausible: on come-from-behind's COM constraints alone (seed 1), the initial
 trajectories' residuals |r|^2 / 2 averaged 31 per agent-frame over the first 16 frames, and 0.6
-forward (a free flock: 0.5). Then, window by window (see
-``windows``):
+forward (a free flock: 0.5). Then, window by window (see ``windows``):
 
 1. simulate forward from the window's start state (Operation 1). A model that declares
    ``Capabilities(guide=True)`` simulates with the agents of spanning point sequences already on their B-spline paths,
@@ -174,15 +173,13 @@ class _Initial:
         over the whole lead-in, so its center is exactly met (the group's own motion unchanged)."""
         steps = lead.n_frames - 1
         points = {c.agent: lead.positions[:, c.agent] for c in pinned if isinstance(c, PointConstraint)}
-        coms = [c for c in pinned if isinstance(c, ComConstraint)]
-        groups = [(list(self.problem.agents_of(c)), lead.positions[:, list(self.problem.agents_of(c))].mean(axis=1))
-                  for c in coms]  # fmt: skip
+        coms = [(c, list(self.problem.agents_of(c))) for c in pinned if isinstance(c, ComConstraint)]
         extra = {"guide": points} if points else {}
-        if groups:
-            extra["group_guide"] = groups
+        if coms:
+            extra["group_guide"] = [(agents, lead.positions[:, agents].mean(axis=1)) for _, agents in coms]
         forward = self.behavior.forward(lead.state(0), steps, self.rng, **extra)
         positions = np.array(forward.positions)
-        for c, (agents, _) in zip(coms, groups):
+        for c, agents in coms:
             free = [a for a in agents if a not in points]
             if free:
                 miss = len(agents) * c.position - positions[-1, agents].sum(axis=0)
