@@ -173,17 +173,17 @@ class _Initial:
         over the whole lead-in, so its center is exactly met (the group's own motion unchanged)."""
         steps = lead.n_frames - 1
         points = {c.agent: lead.positions[:, c.agent] for c in pinned if isinstance(c, PointConstraint)}
-        coms = [(c, list(self.problem.agents_of(c))) for c in pinned if isinstance(c, ComConstraint)]
-        extra = {"guide": points} if points else {}
-        if coms:
-            extra["group_guide"] = [(agents, lead.positions[:, agents].mean(axis=1)) for _, agents in coms]
-        forward = self.behavior.forward(lead.state(0), steps, self.rng, **extra)
+        coms = [c for c in pinned if isinstance(c, ComConstraint)]
+        groups = []
+        for c in coms:
+            agents = list(self.problem.agents_of(c))
+            groups.append((agents, lead.positions[:, agents].mean(axis=1)))
+        forward = self.behavior.forward(lead.state(0), steps, self.rng, **_guide_arguments(points, groups))
         positions = np.array(forward.positions)
-        for c, agents in coms:
-            free = [a for a in agents if a not in points]
-            if free:
-                miss = len(agents) * c.position - positions[-1, agents].sum(axis=0)
-                positions[:, free] += miss / len(free)
+        free = np.ones((steps + 1, self.problem.n_agents), dtype=bool)
+        free[:, list(points)] = False
+        for c in coms:
+            self._recentre(positions, free, steps, c, np.ones(steps + 1))
         return Motion(positions=positions, dt=self.dt, channels=_channels(forward))
 
     # -- one window --------------------------------------------------------------------------
@@ -240,10 +240,8 @@ class _Initial:
         points = [p for p in spanning if p.is_point] if self.guided else []
         coms = [p for p in spanning if not p.is_point] if steer and self.group_guided else []
         times = (start + np.arange(steps + 1)) * self.dt
-        found = {"guide": {p.agents[0]: p.spline(times) for p in points}} if points else {}
-        if coms:
-            found["group_guide"] = [(list(p.agents), p.spline(times)) for p in coms]
-        return found
+        return _guide_arguments({p.agents[0]: p.spline(times) for p in points},
+                                [(list(p.agents), p.spline(times)) for p in coms])  # fmt: skip
 
     def _onto_paths(self, positions, spanning, start, anchor) -> np.ndarray:
         """Operation 2: translate constrained agents onto their paths, the others with them."""
@@ -492,6 +490,15 @@ def _matching(slots: np.ndarray, origins: np.ndarray, rng) -> np.ndarray:
     scale = float(np.median(cost)) or 1.0
     _, order = linear_sum_assignment(cost + rng.gumbel(0.0, 0.05 * scale, cost.shape))
     return order
+
+
+def _guide_arguments(points: dict, groups: list) -> dict:
+    """A model's ``guide`` (agent -> path) and ``group_guide`` ((agents, path) pairs) keyword
+    arguments, each left out where empty."""
+    found = {"guide": points} if points else {}
+    if groups:
+        found["group_guide"] = groups
+    return found
 
 
 def _state_at_end(motion: Motion, velocities) -> State:
