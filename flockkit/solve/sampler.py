@@ -302,17 +302,18 @@ def solve(
         sampling, so that the motion looks like the model made it; 0 samples from the initial
         trajectories as they are (paper 004).
     starts : int
-        Initial trajectories drawn per chain; the chain refines and samples the one whose first
-        SCREEN_STEPS refine steps (uncoupled, cheap; none without `refine`) reach the highest log
-        g among those meeting the constraints. Draws differ much: on obstacle-squeeze, seeds
-        1-10, one refined start's log g_w per agent-step ranged from -187 to -13, and the best of
-        5 averaged -19 against -50. But the best start is often one where agents no constraint
-        holds take on part of the constrained agents' cost: on one-agent (seeds 1-5; before track
-        paths were natural cubics and refine held those agents) the best of
-        5 raised log g_w per agent-step from -5.0..-7.3 to -2.6..-6.1, and the free agents'
-        impulses were then larger than a free flock's (median 0.11 against 0.086; KS p < 0.005
-        on every seed). So the default is 1; obstacle-squeeze and arrows, whose every agent is
-        in a constrained group, ask for 20 and 5 (bench/README.md).
+        Initial trajectories drawn per chain; the chain refines and samples the one whose
+        uncoupled (cheap) refine steps reach the highest log g among those meeting the
+        constraints: SCREEN_STEPS of them, or with more than SURVIVORS draws FIRST_STEPS for each
+        and SCREEN_STEPS for the SURVIVORS best (none without `refine`). Draws differ much: on
+        obstacle-squeeze, seeds 1-10, one refined start's log g_w per agent-step ranged from -187
+        to -13, and the best of 5 averaged -19 against -50. But the best start is often one
+        where agents no constraint holds take on part of the constrained agents' cost: on
+        one-agent (seeds 1-5; before track paths were natural cubics and refine held those
+        agents) the best of 5 raised log g_w per agent-step from -5.0..-7.3 to -2.6..-6.1, and
+        the free agents' impulses were then larger than a free flock's (median 0.11 against
+        0.086; KS p < 0.005 on every seed). So the default is 1; obstacle-squeeze and arrows,
+        whose every agent is in a constrained group, ask for 120 and 5 (bench/README.md).
     stable : float, optional
         Stop a chain early once its running mean of log g stabilizes: the mean over the last 100
         iterations within this fraction of the mean over the 100 before.
@@ -461,16 +462,22 @@ def _chain(problem, aims, behavior, moves, terms, iterations, refine, starts, st
     )
 
 
-# Uncoupled refine steps that rank a chain's starts. On obstacle-squeeze (seeds 1-10, best of 3,
-# then 40 coupled steps) 10 steps chose starts refined to a mean of -25.5 log g_w per agent-step,
-# 40 steps -25.2.
+# Ranking a chain's starts by uncoupled refine steps (cheap): with more draws than SURVIVORS,
+# every draw is scored after FIRST_STEPS and the SURVIVORS best of them again after SCREEN_STEPS;
+# with fewer, every draw after SCREEN_STEPS. The draws differ more than steps tell them apart:
+# on obstacle-squeeze (seeds 1-24, default solves, log g_w per agent-step) 20 draws ranked after
+# 10 steps gave a mean of -12.0, 120 after 1 step -8.3, and 120 after 1 step whose best 10 were
+# ranked again after 10 steps -6.0 (5 again: -7.3; 80 draws: -8.6).
+FIRST_STEPS = 1
 SCREEN_STEPS = 10
+SURVIVORS = 10
 
 
 def _start(problem, aims, behavior, terms, refine, starts, rng) -> Motion:
-    """A chain's starting motion: of `starts` initial trajectories, the one that scores highest
-    after SCREEN_STEPS uncoupled refine steps (as drawn, without refine, or where the steps leave
-    a constraint unmet), refined by `refine` steps that move only the agents of some constraint."""
+    """A chain's starting motion: of `starts` initial trajectories, the one ranked best (see
+    SURVIVORS) by its log g after uncoupled refine steps (as drawn, without refine, or where the
+    steps leave a constraint unmet), refined by `refine` steps that move only the agents of some
+    constraint."""
     refines = bool(refine) and capabilities(behavior).residuals
     pinned, scorer = pinned_frames(aims), Scorer(problem, behavior, terms)
     # refine leaves the agents of no constraint as simulated: least squares on the total let them
@@ -478,19 +485,24 @@ def _start(problem, aims, behavior, terms, refine, starts, rng) -> Motion:
     # 1e-35 for their impulses; held: -1.08 and 0.64)
     constrained = set().union(*(problem.agents_of(c) for c in problem.constraints))
     pinned[:, [a for a in range(problem.n_agents) if a not in constrained]] = True
-    best, best_score = None, -math.inf
+
+    def rank(motion, steps) -> float:
+        if refines:
+            screened = refine_motion(aims, behavior, motion, pinned, rng, iterations=min(refine, steps), coupling=False)
+            motion = screened if feasible(problem, screened) else motion
+        return float(scorer.frames(motion).sum())
+
+    many = starts > SURVIVORS
+    kept = []  # (score, draw): the SURVIVORS best so far
     for _ in range(starts):
-        initial = initial_trajectories(aims, behavior, rng)
-        score = 0.0  # one start: nothing to rank
-        if starts > 1:
-            screened = initial
-            if refines:
-                screened = refine_motion(aims, behavior, initial, pinned, rng, iterations=min(refine, SCREEN_STEPS),
-                                         coupling=False)  # fmt: skip
-                screened = screened if feasible(problem, screened) else initial
-            score = float(scorer.frames(screened).sum())
-        if best is None or score > best_score:
-            best, best_score = initial, score
+        draw = initial_trajectories(aims, behavior, rng)
+        score = rank(draw, FIRST_STEPS if many else SCREEN_STEPS) if starts > 1 else 0.0  # one: nothing to rank
+        kept.append((score, draw))
+        kept.sort(key=lambda pair: -pair[0])  # stable: of equal scores, the first drawn
+        del kept[SURVIVORS:]
+    if many and refines:
+        kept = [(rank(draw, SCREEN_STEPS), draw) for _, draw in kept]
+    best = max(kept, key=lambda pair: pair[0])[1]
     # the full refine starts again from the draw: its targets are drawn from the motion it starts
     # from, and from a screened one (residuals already model-like) it would keep them as they are
     if refines:
