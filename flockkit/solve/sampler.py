@@ -467,7 +467,7 @@ def _chain(problem, aims, behavior, moves, terms, iterations, refine, starts, st
 # with fewer, every draw after SCREEN_STEPS. The draws differ more than steps tell them apart:
 # on obstacle-squeeze (seeds 1-24, default solves, log g_w per agent-step) 20 draws ranked after
 # 10 steps gave a mean of -12.0, 120 after 1 step -8.3, and 120 after 1 step whose best 10 were
-# ranked again after 10 steps -7.9 (bench/README.md).
+# ranked again after 10 steps -6.6 (bench/README.md).
 FIRST_STEPS = 1
 SCREEN_STEPS = 10
 SURVIVORS = 10
@@ -487,8 +487,11 @@ def _start(problem, aims, behavior, terms, refine, starts, rng) -> Motion:
     pinned[:, [a for a in range(problem.n_agents) if a not in constrained]] = True
 
     def rank(motion, steps) -> float:
+        # steps towards the most regular motion (sample=False): no targets drawn, so no forward
+        # simulation to draw them from, and a rank that does not hang on a draw of targets
         if refines:
-            screened = refine_motion(aims, behavior, motion, pinned, rng, iterations=min(refine, steps), coupling=False)
+            screened = refine_motion(aims, behavior, motion, pinned, rng, iterations=min(refine, steps),
+                                     coupling=False, sample=False)  # fmt: skip
             motion = screened if feasible(problem, screened) else motion
         return float(scorer.frames(motion).sum())
 

@@ -460,16 +460,18 @@ def test_the_model_s_coupling_makes_refine_s_jacobian_exact():
 
 def test_many_starts_are_ranked_cheaply_then_their_best_again(monkeypatch):
     """With more draws than SURVIVORS, every draw is ranked after FIRST_STEPS uncoupled refine
-    steps, the SURVIVORS best of them again after SCREEN_STEPS, and the best of those is refined
-    in full (the ranking read from the calls it makes)."""
+    steps towards the most regular motion, the SURVIVORS best of them again after SCREEN_STEPS,
+    and the best of those is refined in full, with sampled targets (the ranking read from the
+    calls it makes)."""
     sampler = importlib.import_module("flockkit.solve.sampler")
     monkeypatch.setattr(sampler, "SURVIVORS", 3)
     calls, scores = [], {}
     real_refine, real_frames = sampler.refine_motion, sampler.Scorer.frames
 
-    def refine(problem, behavior, motion, pinned, rng, *, iterations, coupling=True):
-        result = real_refine(problem, behavior, motion, pinned, rng, iterations=iterations, coupling=coupling)
-        calls.append((iterations, coupling, motion, result))  # held, so ids stay theirs
+    def refine(problem, behavior, motion, pinned, rng, *, iterations, coupling=True, sample=True):
+        result = real_refine(problem, behavior, motion, pinned, rng, iterations=iterations, coupling=coupling,
+                             sample=sample)  # fmt: skip
+        calls.append((iterations, coupling, sample, motion, result))  # held, so ids stay theirs
         return result
 
     def frames(self, motion):
@@ -481,11 +483,12 @@ def test_many_starts_are_ranked_cheaply_then_their_best_again(monkeypatch):
     monkeypatch.setattr(sampler.Scorer, "frames", frames)
     flockkit.solve(small_problem(), iterations=0, refine=12, starts=5, seed=2)
     first, second, full = calls[:5], calls[5:8], calls[8:]
-    assert [c[:2] for c in first] == [(sampler.FIRST_STEPS, False)] * 5
-    assert [c[:2] for c in second] == [(sampler.SCREEN_STEPS, False)] * 3 and len(full) == 1 and full[0][1]
-    ranked = sorted(first, key=lambda c: -scores[id(c[3])])  # every screened motion met the constraints
-    assert {id(c[2]) for c in second} == {id(c[2]) for c in ranked[:3]}
-    assert full[0][2] is max(second, key=lambda c: scores[id(c[3])])[2]
+    assert [c[:3] for c in first] == [(sampler.FIRST_STEPS, False, False)] * 5
+    assert [c[:3] for c in second] == [(sampler.SCREEN_STEPS, False, False)] * 3
+    assert [c[:3] for c in full] == [(12, True, True)]
+    ranked = sorted(first, key=lambda c: -scores[id(c[4])])  # every screened motion met the constraints
+    assert {id(c[3]) for c in second} == {id(c[3]) for c in ranked[:3]}
+    assert full[0][3] is max(second, key=lambda c: scores[id(c[4])])[3]
 
 
 def test_a_chain_keeps_the_best_of_its_starts():
