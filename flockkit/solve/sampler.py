@@ -463,11 +463,12 @@ def _chain(problem, aims, behavior, moves, terms, iterations, refine, starts, st
 
 
 # Ranking a chain's starts by uncoupled refine steps (cheap): with more draws than SURVIVORS,
-# every draw is scored after FIRST_STEPS and the SURVIVORS best of them again after SCREEN_STEPS;
+# every draw is scored after FIRST_STEPS (towards the most regular motion, sample=False) and the
+# SURVIVORS best of them again after SCREEN_STEPS;
 # with fewer, every draw after SCREEN_STEPS. The draws differ more than steps tell them apart:
 # on obstacle-squeeze (seeds 1-24, default solves, log g_w per agent-step) 20 draws ranked after
 # 10 steps gave a mean of -12.0, 120 after 1 step -8.3, and 120 after 1 step whose best 10 were
-# ranked again after 10 steps -6.6 (bench/README.md).
+# ranked again after 10 steps -6.8 (bench/README.md).
 FIRST_STEPS = 1
 SCREEN_STEPS = 10
 SURVIVORS = 10
@@ -486,12 +487,10 @@ def _start(problem, aims, behavior, terms, refine, starts, rng) -> Motion:
     constrained = set().union(*(problem.agents_of(c) for c in problem.constraints))
     pinned[:, [a for a in range(problem.n_agents) if a not in constrained]] = True
 
-    def rank(motion, steps) -> float:
-        # steps towards the most regular motion (sample=False): no targets drawn, so no forward
-        # simulation to draw them from, and a rank that does not hang on a draw of targets
+    def rank(motion, steps, sample=True) -> float:
         if refines:
             screened = refine_motion(aims, behavior, motion, pinned, rng, iterations=min(refine, steps),
-                                     coupling=False, sample=False)  # fmt: skip
+                                     coupling=False, sample=sample)  # fmt: skip
             motion = screened if feasible(problem, screened) else motion
         return float(scorer.frames(motion).sum())
 
@@ -499,7 +498,12 @@ def _start(problem, aims, behavior, terms, refine, starts, rng) -> Motion:
     kept = []  # (score, draw): the SURVIVORS best so far
     for _ in range(starts):
         draw = initial_trajectories(aims, behavior, rng)
-        score = rank(draw, FIRST_STEPS if many else SCREEN_STEPS) if starts > 1 else 0.0  # one: nothing to rank
+        if starts == 1:
+            score = 0.0  # nothing to rank
+        elif many:  # a step towards the most regular motion: no forward simulation to draw targets from
+            score = rank(draw, FIRST_STEPS, sample=False)
+        else:
+            score = rank(draw, SCREEN_STEPS)
         kept.append((score, draw))
         kept.sort(key=lambda pair: -pair[0])  # stable: of equal scores, the first drawn
         del kept[SURVIVORS:]
