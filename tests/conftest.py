@@ -18,6 +18,18 @@ def require_folder(folder: Path) -> Path:
     return folder
 
 
+def free_impulse_lengths(behavior, n_agents: int, steps: int, seed: int):
+    """The lengths of the wander impulses `behavior` infers in a free flock of `n_agents` simulated
+    for `steps` (``flockkit.simulate``, boids), (steps - 1, n_agents): what a model-like flock's
+    impulses are measured against."""
+    import numpy as np
+
+    import flockkit
+
+    free = flockkit.simulate(n_agents=n_agents, steps=steps, seed=seed)
+    return np.linalg.norm(behavior.wander_impulses(free)[1:-1], axis=-1)
+
+
 @pytest.fixture
 def fresh_registry():
     """Plugins discovered afresh before and after the test (run-time plugins forgotten)."""

@@ -465,10 +465,10 @@ def _chain(problem, aims, behavior, moves, terms, iterations, refine, starts, st
 # Ranking a chain's starts by uncoupled refine steps (cheap): with more draws than SURVIVORS,
 # every draw is scored after FIRST_STEPS (towards the most regular motion, sample=False) and the
 # SURVIVORS best of them again after SCREEN_STEPS; with fewer, every draw after SCREEN_STEPS.
-# The draws differ more than steps tell them apart:
-# on obstacle-squeeze (seeds 1-24, default solves, log g_w per agent-step) 20 draws ranked after
-# 10 steps gave a mean of -12.0, 120 after 1 step -8.3, and 120 after 1 step whose best 10 were
-# ranked again after 10 steps -6.8 (bench/README.md).
+# The draws differ more than steps tell them apart: on obstacle-squeeze (seeds 1-24, default
+# solves, log g_w per agent-step) 20 draws ranked after 10 steps gave a mean of -12.0, 120 after
+# 1 step -8.3, and 120 after 1 step whose best 10 were ranked again after 10 steps -6.8
+# (bench/README.md).
 FIRST_STEPS = 1
 SCREEN_STEPS = 10
 SURVIVORS = 10

@@ -13,6 +13,8 @@ from flockkit.errors import FlockkitWarning, UnknownPluginError, ValidationError
 from flockkit.solve.sampler import Scorer
 from flockkit.testing import strategies as fst
 
+from ..conftest import free_impulse_lengths
+
 
 def small_problem():
     return Problem(
@@ -118,11 +120,7 @@ def test_a_steered_com_group_keeps_the_model_s_impulses(seed):
         motion = flockkit.solve(problem, behavior=behavior, iterations=0, refine=0, starts=1, seed=seed).motion
         return float(np.median(np.linalg.norm(boids.wander_impulses(motion)[20:100, rest], axis=-1)))
 
-    free = float(
-        np.median(
-            np.linalg.norm(boids.wander_impulses(flockkit.simulate(n_agents=12, steps=120, seed=seed))[1:-1], axis=-1)
-        )
-    )
+    free = float(np.median(free_impulse_lengths(boids, 12, 120, seed)))
     steered = median_impulse(boids)
     assert steered < 1.7 * free  # a free flock's: 0.082-0.087 (seeds 1-4); steered 0.099-0.135
     assert 1.5 * steered < median_impulse(Unsteered())  # moved onto the path at every frame: 0.17-0.35
@@ -150,9 +148,7 @@ def test_the_lead_in_to_a_first_point_and_com_constraint_is_model_like(seed):
     motion = initial_trajectories(problem, boids, np.random.default_rng(seed))
     assert max(residuals(problem, motion)) <= 1e-9
     lead_in = np.median(np.linalg.norm(boids.wander_impulses(motion)[1:14, rest], axis=-1))
-    free = np.median(
-        np.linalg.norm(boids.wander_impulses(flockkit.simulate(n_agents=12, steps=30, seed=seed))[1:-1], axis=-1)
-    )
+    free = np.median(free_impulse_lengths(boids, 12, 30, seed))
     assert lead_in < 2 * free
 
 

@@ -13,6 +13,8 @@ from flockkit import ComConstraint, PointConstraint
 from flockkit.errors import FlockkitWarning
 from flockkit.solve import load_scenario
 
+from ...conftest import free_impulse_lengths
+
 SCENARIOS = sorted((Path(__file__).parents[3] / "examples" / "scenarios").glob("*.toml"))
 
 
@@ -64,11 +66,8 @@ def test_the_single_agent_example_keeps_the_flock_around_it_model_like_for_five_
 
     problem, settings = load_scenario(next(p for p in SCENARIOS if p.stem == "one-agent"))
     boids = flockkit.get("behavior", "boids")
-    simulated = np.concatenate([
-        np.linalg.norm(boids.wander_impulses(flockkit.simulate(n_agents=problem.n_agents, steps=problem.n_frames - 1,
-                                                               seed=k))[1:-1], axis=-1).ravel()
-        for k in range(5)
-    ])  # fmt: skip
+    simulated = np.concatenate([free_impulse_lengths(boids, problem.n_agents, problem.n_frames - 1, k).ravel()
+                                for k in range(5)])  # fmt: skip
     for seed in range(1, 6):
         solution = flockkit.solve(problem, **{**settings, "seed": seed})
         found = np.linalg.norm(boids.wander_impulses(solution.motion)[1:-1, 1:], axis=-1).ravel()
