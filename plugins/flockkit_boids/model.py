@@ -486,8 +486,9 @@ class Boids:
 
 
 # Pair-table entries per block of frames steered at once (an N x N table per frame): tables that
-# stay in a core's cache (2-3x faster than blocks of 200 000 on the development machine).
-_PAIRS_PER_BLOCK = 10_000
+# stay in a core's cache (2-3x faster than blocks of 200 000 on the development machine); 40 000
+# rather than 10 000 steers 121 frames of 50 agents in 3.7 ms, not 4.5 (2026-12-04).
+_PAIRS_PER_BLOCK = 40_000
 
 
 class _DensePairs:
