@@ -12,6 +12,11 @@ out of reach of the problem's obstacles, and reads two things from it:
   (or the group's center) must accelerate by at least |dv| / (t2 - t0) on average. The same figure,
   measured on the simulation over every window of the same legs, says what the model does.
 
+Shapes hold each of their agents somewhere inside them, so for two constraints that hold an agent
+one after the other, one of them a shape, the speed judged is the gap between their bounding boxes
+over the time between them: a bound that never overstates (arrows' shapes overlap, and ask for
+nothing by it).
+
 A constraint asking for more than IMPLAUSIBLE (speed) or IMPLAUSIBLE_TURN (turn) times the
 model's 99th percentile gets a FlockkitWarning naming it and both figures: the solve still meets
 it, with its agents moving as the model's would not. (On the shipped examples: one-agent's S turns
@@ -25,7 +30,7 @@ import warnings
 
 import numpy as np
 
-from ..constraints import ComConstraint, Problem
+from ..constraints import ComConstraint, Problem, ShapeConstraint
 from ..convenience import random_flock
 from ..errors import FlockkitWarning
 from ..motion import Motion, State
@@ -87,7 +92,8 @@ def speeds(free: Motion) -> np.ndarray:
 
 def warn_beyond(problem: Problem, free: Motion, fastest: float) -> None:
     """Warn (FlockkitWarning) about each constraint whose speed (given, or implied by the one
-    before it on the same agent or subset) is above IMPLAUSIBLE x `fastest`, and each whose track
+    before it on the same agent or subset, or by the gap to a shape, see ``_shape_legs``) is above
+    IMPLAUSIBLE x `fastest`, and each whose track
     turns there harder than IMPLAUSIBLE_TURN x what `free`'s agents (or groups of the track's size) do."""
     index = {id(c): k for k, c in enumerate(problem.constraints)}
 
@@ -108,6 +114,13 @@ def warn_beyond(problem: Problem, free: Motion, fastest: float) -> None:
                 warn(
                     c, f"asks for a speed of {speed:.3g}; the model's agents move at up to {fastest:.3g} unconstrained"
                 )
+    for before, after, gap in _shape_legs(problem):
+        speed = gap / (after.time - before.time)
+        if speed > IMPLAUSIBLE * fastest:
+            warn(after, f"is at least {gap:.3g} length units from constraint {index[id(before)]} at t={before.time:g} "
+                        f"(the gap between their bounding boxes), so its agents move at {speed:.3g} length units per "
+                        f"second at least; the model's agents move at up to {fastest:.3g} unconstrained, so the "
+                        "solution meets it with motion that does not look like the model's")  # fmt: skip
     for (first, middle, last), needed, legs in _turns(problem):
         group = problem.agents_of(middle)
         usual = np.percentile(_turning(free, group, legs), 99)
@@ -120,6 +133,39 @@ def warn_beyond(problem: Problem, free: Motion, fastest: float) -> None:
                          f"{last.time - first.time:g} s); unconstrained, the model's {peers} turn at up to "
                          f"{usual:.3g} over as long, so the solution meets it with {movers} moving as the "
                          "model's would not")  # fmt: skip
+
+
+def shapes_apart(problem: Problem) -> bool:
+    """Whether some shape constraint lies apart from a place that holds its agents before or after
+    it, so that ``warn_beyond`` has its speed to judge (arrows' shapes overlap: nothing to judge)."""
+    return any(gap > 0 for *_, gap in _shape_legs(problem))
+
+
+def _shape_legs(problem: Problem):
+    """Per pair of constraints that hold an agent one after the other, at least one of them a
+    shape: the two and how far apart their places are at least (the gap between their bounding
+    boxes, a point's box being the point: it never overstates, and is exact for boxes). COM
+    constraints hold a group's center, not its agents, and are left to the tracks."""
+    held: dict = {}
+    for constraint in problem.constraints:
+        if not isinstance(constraint, ComConstraint):
+            for agent in problem.agents_of(constraint):
+                held.setdefault(agent, []).append(constraint)
+    pairs = {}
+    for constraints in held.values():
+        ordered = sorted(constraints, key=lambda c: c.time)
+        for before, after in zip(ordered, ordered[1:]):
+            if after.time > before.time and any(isinstance(c, ShapeConstraint) for c in (before, after)):
+                pairs[id(before), id(after)] = before, after
+    for before, after in pairs.values():
+        (low, high), (other_low, other_high) = _box(before), _box(after)
+        yield before, after, float(np.linalg.norm(np.maximum(0.0, np.maximum(other_low - high, low - other_high))))
+
+
+def _box(constraint) -> tuple[np.ndarray, np.ndarray]:
+    if isinstance(constraint, ShapeConstraint):
+        return constraint.shape.bounds()
+    return np.asarray(constraint.position), np.asarray(constraint.position)
 
 
 def _turns(problem: Problem):

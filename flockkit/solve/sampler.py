@@ -33,7 +33,7 @@ from ..validate import allocation, integer, number
 from ..validate import seed as validate_seed
 from .aims import com_aims
 from .initial import initial_trajectories
-from .reach import speeds, unconstrained, warn_beyond
+from .reach import shapes_apart, speeds, unconstrained, warn_beyond
 from .refine import refine as refine_motion
 from .windows import windows
 
@@ -351,11 +351,12 @@ def solve(
     allocation(3 * chains * iterations, f"solve: the trace of {chains} chains of {iterations} iterations")
     model = _behavior(problem, behavior, behavior_params)
     aims = problem
-    if problem.tracks:  # a speed given or implied, and COM tracks to aim
+    if problem.tracks or shapes_apart(problem):  # speeds given or implied to judge, and COM tracks to aim
         free = unconstrained(problem, model, seed)
         lowest, highest, fastest = np.percentile(speeds(free), [10, 90, 99])
         warn_beyond(problem, free, float(fastest))
-        aims = com_aims(problem, (float(lowest), float(highest)))
+        if problem.tracks:
+            aims = com_aims(problem, (float(lowest), float(highest)))
     moves = _moves(problem, DEFAULT_PROPOSALS if proposals is None else proposals, iterations)
     terms = [_component("objective", spec, problem) for spec in objectives]
     seeds = np.random.SeedSequence(seed).spawn(chains)

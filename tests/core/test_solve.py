@@ -293,6 +293,33 @@ def test_a_constraint_faster_than_the_model_warns_naming_it_and_is_still_met():
         flockkit.solve(small_problem(), iterations=0, refine=0, starts=1, seed=1)
 
 
+def test_shapes_too_far_apart_for_the_model_warn_naming_the_later_one_and_are_still_met():
+    """Every agent held by two shapes 8 length units apart (their boxes' gap) 2 s apart must move
+    at 4 per second at least: the later shape warns, and so does a point of agent 0 held 12 units
+    beyond it 1 s later. The same shapes 6 s apart ask for 1.33 per second by their gap, and say
+    nothing (by their centres, 12 apart, they would ask for 2)."""
+    near = flockkit.Box(lower=[-2.0, -2.0], upper=[2.0, 2.0])
+    far = flockkit.Box(lower=[10.0, -2.0], upper=[14.0, 2.0])
+
+    def shapes(apart):
+        return [ShapeConstraint(time=1.0, shape=near, velocity=[1.0, 0.0]),
+                ShapeConstraint(time=1.0 + apart, shape=far, velocity=[1.0, 0.0])]  # fmt: skip
+
+    beyond = PointConstraint(agent=0, time=4.0, position=[26.0, 0.0], velocity=[1.0, 0.0])
+    problem = Problem(n_agents=6, duration=4.0, constraints=[*shapes(2.0), beyond])
+    with pytest.warns(FlockkitWarning) as caught:
+        solution = flockkit.solve(problem, iterations=0, refine=0, seed=1)
+    said = [str(w.message) for w in caught]
+    assert any(m.startswith("constraint 1 (ShapeConstraint at t=3) is at least 8 length units from constraint 0 "
+                            "at t=1") and "at 4 length units per second at least" in m for m in said), said  # fmt: skip
+    assert any(m.startswith("constraint 2 (PointConstraint at t=4) is at least 12 length units from constraint 1")
+               for m in said), said  # fmt: skip
+    assert solution.residuals[:2] == (0.0, 0.0) and solution.residuals[2] <= 1e-9
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        flockkit.solve(Problem(n_agents=6, duration=7.0, constraints=shapes(6.0)), iterations=0, refine=0, seed=1)
+
+
 @pytest.mark.parametrize("seed", [1, 6])
 def test_the_model_s_speeds_are_measured_in_open_space(seed):
     """The unconstrained flock that measures the model's speeds is simulated out of reach of the
