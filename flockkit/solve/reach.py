@@ -93,9 +93,11 @@ def speeds(free: Motion) -> np.ndarray:
 def warn_beyond(problem: Problem, free: Motion, fastest: float) -> None:
     """Warn (FlockkitWarning) about each constraint whose speed (given, or implied by the one
     before it on the same agent or subset, or by the gap to a shape, see ``_shape_legs``) is above
-    IMPLAUSIBLE x `fastest`, and each whose track
-    turns there harder than IMPLAUSIBLE_TURN x what `free`'s agents (or groups of the track's size) do."""
+    IMPLAUSIBLE x `fastest`, and each whose track turns there harder than IMPLAUSIBLE_TURN x what
+    `free`'s agents (or groups of the track's size) do."""
     index = {id(c): k for k, c in enumerate(problem.constraints)}
+    unlike = (f"the model's agents move at up to {fastest:.3g} unconstrained, so the solution meets it with motion "
+              "that does not look like the model's")  # fmt: skip
 
     def warn(constraint, text):
         where = f"constraint {index[id(constraint)]} ({type(constraint).__name__} at t={constraint.time:g})"
@@ -106,8 +108,7 @@ def warn_beyond(problem: Problem, free: Motion, fastest: float) -> None:
             speed = np.linalg.norm(np.asarray(after.position) - before.position) / max(after.time - before.time, 1e-12)
             if speed > IMPLAUSIBLE * fastest:
                 warn(after, f"is {speed:.3g} length units per second from constraint {index[id(before)]} at "
-                            f"t={before.time:g}; the model's agents move at up to {fastest:.3g} unconstrained, so "
-                            "the solution meets it with motion that does not look like the model's")  # fmt: skip
+                            f"t={before.time:g}; {unlike}")  # fmt: skip
         for c in track[:1] if len(track) == 1 else ():  # a lone constraint's speed is its given velocity
             speed = float(np.linalg.norm(c.velocity))
             if speed > IMPLAUSIBLE * fastest:
@@ -119,8 +120,7 @@ def warn_beyond(problem: Problem, free: Motion, fastest: float) -> None:
         if speed > IMPLAUSIBLE * fastest:
             warn(after, f"is at least {gap:.3g} length units from constraint {index[id(before)]} at t={before.time:g} "
                         f"(the gap between their bounding boxes), so its agents move at {speed:.3g} length units per "
-                        f"second at least; the model's agents move at up to {fastest:.3g} unconstrained, so the "
-                        "solution meets it with motion that does not look like the model's")  # fmt: skip
+                        f"second at least; {unlike}")  # fmt: skip
     for (first, middle, last), needed, legs in _turns(problem):
         group = problem.agents_of(middle)
         usual = np.percentile(_turning(free, group, legs), 99)
