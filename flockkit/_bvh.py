@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import rigid
+from . import _files, rigid, validate
 from .errors import FileFormatError
 
 _AXES = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
@@ -31,21 +31,18 @@ def read(path):
     """(joint names, parents, rest offsets (J, 3), frame time, local rotations (T, J, 4),
     local translations (T, J, 3)) of the BVH file `path`."""
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
-    try:
-        text = path.read_text(encoding="utf-8", errors="strict")
-    except UnicodeDecodeError:
-        raise FileFormatError(f"{path}: not a BVH file (not text)") from None
+    text = _files.read_text(path)
     head, marker, motion = text.partition("MOTION")
     if not head.lstrip().startswith("HIERARCHY") or not marker:
         raise FileFormatError(f"{path}: not a BVH file (it needs a HIERARCHY section, then MOTION)")
     names, parents, offsets, channels = _hierarchy(path, list(_tokens(head))[1:])
+    if not channels:
+        raise FileFormatError(f"{path}: the HIERARCHY has no CHANNELS, so nothing in the file moves")
     motion_line = head.count("\n") + 1
     lines = motion.split("\n", 3)
     try:
         frames_line, time_line = lines[1].split(), lines[2].split()
-        if frames_line[0] != "Frames:" or time_line[:2] != ["Frame", "Time:"]:
+        if frames_line[0] != "Frames:" or time_line[:2] != ["Frame", "Time:"] or len(time_line) != 3:
             raise ValueError
         n_frames, frame_time = int(frames_line[1]), float(time_line[2])
     except (ValueError, IndexError):
@@ -54,16 +51,18 @@ def read(path):
         ) from None
     if n_frames < 1 or not np.isfinite(frame_time) or frame_time <= 0:
         raise FileFormatError(f"{path}: line {motion_line + 1}: needs at least one frame and a positive frame time")
-    try:
-        values = np.array(lines[3].split() if len(lines) > 3 else [], dtype=np.float64)
-    except ValueError as exc:
-        raise FileFormatError(f"{path}: the motion data has a value that is not a number: {exc}") from None
     width = len(channels)
-    if values.size != n_frames * width:
+    tokens = lines[3].split() if len(lines) > 3 else []
+    if len(tokens) != n_frames * width:  # checked before any number is made: the count comes from the file
         raise FileFormatError(
-            f"{path}: the motion has {values.size} values; {n_frames} frames of {width} channels need "
+            f"{path}: the motion has {len(tokens)} values; {n_frames} frames of {width} channels need "
             f"{n_frames * width} (truncated?)"
         )
+    validate.allocation(n_frames * len(names) * 12, f"{path}: {n_frames} frames of {len(names)} joints")
+    try:
+        values = np.array(tokens, dtype=np.float64)
+    except ValueError as exc:
+        raise FileFormatError(f"{path}: the motion data has a value that is not a number: {exc}") from None
     if not np.all(np.isfinite(values)):
         raise FileFormatError(f"{path}: the motion data has values that are not finite")
     values = values.reshape(n_frames, width)
@@ -83,6 +82,7 @@ def read(path):
 
 def _hierarchy(path, tokens):
     names, parents, offsets, channels = [], [], [], []
+    taken: set[str] = set()
     stack: list[int] = []
     position = 0
 
@@ -112,20 +112,21 @@ def _hierarchy(path, tokens):
             if (token == "ROOT") != (not stack):
                 raise FileFormatError(f"{path}: line {line}: {token} where a {'JOINT' if stack else 'ROOT'} belongs")
             name, _ = take()
-            if name in names:
+            if name in taken:
                 raise FileFormatError(f"{path}: line {line}: joint {name!r} appears twice")
             take("{")
             take("OFFSET")
             offset = numbers(3, "OFFSET")
             index = len(names)
             names.append(name)
+            taken.add(name)
             parents.append(stack[-1] if stack else -1)
             offsets.append(offset)
             stack.append(index)
             if position < len(tokens) and tokens[position][0] == "CHANNELS":
                 take()
                 count_token, count_line = take()
-                if not count_token.isdigit():
+                if not (count_token.isascii() and count_token.isdigit()):
                     raise FileFormatError(f"{path}: line {count_line}: CHANNELS needs a count; found {count_token!r}")
                 for _ in range(int(count_token)):
                     channel, channel_line = take()
@@ -143,10 +144,11 @@ def _hierarchy(path, tokens):
             take("}")
             parent = stack[-1]
             name, k = f"{names[parent]}_end", 1
-            while name in names:
+            while name in taken:
                 k += 1
                 name = f"{names[parent]}_end{k}"
             names.append(name)
+            taken.add(name)
             parents.append(parent)
             offsets.append(offset)
         elif token == "}":

@@ -1,29 +1,56 @@
-"""A small glTF 2.0 reader: the container (.glb, or .gltf with external, data-URI or GLB buffers),
-accessors as numpy arrays, the node hierarchy, animation sampling, morph targets and linear blend
-skinning, vectorized over frames.
+"""A glTF 2.0 reader: the container (.glb, or .gltf with external, data-URI or GLB buffers), one
+validated view of the document, accessors as numpy arrays, the node hierarchy, animation
+sampling, morph targets and linear blend skinning, vectorized over frames.
 
 Our own rather than a library's: pygltflib (the well-kept Python glTF library) parses the JSON and
 the GLB container only; accessors, sparse storage, animation interpolation, morphing and skinning,
 which are most of the work, would still be ours. The spec sections cited are those of glTF 2.0.
+
+Files are untrusted. The whole document is checked when it is opened, before any array is built:
+every index, count, offset, stride, type and component type against the spec and against the
+buffers' real lengths, the node hierarchy for cycles and shared children, samplers for their
+interpolation. Errors are FileFormatError naming the file and the JSON path (``accessors[3].count``).
+An external buffer is read only from inside the file's folder (``flockkit._files.confined``).
+Work grows linearly with the nodes, joints and frames, and only the nodes that place a mesh or a
+skeleton are sampled.
 """
 
 from __future__ import annotations
 
 import base64
+import binascii
 import json
+import math
+import re
 import struct
+from collections import Counter
 from pathlib import Path
-from urllib.parse import unquote
 
 import numpy as np
 
-from . import rigid
+from . import _files, rigid, validate
 from .errors import FileFormatError, ValidationError
 
 _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _GLB_MAGIC, _JSON_CHUNK, _BIN_CHUNK = b"glTF", 0x4E4F534A, 0x004E4942
 FLOAT, UNSIGNED_SHORT = 5126, 5123  # componentType codes, for writers
+_UNSIGNED = (5121, 5123, 5125)
+_NORMALIZED_OR_FLOAT = (5120, 5121, 5122, 5123, 5126)  # float, or integers read as normalized
+_INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
+_PATH_WIDTH = {"translation": 3, "rotation": 4, "scale": 3, "weights": 1}
+# Required extensions flockkit reads (KHR_mesh_quantization: integer positions, decoded as the
+# spec says) or may ignore because they only change how a mesh is shaded or lit.
+_READ_EXTENSIONS = {"KHR_mesh_quantization"}
+_IGNORED_EXTENSION = re.compile(r"^(KHR_materials_|KHR_texture_|EXT_texture_|KHR_lights_)")
+# The mesh primitive modes (spec 5.24.2): 4 triangles, 5 a strip, 6 a fan; below 4, points and
+# lines, which have vertices but no faces.
+_TRIANGLES, _STRIP, _FAN = 4, 5, 6
+# The fastest key rate a clip is sampled at by default: 1 000 keys a second, above any capture
+# rate in use (motion capture runs at 60-480 Hz); closer keys are what a broken exporter writes.
+MAX_KEY_RATE = 1000.0
+# Skinning works on blocks of frames whose per-vertex matrices take about this many bytes.
+_SKIN_BLOCK_BYTES = 64 * 1024**2
 
 
 def glb_bytes(document: dict, buffer: bytes) -> bytes:
@@ -42,210 +69,574 @@ def glb_bytes(document: dict, buffer: bytes) -> bytes:
     )
 
 
-class Document:
-    """A parsed glTF file: its JSON (`json`), its buffers, and decoded accessors."""
+def _element_bytes(component: int, kind: str) -> int:
+    """Bytes of one element: matrices of 1- and 2-byte components pad each column to 4 bytes
+    (spec 3.6.2.4)."""
+    size = np.dtype(_COMPONENTS[component]).itemsize
+    if kind in ("MAT2", "MAT3") and size < 4:
+        rows = 2 if kind == "MAT2" else 3
+        return rows * (-(-rows * size // 4) * 4)
+    return size * _WIDTH[kind]
 
-    def __init__(self, path):
+
+class Document:
+    """A parsed and validated glTF file: its JSON (`json`), its buffers, decoded accessors, and
+    the node hierarchy (`parent` of every node, `order`: the default scene's nodes, parents first).
+
+    `allow_outside`: let external buffers live outside the file's folder (absolute paths and
+    ``..``); by default they must lie inside it."""
+
+    def __init__(self, path, *, allow_outside: bool = False):
         self.path = Path(path)
-        if not self.path.is_file():
-            raise FileNotFoundError(f"{self.path}: no such file")
-        data = self.path.read_bytes()
+        data = _files.read_bytes(self.path)
         glb = None
         try:
             if data[:4] == _GLB_MAGIC:
-                self.json, glb = _read_glb(data)
+                document, glb = _read_glb(data)
             else:
-                self.json = json.loads(data.decode("utf-8-sig"))
-        except (ValueError, UnicodeDecodeError, struct.error) as exc:
-            raise FileFormatError(f"{self.path}: not a glTF 2.0 file: {exc}") from None
-        if not isinstance(self.json, dict) or not str(self.json.get("asset", {}).get("version", "")).startswith("2"):
-            raise FileFormatError(f"{self.path}: not a glTF 2.0 file (no asset.version 2.x)")
-        self.buffers = [self._buffer(i, b, glb) for i, b in enumerate(self.json.get("buffers", []))]
+                document = json.loads(data.decode("utf-8-sig"))
+        except (ValueError, UnicodeDecodeError, struct.error, RecursionError) as exc:
+            raise FileFormatError(f"{self.path}: not a glTF 2.0 file: {type(exc).__name__}: {exc}") from None
+        if not isinstance(document, dict):
+            raise FileFormatError(f"{self.path}: not a glTF 2.0 file (the JSON is not an object)")
+        asset = document.get("asset")
+        version = asset.get("version") if isinstance(asset, dict) else None
+        if not isinstance(version, str) or not re.fullmatch(r"2\.\d+", version):
+            raise FileFormatError(f'{self.path}: not a glTF 2.0 file (asset.version must be "2.x"; got {version!r})')
+        self.json = document
+        self._check_extensions()
+        for name in ("buffers", "bufferViews", "accessors", "nodes", "meshes", "skins", "animations", "scenes"):
+            self._objects(name)
+        self._check_buffers_and_views()
+        self._check_accessors()
+        self._check_meshes()
+        self.parent = self._check_nodes()
+        self._check_skins()
+        self._check_animations()
+        self.order = self._scene_order()
+        self.buffers = [self._buffer(i, b, glb, allow_outside) for i, b in enumerate(self.json.get("buffers", []))]
         self._accessors: dict[int, np.ndarray] = {}
 
-    def _buffer(self, index: int, buffer: dict, glb: bytes | None) -> bytes:
-        uri = buffer.get("uri")
+    # -- checks ---------------------------------------------------------------------------------
+
+    def fail(self, where: str, what: str):
+        raise FileFormatError(f"{self.path}: {where} {what}")
+
+    def _objects(self, name: str) -> list:
+        value = self.json.get(name, [])
+        if not isinstance(value, list):
+            self.fail(name, f"must be an array; got {type(value).__name__}")
+        for i, item in enumerate(value):
+            if not isinstance(item, dict):
+                self.fail(f"{name}[{i}]", f"must be an object; got {type(item).__name__}")
+        return value
+
+    def _list(self, name: str) -> list:
+        return self.json.get(name, [])
+
+    def _int(self, value, where: str, *, minimum: int = 0, maximum: int | None = None) -> int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            self.fail(where, f"must be an integer; got {value!r:.60}")
+        if value < minimum or (maximum is not None and value > maximum):
+            high = "" if maximum is None else f" and <= {maximum}"
+            self.fail(where, f"must be >= {minimum}{high}; got {value}")
+        return value
+
+    def _index(self, value, where: str, array: str) -> int:
+        count = len(self._list(array))
+        if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < count:
+            self.fail(where, f"must index {array} (0..{count - 1}); got {value!r:.60}")
+        return value
+
+    def _numbers(self, value, where: str, count: int | None = None) -> list[float]:
+        ok = isinstance(value, list) and (count is None or len(value) == count)
+        ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+        if not ok:
+            size = "" if count is None else f"{count} "
+            self.fail(where, f"must be an array of {size}finite numbers; got {value!r:.80}")
+        return [float(v) for v in value]
+
+    def _name(self, value, where: str):
+        if value is not None and not isinstance(value, str):
+            self.fail(where, f"must be a string; got {value!r:.60}")
+        return value
+
+    def _dict(self, value, where: str) -> dict:
+        if not isinstance(value, dict):
+            self.fail(where, f"must be an object; got {type(value).__name__}")
+        return value
+
+    def _check_extensions(self) -> None:
+        required = self.json.get("extensionsRequired", [])
+        if not isinstance(required, list) or not all(isinstance(e, str) for e in required):
+            self.fail("extensionsRequired", "must be an array of strings")
+        unknown = [e for e in required if e not in _READ_EXTENSIONS and not _IGNORED_EXTENSION.match(e)]
+        if unknown:
+            self.fail("extensionsRequired", f"names {', '.join(unknown)}, which flockkit cannot read (decompress the "
+                      "file first, for example with gltf-transform)")  # fmt: skip
+
+    def _check_buffers_and_views(self) -> None:
+        for i, buffer in enumerate(self._list("buffers")):
+            self._int(buffer.get("byteLength"), f"buffers[{i}].byteLength", minimum=1)
+            if "uri" in buffer and (not isinstance(buffer["uri"], str) or not buffer["uri"]):
+                self.fail(f"buffers[{i}].uri", f"must be a non-empty string; got {buffer['uri']!r:.60}")
+        for i, view in enumerate(self._list("bufferViews")):
+            where = f"bufferViews[{i}]"
+            b = self._index(view.get("buffer"), f"{where}.buffer", "buffers")
+            offset = self._int(view.get("byteOffset", 0), f"{where}.byteOffset")
+            length = self._int(view.get("byteLength"), f"{where}.byteLength", minimum=1)
+            if offset + length > self._list("buffers")[b]["byteLength"]:
+                self.fail(where, f"runs to byte {offset + length}, past the end of buffer {b} "
+                                 f"({self._list('buffers')[b]['byteLength']} bytes)")  # fmt: skip
+            if "byteStride" in view:
+                stride = self._int(view["byteStride"], f"{where}.byteStride", minimum=4, maximum=252)
+                if stride % 4:
+                    self.fail(f"{where}.byteStride", f"must be a multiple of 4; got {stride}")
+
+    def _fits(self, where: str, view_index, offset, element: int, count: int, *, packed: bool = False) -> None:
+        """That `count` elements of `element` bytes from `offset` lie inside buffer view `view_index`."""
+        view = self._list("bufferViews")[self._index(view_index, f"{where}.bufferView", "bufferViews")]
+        offset = self._int(offset, f"{where}.byteOffset")
+        stride = element if packed else view.get("byteStride", element)
+        if stride < element:
+            self.fail(where, f"has elements of {element} bytes, wider than the view's byteStride {stride} (they "
+                             "would overlap)")  # fmt: skip
+        end = offset + stride * (count - 1) + element
+        if end > view["byteLength"]:
+            self.fail(where, f"needs {end} bytes of bufferView {view_index}, which holds {view['byteLength']}")
+
+    def _check_accessors(self) -> None:
+        for i, accessor in enumerate(self._list("accessors")):
+            where = f"accessors[{i}]"
+            component = accessor.get("componentType")
+            if type(component) is not int or component not in _COMPONENTS:
+                self.fail(f"{where}.componentType", f"must be one of {sorted(_COMPONENTS)}; got {component!r:.60}")
+            kind = accessor.get("type")
+            if kind not in _WIDTH:
+                self.fail(f"{where}.type", f"must be one of {', '.join(_WIDTH)}; got {kind!r:.60}")
+            count = self._int(accessor.get("count"), f"{where}.count", minimum=1)
+            if not isinstance(accessor.get("normalized", False), bool):
+                self.fail(f"{where}.normalized", "must be true or false")
+            if accessor.get("normalized") and component in (5125, 5126):
+                self.fail(f"{where}.normalized", "may be true only for 8- and 16-bit integers")
+            element = _element_bytes(component, kind)
+            if "bufferView" in accessor:
+                self._fits(where, accessor["bufferView"], accessor.get("byteOffset", 0), element, count)
+            elif "byteOffset" in accessor:
+                self.fail(f"{where}.byteOffset", "is given without a bufferView")
+            else:  # zeros, perhaps with sparse values: memory from a number alone
+                validate.allocation(count * _WIDTH[kind], f"{self.path}: {where} ({count} elements without data)")
+            if "sparse" in accessor:
+                sparse = self._dict(accessor["sparse"], f"{where}.sparse")
+                n = self._int(sparse.get("count"), f"{where}.sparse.count", minimum=1, maximum=count)
+                indices = self._dict(sparse.get("indices"), f"{where}.sparse.indices")
+                if type(indices.get("componentType")) is not int or indices["componentType"] not in _UNSIGNED:
+                    self.fail(f"{where}.sparse.indices.componentType", f"must be one of {_UNSIGNED}")
+                size = np.dtype(_COMPONENTS[indices["componentType"]]).itemsize
+                self._fits(f"{where}.sparse.indices", indices.get("bufferView"), indices.get("byteOffset", 0), size, n,
+                           packed=True)  # fmt: skip
+                values = self._dict(sparse.get("values"), f"{where}.sparse.values")
+                self._fits(f"{where}.sparse.values", values.get("bufferView"), values.get("byteOffset", 0), element,
+                           n, packed=True)  # fmt: skip
+
+    def _accessor_count(self, index) -> int:
+        return self._list("accessors")[index]["count"]
+
+    def _check_meshes(self) -> None:
+        for m, mesh in enumerate(self._list("meshes")):
+            primitives = mesh.get("primitives")
+            if not isinstance(primitives, list) or not primitives:
+                self.fail(f"meshes[{m}].primitives", "must be a non-empty array")
+            targets = None
+            for p, primitive in enumerate(primitives):
+                where = f"meshes[{m}].primitives[{p}]"
+                self._dict(primitive, where)
+                attributes = self._dict(primitive.get("attributes"), f"{where}.attributes")
+                counts = {name: self._accessor_count(self._index(a, f"{where}.attributes.{name}", "accessors"))
+                          for name, a in attributes.items()}  # fmt: skip
+                if len(set(counts.values())) > 1:
+                    self.fail(f"{where}.attributes", f"have different counts {counts}; a primitive's attributes "
+                              "describe the same vertices")  # fmt: skip
+                if "indices" in primitive:
+                    self._index(primitive["indices"], f"{where}.indices", "accessors")
+                self._int(primitive.get("mode", _TRIANGLES), f"{where}.mode", maximum=6)
+                found = primitive.get("targets", [])
+                if not isinstance(found, list):
+                    self.fail(f"{where}.targets", "must be an array")
+                for t, target in enumerate(found):
+                    for name, a in self._dict(target, f"{where}.targets[{t}]").items():
+                        a = self._index(a, f"{where}.targets[{t}].{name}", "accessors")
+                        if counts and self._accessor_count(a) != next(iter(counts.values())):
+                            self.fail(f"{where}.targets[{t}].{name}", "has a count unlike the primitive's vertices")
+                if targets is not None and len(found) != targets:
+                    self.fail(f"{where}.targets", f"number {len(found)}; the mesh's other primitives have {targets}")
+                targets = len(found)
+            if "weights" in mesh and len(self._numbers(mesh["weights"], f"meshes[{m}].weights")) != targets:
+                self.fail(f"meshes[{m}].weights", f"must give one weight per morph target ({targets})")
+
+    def targets(self, mesh: int) -> int:
+        """The number of morph targets of mesh `mesh`."""
+        return len(self._list("meshes")[mesh]["primitives"][0].get("targets", []))
+
+    def _check_nodes(self) -> np.ndarray:
+        nodes = self._list("nodes")
+        parent = np.full(len(nodes), -1, dtype=np.int64)
+        for i, node in enumerate(nodes):
+            where = f"nodes[{i}]"
+            self._name(node.get("name"), f"{where}.name")
+            children = node.get("children", [])
+            if not isinstance(children, list):
+                self.fail(f"{where}.children", "must be an array")
+            for k, child in enumerate(children):
+                child = self._index(child, f"{where}.children[{k}]", "nodes")
+                if parent[child] >= 0 or child == i:
+                    self.fail(f"{where}.children[{k}]", f"is node {child}, which already has a parent (node "
+                              f"{parent[child] if child != i else i}); nodes form trees")  # fmt: skip
+                parent[child] = i
+            if "matrix" in node:
+                self._numbers(node["matrix"], f"{where}.matrix", 16)
+                if any(key in node for key in ("translation", "rotation", "scale")):
+                    self.fail(where, "has both a matrix and translation, rotation or scale")
+            for key, width in (("translation", 3), ("rotation", 4), ("scale", 3)):
+                if key in node:
+                    self._numbers(node[key], f"{where}.{key}", width)
+            if "rotation" in node and abs(np.linalg.norm(node["rotation"]) - 1) > 1e-3:
+                self.fail(f"{where}.rotation", f"must be a unit quaternion; got {node['rotation']}")
+            if "mesh" in node:
+                mesh = self._index(node["mesh"], f"{where}.mesh", "meshes")
+                if "weights" in node and len(self._numbers(node["weights"], f"{where}.weights")) != self.targets(mesh):
+                    self.fail(f"{where}.weights", f"must give one weight per morph target ({self.targets(mesh)})")
+            if "skin" in node:
+                self._index(node["skin"], f"{where}.skin", "skins")
+                if "mesh" not in node:
+                    self.fail(f"{where}.skin", "is given without a mesh")
+        # every node must reach a root: jump to the ancestor 1, 2, 4, ... levels up (log n passes)
+        up = np.where(parent >= 0, parent, np.arange(len(nodes)))
+        for _ in range(len(nodes).bit_length() + 1):
+            up = up[up]
+        if len(nodes) and np.any(parent[up] >= 0):
+            stuck = int(np.flatnonzero(parent[up] >= 0)[0])
+            self.fail(f"nodes[{stuck}]", "is its own ancestor (the hierarchy has a cycle)")
+        return parent
+
+    def _check_skins(self) -> None:
+        for s, skin in enumerate(self._list("skins")):
+            joints = skin.get("joints")
+            if not isinstance(joints, list) or not joints:
+                self.fail(f"skins[{s}].joints", "must be a non-empty array")
+            for k, joint in enumerate(joints):
+                self._index(joint, f"skins[{s}].joints[{k}]", "nodes")
+            if len(set(joints)) != len(joints):
+                self.fail(f"skins[{s}].joints", "name a node twice")
+            if "inverseBindMatrices" in skin:
+                a = self._index(skin["inverseBindMatrices"], f"skins[{s}].inverseBindMatrices", "accessors")
+                accessor = self._list("accessors")[a]
+                if accessor["type"] != "MAT4" or accessor["componentType"] != FLOAT or accessor["count"] < len(joints):
+                    self.fail(f"skins[{s}].inverseBindMatrices", f"must be a float MAT4 accessor of {len(joints)} "
+                              "matrices, one per joint")  # fmt: skip
+            if "skeleton" in skin:
+                self._index(skin["skeleton"], f"skins[{s}].skeleton", "nodes")
+
+    def _check_animations(self) -> None:
+        nodes = self._list("nodes")
+        for a, animation in enumerate(self._list("animations")):
+            where = f"animations[{a}]"
+            self._name(animation.get("name"), f"{where}.name")
+            samplers, channels = animation.get("samplers"), animation.get("channels")
+            for name, value in (("samplers", samplers), ("channels", channels)):
+                if not isinstance(value, list) or not value:
+                    self.fail(f"{where}.{name}", "must be a non-empty array")
+            for k, sampler in enumerate(samplers):
+                here = f"{where}.samplers[{k}]"
+                self._dict(sampler, here)
+                self._index(sampler.get("input"), f"{here}.input", "accessors")
+                self._index(sampler.get("output"), f"{here}.output", "accessors")
+                if sampler.get("interpolation", "LINEAR") not in _INTERPOLATIONS:
+                    self.fail(f"{here}.interpolation", f"must be one of {', '.join(_INTERPOLATIONS)}; got "
+                              f"{sampler.get('interpolation')!r:.60}")  # fmt: skip
+            targeted = set()
+            for k, channel in enumerate(channels):
+                here = f"{where}.channels[{k}]"
+                self._dict(channel, here)
+                s = self._int(channel.get("sampler"), f"{here}.sampler", maximum=len(samplers) - 1)
+                target = self._dict(channel.get("target"), f"{here}.target")
+                if "node" not in target:
+                    continue  # a target given by an extension (KHR_animation_pointer): not ours to move
+                node = self._index(target["node"], f"{here}.target.node", "nodes")
+                path = target.get("path")
+                if path not in _PATH_WIDTH:
+                    self.fail(f"{here}.target.path", f"must be one of {', '.join(_PATH_WIDTH)}; got {path!r:.60}")
+                if (node, path) in targeted:
+                    self.fail(here, f"animates node {node}'s {path} a second time in one animation")
+                targeted.add((node, path))
+                if path != "weights" and "matrix" in nodes[node]:
+                    self.fail(here, f"animates node {node}, which is placed by a matrix")
+                if path == "weights" and ("mesh" not in nodes[node] or not self.targets(nodes[node]["mesh"])):
+                    self.fail(here, f"animates the morph weights of node {node}, which has no morph targets")
+                self._check_sampler_output(f"{where}.samplers[{s}]", samplers[s], path, nodes[node])
+
+    def _check_sampler_output(self, where: str, sampler: dict, path: str, node: dict) -> None:
+        accessors = self._list("accessors")
+        keys, out = accessors[sampler["input"]], accessors[sampler["output"]]
+        if keys["type"] != "SCALAR" or keys["componentType"] != FLOAT:
+            self.fail(f"{where}.input", "must be a float SCALAR accessor (key times in seconds)")
+        cubic = sampler.get("interpolation") == "CUBICSPLINE"
+        if cubic and keys["count"] < 2:
+            self.fail(where, "is a CUBICSPLINE with fewer than 2 keys")
+        width = _PATH_WIDTH[path]
+        components = (FLOAT,) if path in ("translation", "scale") else _NORMALIZED_OR_FLOAT
+        floats = out["componentType"] == FLOAT or out.get("normalized", False)
+        if out["type"] != ("SCALAR", "VEC2", "VEC3", "VEC4")[width - 1] or out["componentType"] not in components \
+                or not floats:  # fmt: skip
+            self.fail(
+                f"{where}.output",
+                f"must be a {('SCALAR', 'VEC2', 'VEC3', 'VEC4')[width - 1]} accessor of "
+                f"floats{'' if len(components) == 1 else ' or normalized integers'} for a {path} channel",
+            )
+        per_key = (3 if cubic else 1) * (self.targets(node["mesh"]) if path == "weights" else 1)
+        if out["count"] != keys["count"] * per_key:
+            self.fail(f"{where}.output", f"has {out['count']} elements; {keys['count']} keys of a {path} channel "
+                      f"need {keys['count'] * per_key}")  # fmt: skip
+
+    def _scene_order(self) -> list[int]:
+        nodes, scenes = self._list("nodes"), self._list("scenes")
+        if scenes:
+            index = self._index(self.json.get("scene", 0), "scene", "scenes")
+            roots = scenes[index].get("nodes", [])
+            if not isinstance(roots, list):
+                self.fail(f"scenes[{index}].nodes", "must be an array")
+            for k, root in enumerate(roots):
+                self._index(root, f"scenes[{index}].nodes[{k}]", "nodes")
+                if self.parent[root] >= 0:
+                    self.fail(f"scenes[{index}].nodes[{k}]", f"is node {root}, which is not a root (its parent is "
+                              f"node {self.parent[root]})")  # fmt: skip
+            if len(set(roots)) != len(roots):
+                self.fail(f"scenes[{index}].nodes", "name a node twice")
+        else:
+            roots = [i for i in range(len(nodes)) if self.parent[i] < 0]
+        order, stack = [], list(reversed(roots))
+        while stack:  # depth first, parents before children, as the scene lists them
+            node = stack.pop()
+            order.append(node)
+            stack.extend(reversed(nodes[node].get("children", [])))
+        return order
+
+    # -- buffers and accessors ------------------------------------------------------------------
+
+    def _buffer(self, index: int, buffer: dict, glb: bytes | None, allow_outside: bool) -> bytes:
+        length, uri = buffer["byteLength"], buffer.get("uri")
+        where = f"buffers[{index}]"
         if uri is None:
-            if glb is None:
-                raise FileFormatError(f"{self.path}: buffer {index} has no uri and the file has no binary chunk")
+            if glb is None or index != 0:
+                self.fail(where, "has no uri, and only buffer 0 of a .glb may use its binary chunk")
             data = glb
         elif uri.startswith("data:"):
             header, _, payload = uri.partition(",")
             # application/octet-stream and application/gltf-buffer are both valid (spec 3.6.1.1)
             if not header.endswith(";base64"):
-                raise FileFormatError(f"{self.path}: buffer {index} is a data URI that is not base64")
+                self.fail(f"{where}.uri", "is a data URI that is not base64")
             try:
                 data = base64.b64decode(payload, validate=False)
-            except ValueError as exc:
-                raise FileFormatError(f"{self.path}: buffer {index}: bad base64: {exc}") from None
+            except (ValueError, binascii.Error) as exc:
+                self.fail(f"{where}.uri", f"holds bad base64: {exc}")
         else:
-            file = self.path.parent / unquote(uri)
-            if not file.is_file():
-                raise FileFormatError(f"{self.path}: buffer {index} refers to {file}, which does not exist")
-            data = file.read_bytes()
-        if len(data) < buffer.get("byteLength", 0):
-            raise FileFormatError(
-                f"{self.path}: buffer {index} holds {len(data)} bytes, not the {buffer['byteLength']} it should "
-                "(truncated?)"
-            )
+            file = _files.confined(self.path.parent, uri, source=self.path, where=f"{where}.uri",
+                                   allow_outside=allow_outside)  # fmt: skip
+            try:
+                data = _files.read_bytes(file, size=length)
+            except FileNotFoundError:
+                self.fail(f"{where}.uri", f"refers to {file}, which does not exist")
+            except FileFormatError as exc:
+                self.fail(f"{where}.uri", f"refers to a file flockkit cannot read: {exc}")
+        if len(data) < length:
+            self.fail(where, f"holds {len(data)} bytes, not the {length} it should (truncated?)")
         return data
 
     def accessor(self, index: int) -> np.ndarray:
-        """Accessor `index` as an array (count, width) (float64 where normalized or float)."""
+        """Accessor `index` as an array (count, width): float64 where floats or normalized
+        integers (spec 3.11), else int64. Matrices of 1- and 2-byte components are not read."""
         if index not in self._accessors:
             self._accessors[index] = self._decode(index)
         return self._accessors[index]
 
     def _decode(self, index: int) -> np.ndarray:
-        try:
-            spec = self.json["accessors"][index]
-            dtype = np.dtype(_COMPONENTS[spec["componentType"]]).newbyteorder("<")
-            width, count = _WIDTH[spec["type"]], int(spec["count"])
-            if "bufferView" in spec:
-                values = self._view(spec["bufferView"], spec.get("byteOffset", 0), dtype, width, count)
-            else:
-                values = np.zeros((count, width), dtype=dtype)
-            if "sparse" in spec:  # spec 3.6.2.3: a few replaced elements
-                sparse = spec["sparse"]
-                n = int(sparse["count"])
-                idx = sparse["indices"]
-                where = self._view(
-                    idx["bufferView"],
-                    idx.get("byteOffset", 0),
-                    np.dtype(_COMPONENTS[idx["componentType"]]).newbyteorder("<"),
-                    1,
-                    n,
-                )[:, 0]
-                replaced = self._view(
-                    sparse["values"]["bufferView"], sparse["values"].get("byteOffset", 0), dtype, width, n
-                )
-                values = values.copy()
-                values[where.astype(np.int64)] = replaced
-        except (KeyError, IndexError, TypeError) as exc:
-            raise FileFormatError(f"{self.path}: accessor {index} is invalid: {type(exc).__name__}: {exc}") from None
-        if spec.get("normalized") and dtype.kind in "iu":  # spec 3.11: normalized integers to [-1, 1] or [0, 1]
-            info = np.iinfo(dtype)
-            return np.maximum(values.astype(np.float64) / info.max, -1.0)
-        return values.astype(np.float64) if dtype.kind == "f" else values.astype(np.int64)
+        spec = self._list("accessors")[index]
+        where = f"accessors[{index}]"
+        component, kind, count = spec["componentType"], spec["type"], spec["count"]
+        dtype = np.dtype(_COMPONENTS[component]).newbyteorder("<")
+        width = _WIDTH[kind]
+        if _element_bytes(component, kind) != dtype.itemsize * width:
+            self.fail(where, f"is a {kind} of {dtype.itemsize}-byte components with padded columns, which flockkit "
+                      "does not read")  # fmt: skip
+        if "bufferView" in spec:
+            values = self._view(spec["bufferView"], spec.get("byteOffset", 0), dtype, width, count)
+        else:
+            values = np.zeros((count, width), dtype=dtype)
+        if "sparse" in spec:  # spec 3.6.2.3: a few replaced elements
+            sparse = spec["sparse"]
+            n, indices = sparse["count"], sparse["indices"]
+            where_dtype = np.dtype(_COMPONENTS[indices["componentType"]]).newbyteorder("<")
+            at = self._view(indices["bufferView"], indices.get("byteOffset", 0), where_dtype, 1, n, packed=True)[:, 0]
+            at = at.astype(np.int64)
+            if np.any(np.diff(at) <= 0) or at[-1] >= count:
+                self.fail(f"{where}.sparse.indices", f"must increase strictly and stay below count {count}")
+            values = values.copy()
+            values[at] = self._view(sparse["values"]["bufferView"], sparse["values"].get("byteOffset", 0), dtype,
+                                    width, n, packed=True)  # fmt: skip
+        if spec.get("normalized"):  # spec 3.11: normalized integers to [-1, 1] or [0, 1]
+            return np.maximum(values.astype(np.float64) / np.iinfo(dtype).max, -1.0)
+        if dtype.kind == "f":
+            values = values.astype(np.float64)
+            if not np.all(np.isfinite(values)):
+                self.fail(where, "holds values that are not finite")
+            return values
+        return values.astype(np.int64)
 
-    def _view(self, view_index: int, offset: int, dtype: np.dtype, width: int, count: int) -> np.ndarray:
-        view = self.json["bufferViews"][view_index]
+    def _view(self, view_index: int, offset: int, dtype: np.dtype, width: int, count: int, *, packed=False):
+        """`count` elements of `width` values of `dtype` from buffer view `view_index`, `offset`
+        bytes in (bounds checked when the document was opened; numpy checks them again)."""
+        view = self._list("bufferViews")[view_index]
         data = self.buffers[view["buffer"]]
-        start = view.get("byteOffset", 0) + offset
         element = dtype.itemsize * width
-        stride = view.get("byteStride") or element
-        end = start + stride * (count - 1) + element if count else start
-        if end > len(data) or end - view.get("byteOffset", 0) > view["byteLength"]:
-            raise FileFormatError(f"{self.path}: buffer view {view_index} is shorter than its accessor (truncated?)")
-        if count == 0:
-            return np.zeros((0, width), dtype=dtype)
-        raw = np.frombuffer(data, dtype=np.uint8, count=end - start, offset=start)
-        rows = np.lib.stride_tricks.as_strided(raw, shape=(count, element), strides=(stride, 1))
+        stride = element if packed else view.get("byteStride", element)
+        rows = np.ndarray((count, element), dtype=np.uint8, buffer=data, offset=view.get("byteOffset", 0) + offset,
+                          strides=(stride, 1))  # fmt: skip
         return np.ascontiguousarray(rows).view(dtype).reshape(count, width)
 
-    # -- scene ----------------------------------------------------------------------------------
+    def typed(self, index: int, where: str, kinds: tuple, components: tuple) -> np.ndarray:
+        """Accessor `index` if its type is one of `kinds` and its componentType one of
+        `components`; else a FileFormatError naming `where`, the property that refers to it."""
+        spec = self._list("accessors")[index]
+        if spec["type"] not in kinds or spec["componentType"] not in components:
+            self.fail(where, f"must refer to a {' or '.join(kinds)} accessor of component types {components}; "
+                      f"accessors[{index}] is a {spec['type']} of {spec['componentType']}")  # fmt: skip
+        return self.accessor(index)
+
+    # -- the scene --------------------------------------------------------------------------------
 
     def scene_nodes(self) -> list[int]:
         """Every node of the default scene (or all root nodes), parents before children."""
-        nodes = self.json.get("nodes", [])
-        scenes = self.json.get("scenes")
-        if scenes:
-            roots = scenes[self.json.get("scene", 0)].get("nodes", [])
-        else:
-            children = {c for n in nodes for c in n.get("children", [])}
-            roots = [i for i in range(len(nodes)) if i not in children]
-        order, stack = [], list(reversed(roots))
-        while stack:
-            node = stack.pop()
-            if node in order:
-                raise FileFormatError(f"{self.path}: node {node} appears twice in the scene (a cycle?)")
-            order.append(node)
-            stack.extend(reversed(nodes[node].get("children", [])))
-        return order
+        return self.order
 
-    def parents(self) -> dict[int, int]:
-        return {c: i for i, n in enumerate(self.json.get("nodes", [])) for c in n.get("children", [])}
+    def key_times(self, animation: int, sampler: int) -> np.ndarray:
+        """The key times (K,) of a sampler: finite seconds >= 0, strictly increasing (spec 3.11)."""
+        index = self._list("animations")[animation]["samplers"][sampler]["input"]
+        times = self.accessor(index)[:, 0]
+        if times[0] < 0 or np.any(np.diff(times) <= 0):
+            self.fail(f"animations[{animation}].samplers[{sampler}].input",
+                      "must hold key times >= 0 that increase strictly")  # fmt: skip
+        return times
+
+    def clip_names(self) -> list[str]:
+        """Animation names (unnamed ones as "animation K", repeated ones with " (K)" added)."""
+        names = [a.get("name") or f"animation {k}" for k, a in enumerate(self._list("animations"))]
+        counts = Counter(names)
+        return [name if counts[name] == 1 else f"{name} ({k})" for k, name in enumerate(names)]
+
+    def duration(self, animation: int) -> float:
+        """Seconds to the last key of animation `animation`."""
+        samplers = self._list("animations")[animation]["samplers"]
+        return max(float(self.key_times(animation, s)[-1]) for s in range(len(samplers)))
 
     def clips(self) -> dict[str, float]:
-        """Animation names (unnamed ones as "animation K") and their durations in seconds."""
-        found = {}
-        for k, animation in enumerate(self.json.get("animations", [])):
-            times = [self.accessor(s["input"]) for s in animation.get("samplers", [])]
-            found[animation.get("name") or f"animation {k}"] = float(
-                max((t.max() for t in times if len(t)), default=0.0)
-            )
-        return found
+        """Animation names (see :meth:`clip_names`) and their durations in seconds."""
+        return {name: self.duration(k) for k, name in enumerate(self.clip_names())}
 
-    def animation(self, clip) -> tuple[str, dict]:
-        """(name, the animation's JSON) for `clip`: a name, an index, or None for the first."""
-        animations = self.json.get("animations", [])
+    def animation(self, clip) -> int:
+        """The index of `clip`: a name, an index, or None for the first."""
+        animations = self._list("animations")
         if not animations:
             raise ValidationError(f"{self.path}: has no animation; a mesh animation needs one")
-        names = list(self.clips())
+        names = self.clip_names()
         if clip is None:
-            return names[0], animations[0]
+            return 0
         if isinstance(clip, (int, np.integer)) and not isinstance(clip, bool) and 0 <= clip < len(animations):
-            return names[clip], animations[clip]
+            return int(clip)
         if clip in names:
-            return clip, animations[names.index(clip)]
+            return names.index(clip)
         raise ValidationError(f"{self.path}: no clip {clip!r}; its clips are {', '.join(map(repr, names))}")
 
-    def pose(self, animation: dict, times: np.ndarray):
-        """Local transforms (T, nodes, 4, 4) and morph weights {node: (T, W)} at `times`."""
-        translation, rotation, scale, weights, matrices, fixed = self.trs(animation, times)
-        trs = rigid.trs(translation, rotation / np.linalg.norm(rotation, axis=-1, keepdims=True), scale)
-        matrices[:, ~fixed] = trs[:, ~fixed]
-        return matrices, weights
+    def with_ancestors(self, nodes) -> list[int]:
+        """`nodes` and every ancestor of them, parents before children."""
+        found = set()
+        for node in nodes:
+            while node >= 0 and node not in found:
+                found.add(node)
+                node = int(self.parent[node])
+        depth = {}
+        for node in found:  # depth by climbing; memoized, so linear in the nodes
+            chain = []
+            while node not in depth and node >= 0:
+                chain.append(node)
+                node = int(self.parent[node])
+            base = depth.get(node, -1)
+            for k, n in enumerate(reversed(chain)):
+                depth[n] = base + 1 + k
+        return sorted(found, key=lambda n: (depth[n], n))
 
-    def trs(self, animation: dict, times: np.ndarray):
-        """Every node's local translation (T, nodes, 3), rotation (T, nodes, 4), scale (T, nodes,
-        3) at `times`, morph weights {node: (T, W)}, and the nodes given as a matrix instead
-        (T, nodes, 4, 4) with a mask of them."""
-        nodes = self.json.get("nodes", [])
-        t = len(times)
-        translation = np.zeros((t, len(nodes), 3))
-        rotation = np.zeros((t, len(nodes), 4))
+    def trs(self, animation: int | None, times: np.ndarray, nodes: list[int]):
+        """The local translation (T, n, 3), rotation (T, n, 4) and scale (T, n, 3) of `nodes` at
+        `times` (animation None: the rest pose), their morph weights {node: (T, W)}, and the
+        nodes placed by a matrix instead: (T, n, 4, 4) with a mask (n,)."""
+        all_nodes = self._list("nodes")
+        t, n = len(times), len(nodes)
+        validate.allocation(t * n * 30, f"{self.path}: {n} nodes over {t} frames")
+        column = {node: k for k, node in enumerate(nodes)}
+        translation = np.zeros((t, n, 3))
+        rotation = np.zeros((t, n, 4))
         rotation[..., 3] = 1.0
-        scale = np.ones((t, len(nodes), 3))
-        fixed = np.zeros(len(nodes), dtype=bool)
-        matrices = np.tile(np.eye(4), (t, len(nodes), 1, 1))
+        scale = np.ones((t, n, 3))
+        fixed = np.zeros(n, dtype=bool)
+        matrices = np.tile(np.eye(4), (t, n, 1, 1))
         weights = {}
-        for i, node in enumerate(nodes):
+        for k, i in enumerate(nodes):
+            node = all_nodes[i]
             if "matrix" in node:  # column-major (spec 5.25)
-                matrices[:, i] = np.asarray(node["matrix"], dtype=float).reshape(4, 4).T
-                fixed[i] = True
-            translation[:, i] = node.get("translation", (0, 0, 0))
-            rotation[:, i] = node.get("rotation", (0, 0, 0, 1))
-            scale[:, i] = node.get("scale", (1, 1, 1))
-            mesh_weights = self.json["meshes"][node["mesh"]].get("weights") if "mesh" in node else None
-            if node.get("weights", mesh_weights) is not None:
-                weights[i] = np.tile(np.asarray(node.get("weights", mesh_weights), dtype=float), (t, 1))
-        for channel in animation.get("channels", []):
-            target = channel.get("target", {})
-            if "node" not in target:
-                continue
-            sampler = animation["samplers"][channel["sampler"]]
-            path, node = target["path"], target["node"]
-            values = _sample(self.accessor(sampler["input"])[:, 0], self.accessor(sampler["output"]), times,
-                             sampler.get("interpolation", "LINEAR"), path)  # fmt: skip
-            if path == "translation":
-                translation[:, node] = values
-            elif path == "rotation":
-                rotation[:, node] = values
-            elif path == "scale":
-                scale[:, node] = values
-            elif path == "weights":
-                weights[node] = values
+                matrices[:, k] = np.asarray(node["matrix"], dtype=float).reshape(4, 4).T
+                fixed[k] = True
+            translation[:, k] = node.get("translation", (0, 0, 0))
+            rotation[:, k] = node.get("rotation", (0, 0, 0, 1))
+            scale[:, k] = node.get("scale", (1, 1, 1))
+            if "mesh" in node and self.targets(node["mesh"]):
+                default = node.get("weights", self._list("meshes")[node["mesh"]].get("weights"))
+                if default is None:  # spec 3.7.2.2: weights default to zero
+                    default = np.zeros(self.targets(node["mesh"]))
+                weights[i] = np.tile(np.asarray(default, dtype=float), (t, 1))
+        rotation[:] /= np.linalg.norm(rotation, axis=-1, keepdims=True)
+        if animation is not None:
+            spec = self._list("animations")[animation]
+            for channel in spec["channels"]:
+                target = channel["target"]
+                if target.get("node") not in column:
+                    continue
+                sampler = spec["samplers"][channel["sampler"]]
+                path, node = target["path"], target["node"]
+                values = _sample(self.key_times(animation, channel["sampler"]), self.accessor(sampler["output"]),
+                                 times, sampler.get("interpolation", "LINEAR"), path)  # fmt: skip
+                if path == "rotation":
+                    length = np.linalg.norm(values, axis=1, keepdims=True)
+                    if not np.all(length > 1e-12):
+                        self.fail(f"animations[{animation}].samplers[{channel['sampler']}].output",
+                                  "holds a rotation of length zero")  # fmt: skip
+                    rotation[:, column[node]] = values / length
+                elif path == "weights":
+                    weights[node] = values
+                else:
+                    (translation if path == "translation" else scale)[:, column[node]] = values
         return translation, rotation, scale, weights, matrices, fixed
 
-    def world(self, local: np.ndarray) -> np.ndarray:
-        """World matrices (T, nodes, 4, 4) from local ones, through the hierarchy."""
-        world = local.copy()
-        parents = self.parents()
-        for node in self.scene_nodes():
-            if node in parents:
-                world[:, node] = world[:, parents[node]] @ local[:, node]
-        return world
+    def world(self, animation: int | None, times: np.ndarray, nodes: list[int]):
+        """World matrices (T, n, 4, 4) of `nodes` (closed under parents, parents first; see
+        :meth:`with_ancestors`) at `times`, and their morph weights."""
+        translation, rotation, scale, weights, matrices, fixed = self.trs(animation, times, nodes)
+        local = rigid.trs(translation, rotation, scale)
+        local[:, fixed] = matrices[:, fixed]
+        column = {node: k for k, node in enumerate(nodes)}
+        for k, node in enumerate(nodes):
+            parent = int(self.parent[node])
+            if parent >= 0:
+                local[:, k] = local[:, column[parent]] @ local[:, k]
+        return local, weights
 
 
 def _read_glb(data: bytes):
@@ -255,12 +646,14 @@ def _read_glb(data: bytes):
     if length > len(data):
         raise ValueError(f"the header says {length} bytes, the file has {len(data)} (truncated?)")
     offset, document, binary = 12, None, None
-    while offset < length:
+    while offset + 8 <= length:
         size, kind = struct.unpack_from("<II", data, offset)
         chunk = data[offset + 8 : offset + 8 + size]
-        if len(chunk) < size:
+        if len(chunk) < size or offset + 8 + size > length:
             raise ValueError("a chunk runs past the end of the file (truncated?)")
-        if kind == _JSON_CHUNK:
+        if kind == _JSON_CHUNK and document is None:
+            if offset != 12:
+                raise ValueError("the JSON chunk must come first")
             document = json.loads(chunk.decode("utf-8"))
         elif kind == _BIN_CHUNK and binary is None:
             binary = chunk
@@ -285,7 +678,7 @@ def _sample(inputs, outputs, times, interpolation, path):
     clipped = np.clip(times, inputs[0], inputs[-1])
     k = np.clip(np.searchsorted(inputs, clipped, side="right") - 1, 0, keys - 2)
     span = inputs[k + 1] - inputs[k]
-    u = np.where(span > 0, (clipped - inputs[k]) / np.where(span > 0, span, 1), 0.0)[:, None]
+    u = ((clipped - inputs[k]) / span)[:, None]
     if interpolation == "STEP":
         result = np.where(u >= 1, values[k + 1], values[k])
     elif interpolation == "CUBICSPLINE":
@@ -297,170 +690,197 @@ def _sample(inputs, outputs, times, interpolation, path):
         result = rigid.slerp(values[k], values[k + 1], u)
     else:
         result = (1 - u) * values[k] + u * values[k + 1]
-    if path == "rotation":
-        result = result / np.linalg.norm(result, axis=1, keepdims=True)
     return result
 
 
-def mesh_animation(path, clip, fps):
+def _frames(duration: float, fps: float, per_frame: float, what: str) -> int:
+    """Frames of ``numpy.arange(0, duration + 1e-9, 1 / fps)``, counted, and their `per_frame`
+    numbers checked against the memory budget, before any is made."""
+    count = (duration + 1e-9) / (1.0 / fps)
+    validate.allocation(count * per_frame, what)
+    return max(math.ceil(count), 1)
+
+
+def mesh_animation(path, clip, fps, *, allow_outside: bool = False):
     """(name, positions (T, V, 3), faces (F, 3), clip name) of every mesh in the default scene,
     animated by `clip` and sampled at `fps`: morph targets weighted, then skinned (linear blend
     skinning, spec 3.7.3) or placed by the node's world transform."""
-    document = Document(path)
-    name, animation = document.animation(clip)
-    duration = document.clips()[name]
+    document = Document(path, allow_outside=allow_outside)
+    animation = document.animation(clip)
+    name = document.clip_names()[animation]
+    nodes, meshes, skins = document._list("nodes"), document._list("meshes"), document._list("skins")
+    placed = [n for n in document.order if "mesh" in nodes[n]]
+    if not placed:
+        raise ValidationError(f"{path}: the default scene has no mesh")
+    vertices = 0
+    for n in placed:
+        for p, primitive in enumerate(meshes[nodes[n]["mesh"]]["primitives"]):
+            if "POSITION" not in primitive["attributes"]:
+                document.fail(f"meshes[{nodes[n]['mesh']}].primitives[{p}].attributes", "have no POSITION")
+            vertices += document._accessor_count(primitive["attributes"]["POSITION"])
+    needed = document.with_ancestors(placed + [j for n in placed if "skin" in nodes[n]
+                                               for j in skins[nodes[n]["skin"]]["joints"]])  # fmt: skip
+    duration = document.duration(animation)
+    _frames(duration, fps, vertices * 3 * 3 + len(needed) * 16 * 3,
+            f"{path}: clip {name!r} ({duration:g} s) at {fps:g} fps, {vertices} vertices")  # fmt: skip
     times = np.arange(0.0, duration + 1e-9, 1.0 / fps)
-    local, weights = document.pose(animation, times)
-    world = document.world(local)
+    world, weights = document.world(animation, times, needed)
+    column = {node: k for k, node in enumerate(needed)}
     positions, faces, count = [], [], 0
-    for node in document.scene_nodes():
-        spec = document.json["nodes"][node]
-        if "mesh" not in spec:
-            continue
-        mesh = document.json["meshes"][spec["mesh"]]
-        for primitive in mesh.get("primitives", []):
-            points, triangles = _primitive(document, primitive, weights.get(node), len(times))
+    for node in placed:
+        spec = nodes[node]
+        for p, primitive in enumerate(meshes[spec["mesh"]]["primitives"]):
+            where = f"meshes[{spec['mesh']}].primitives[{p}]"
+            points, triangles = _primitive(document, where, primitive, weights.get(node), len(times))
             if "skin" in spec:
-                points = _skinned(document, document.json["skins"][spec["skin"]], primitive, points, world)
+                skin = skins[spec["skin"]]
+                joints = world[:, [column[j] for j in skin["joints"]]]
+                points = _skinned(document, where, skin, spec["skin"], primitive, points, joints)
             else:
-                points = points @ world[:, node, :3, :3].transpose(0, 2, 1) + world[:, node, None, :3, 3]
+                matrix = world[:, column[node]]
+                points = points @ matrix[:, :3, :3].transpose(0, 2, 1) + matrix[:, None, :3, 3]
             positions.append(points)
             faces.append(triangles + count)
             count += points.shape[1]
-    if not positions:
-        raise ValidationError(f"{path}: the default scene has no mesh")
     positions = np.concatenate(positions, axis=1)
     if not np.all(np.isfinite(positions)):
-        raise ValidationError(f"{path}: clip {name!r} gives vertex positions that are not finite")
-    return (
-        document.json.get("asset", {}).get("extras", {}).get("title") or Path(path).stem,
-        positions,
-        np.concatenate(faces),
-        name,
-    )
+        raise FileFormatError(f"{path}: clip {name!r} gives vertex positions that are not finite")
+    asset = document.json["asset"]
+    title = asset.get("extras", {}).get("title") if isinstance(asset.get("extras"), dict) else None
+    return (title if isinstance(title, str) and title else Path(path).stem, positions, np.concatenate(faces), name)
 
 
-def _primitive(document, primitive, weights, frames):
+def _primitive(document, where, primitive, weights, frames):
     """Positions (T, V, 3) of a primitive with its morph targets applied, and its triangles."""
-    attributes = primitive.get("attributes", {})
-    if "POSITION" not in attributes:
-        raise FileFormatError(f"{document.path}: a mesh primitive has no POSITION")
-    base = document.accessor(attributes["POSITION"])
+    attributes = primitive["attributes"]
+    base = document.typed(attributes["POSITION"], f"{where}.attributes.POSITION", ("VEC3",), tuple(_COMPONENTS))
     points = np.broadcast_to(base, (frames, *base.shape)).copy()
     targets = primitive.get("targets", [])
     if targets and weights is not None:
-        offsets = np.stack(
-            [document.accessor(t["POSITION"]) if "POSITION" in t else np.zeros_like(base) for t in targets]
-        )
-        points += np.einsum("tk,kvd->tvd", weights[:, : len(targets)], offsets[: weights.shape[1]])
-    mode = primitive.get("mode", 4)
-    indices = document.accessor(primitive["indices"])[:, 0] if "indices" in primitive else np.arange(len(base))
-    if mode == 4:  # triangles
+        offsets = np.stack([
+            document.typed(t["POSITION"], f"{where}.targets[{k}].POSITION", ("VEC3",), tuple(_COMPONENTS))
+            if "POSITION" in t else np.zeros_like(base) for k, t in enumerate(targets)
+        ])  # fmt: skip
+        points += np.einsum("tk,kvd->tvd", weights, offsets)
+    mode = primitive.get("mode", _TRIANGLES)
+    if "indices" in primitive:
+        indices = document.typed(primitive["indices"], f"{where}.indices", ("SCALAR",), _UNSIGNED)[:, 0]
+        if len(indices) and indices.max() >= len(base):
+            document.fail(f"{where}.indices", f"refer to vertex {indices.max()}; the primitive has {len(base)}")
+    else:
+        indices = np.arange(len(base))
+    if mode == _TRIANGLES:
         triangles = indices[: len(indices) // 3 * 3].reshape(-1, 3)
-    elif mode == 5:  # triangle strip
-        triangles = np.array(
-            [indices[i : i + 3] if i % 2 == 0 else indices[[i + 1, i, i + 2]] for i in range(len(indices) - 2)]
-        ).reshape(-1, 3)
-    elif mode == 6:  # triangle fan
-        triangles = np.column_stack([np.full(len(indices) - 2, indices[0]), indices[1:-1], indices[2:]])
+    elif mode == _STRIP:  # every other triangle turned over, so that all face one way
+        i = np.arange(max(len(indices) - 2, 0))
+        odd = (i % 2).astype(bool)
+        triangles = np.column_stack([indices[np.where(odd, i + 1, i)], indices[np.where(odd, i, i + 1)],
+                                     indices[i + 2]])  # fmt: skip
+    elif mode == _FAN:
+        triangles = np.column_stack([np.full(max(len(indices) - 2, 0), indices[0]), indices[1:-1], indices[2:]])
     else:  # points and lines have no faces
         triangles = np.zeros((0, 3), dtype=np.int64)
-    return points, triangles.astype(np.int64)
+    return points, triangles.reshape(-1, 3).astype(np.int64)
 
 
-def _skinned(document, skin, primitive, points, world):
-    """Linear blend skinning: sum over the vertex's joints of weight * (joint world @ inverse bind)."""
+def _skinned(document, where, skin, s, primitive, points, joint_world):
+    """Linear blend skinning: sum over the vertex's joints of weight * (joint world @ inverse
+    bind), on blocks of frames so that the per-vertex matrices stay small."""
     attributes = primitive["attributes"]
-    joints = np.concatenate(
-        [document.accessor(attributes[k]) for k in sorted(attributes) if k.startswith("JOINTS_")], axis=1
-    )
-    weights = np.concatenate(
-        [document.accessor(attributes[k]) for k in sorted(attributes) if k.startswith("WEIGHTS_")], axis=1
-    )
-    nodes = np.asarray(skin["joints"])
+    sets = sorted(k for k in attributes if k.startswith("JOINTS_"))
+    if not sets or sorted(k for k in attributes if k.startswith("WEIGHTS_")) != [k.replace("JOINTS", "WEIGHTS")
+                                                                                   for k in sets]:  # fmt: skip
+        document.fail(f"{where}.attributes", "of a skinned mesh need JOINTS_n and WEIGHTS_n in pairs")
+    joints = np.concatenate([document.typed(attributes[k], f"{where}.attributes.{k}", ("VEC4",), (5121, 5123))
+                             for k in sets], axis=1)  # fmt: skip
+    weights = np.concatenate([document.typed(attributes[k.replace("JOINTS", "WEIGHTS")],
+                                             f"{where}.attributes.{k.replace('JOINTS', 'WEIGHTS')}", ("VEC4",),
+                                             (5121, 5123, FLOAT)) for k in sets], axis=1)  # fmt: skip
+    n = len(skin["joints"])
+    if joints.max() >= n:
+        document.fail(f"{where}.attributes.{sets[0]}", f"refer to joint {joints.max()}; skins[{s}] has {n}")
     inverse = (
-        document.accessor(skin["inverseBindMatrices"]).reshape(-1, 4, 4).transpose(0, 2, 1)
+        document.accessor(skin["inverseBindMatrices"])[:n].reshape(-1, 4, 4).transpose(0, 2, 1)
         if "inverseBindMatrices" in skin
-        else np.tile(np.eye(4), (len(nodes), 1, 1))
+        else np.tile(np.eye(4), (n, 1, 1))
     )
-    joint_matrices = world[:, nodes] @ inverse  # (T, J, 4, 4)
+    joint_matrices = (joint_world @ inverse)[..., :3, :]  # (T, J, 3, 4)
     total = weights.sum(axis=1, keepdims=True)
     weights = weights / np.where(total > 0, total, 1.0)
-    homogeneous = np.concatenate([points, np.ones(points.shape[:2] + (1,))], axis=2)  # (T, V, 4)
-    result = np.zeros(points.shape)
-    for slot in range(joints.shape[1]):
-        m = joint_matrices[:, joints[:, slot]]  # (T, V, 4, 4)
-        moved = np.einsum("tvij,tvj->tvi", m[..., :3, :], homogeneous)
-        result += weights[None, :, slot, None] * moved
+    frames, vertices = points.shape[:2]
+    block = max(1, _SKIN_BLOCK_BYTES // max(1, vertices * 12 * 8))
+    result = np.empty(points.shape)
+    for start in range(0, frames, block):
+        stop = min(start + block, frames)
+        blended = np.zeros((stop - start, vertices, 3, 4))
+        for slot in range(joints.shape[1]):
+            blended += weights[None, :, slot, None, None] * joint_matrices[start:stop, joints[:, slot]]
+        result[start:stop] = np.einsum("tvij,tvj->tvi", blended[..., :3], points[start:stop]) + blended[..., 3]
     return result
 
 
-def skin_clips(path, fps):
+def skin_clips(path, fps, *, allow_outside: bool = False):
     """Per distinct skin, the skeleton (its joints and their ancestors, which carry the model's
     placement, parents first) and every animation that moves it, sampled at `fps` (None: each
     animation's key rate): yields (skin name, names, parents, rest translations (J, 3), rest
     rotations (J, 4), scales (J, 3), {clip name: (fps, rotations (T, J, 4), translations
     (T, J, 3))})."""
-    document = Document(path)
-    skins = document.json.get("skins", [])
+    document = Document(path, allow_outside=allow_outside)
+    skins = document._list("skins")
     if not skins:
         raise ValidationError(f"{path}: has no skin; skeletal clips need one")
-    if not document.json.get("animations"):
+    if not document._list("animations"):
         raise ValidationError(f"{path}: has no animation")
-    nodes = document.json.get("nodes", [])
-    parents = document.parents()
-    order = {node: k for k, node in enumerate(document.scene_nodes())}
+    nodes = document._list("nodes")
+    order = {node: k for k, node in enumerate(document.order)}
     seen = set()
     for s, skin in enumerate(skins):
-        joints = frozenset(skin.get("joints", []))
-        if not joints or joints in seen:
+        joints = frozenset(skin["joints"])
+        if joints in seen:
             continue
         seen.add(joints)
-        members = set(joints)
-        for joint in joints:
-            while joint in parents:
-                joint = parents[joint]
-                members.add(joint)
+        members = document.with_ancestors(joints)
         if any(m not in order for m in members):
-            raise FileFormatError(f"{path}: skin {s} has joints outside the default scene")
+            document.fail(f"skins[{s}].joints", "name nodes outside the default scene")
         chosen = sorted(members, key=order.__getitem__)
         index = {node: k for k, node in enumerate(chosen)}
         names = [nodes[n].get("name") or f"node {n}" for n in chosen]
-        names = [name if names.count(name) == 1 else f"{name} ({n})" for name, n in zip(names, chosen)]
-        zero = np.zeros(1)
-        translation, rotation, scale, _, matrices, fixed = document.trs({}, zero)
-        if fixed[chosen].any():
-            raise FileFormatError(
-                f"{path}: skin {s} has joints placed by a matrix; flockkit skeletons need translation/rotation/scale"
-            )
+        counts = Counter(names)
+        names = [name if counts[name] == 1 else f"{name} ({n})" for name, n in zip(names, chosen)]
+        translation, rotation, scale, _, _, fixed = document.trs(None, np.zeros(1), chosen)
+        if fixed.any():
+            document.fail(f"skins[{s}].joints", "name nodes placed by a matrix; flockkit skeletons need translation, "
+                          "rotation and scale")  # fmt: skip
         clips = {}
-        for name, animation in zip(document.clips(), document.json["animations"]):
-            targets = {c.get("target", {}).get("node") for c in animation.get("channels", [])}
-            if not targets & members:
+        for a, name in enumerate(document.clip_names()):
+            channels = document._list("animations")[a]["channels"]
+            moving = [c["sampler"] for c in channels if c["target"].get("node") in index]
+            if not moving:
                 continue
-            inputs = [
-                document.accessor(animation["samplers"][c["sampler"]]["input"])[:, 0]
-                for c in animation.get("channels", [])
-                if c.get("target", {}).get("node") in members
-            ]
-            duration = max(float(i.max()) for i in inputs if len(i))
+            inputs = [document.key_times(a, s) for s in moving]
+            duration = max(float(i[-1]) for i in inputs)
             rate = fps
             if rate is None:
                 steps = np.concatenate([np.diff(i) for i in inputs])
                 steps = steps[steps > 1e-6]
                 rate = float(np.round(1.0 / np.median(steps), 3)) if len(steps) else 30.0
+                if rate > MAX_KEY_RATE:
+                    document.fail(f"animations[{a}]", f"has keys {1 / rate:.3g} s apart ({rate:g} a second); read it "
+                                  "with fps= to sample it at a rate of your choice")  # fmt: skip
+            validate.allocation((duration * rate + 1) * len(chosen) * 30,
+                                f"{path}: clip {name!r} ({duration:g} s) at {rate:g} fps")  # fmt: skip
             times = np.arange(int(round(duration * rate)) + 1) / rate
-            t, r, sc, _, _, _ = document.trs(animation, times)
-            if not np.allclose(sc[:, chosen], scale[0, chosen], atol=1e-6):
+            t, r, sc, _, _, _ = document.trs(a, times, chosen)
+            if not np.allclose(sc, scale[0], atol=1e-6):
                 raise ValidationError(f"{path}: clip {name!r} animates joint scales, which flockkit clips do not hold")
-            clips[name] = (rate, r[:, chosen], t[:, chosen])
-        parent = np.array([index.get(parents.get(n), -1) for n in chosen])
+            clips[name] = (rate, r, t)
+        parent = np.array([index.get(int(document.parent[n]), -1) for n in chosen])
         yield (
-            skin.get("name") or f"skin {s}",
+            skin.get("name") if isinstance(skin.get("name"), str) and skin.get("name") else f"skin {s}",
             names,
             parent,
-            translation[0, chosen],
-            rotation[0, chosen],
-            scale[0, chosen],
+            translation[0],
+            rotation[0],
+            scale[0],
             clips,
         )

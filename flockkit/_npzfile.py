@@ -9,16 +9,19 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import warnings
 import zipfile
 from pathlib import Path
 
 import numpy as np
 
+from . import _files, validate
 from ._atomic import atomic_path
 from .errors import FileFormatError
 
 METADATA_KEY = "__metadata__"
+_NUMERIC = "biuf"  # flags, integers, floats: never Python objects, strings, records or complex numbers
 
 
 def write(path, *, kind: str, version: int, arrays: dict[str, np.ndarray], metadata: dict) -> Path:
@@ -72,10 +75,7 @@ def read(path, *, kind: str, versions: tuple[int, ...]) -> tuple[dict[str, np.nd
 
 def _existing_file(path) -> Path:
     path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"{path}: no such file")
-    if not path.is_file():
-        raise FileFormatError(f"{path}: not a regular file ({'a folder' if path.is_dir() else 'a device or socket'})")
+    os.close(_files.open_regular(path))
     return path
 
 
@@ -97,29 +97,41 @@ def kind_of(path) -> str:
 def _arrays(path: Path) -> dict[str, np.ndarray]:
     """The arrays of an .npz, each header checked against the size its archive entry declares
     before the array is read (a corrupt header cannot make us allocate what is not there)."""
-    from numpy.lib import format as npy
-
     arrays = {}
     with zipfile.ZipFile(path) as archive:
-        for info in archive.infolist():
+        entries = archive.infolist()
+        # the sizes the zip headers declare, before anything is inflated: a few megabytes of zeros
+        # may declare gigabytes, and would inflate to them
+        validate.allocation(sum(info.file_size for info in entries), f"{path}: the arrays it holds", itemsize=1)
+        for info in entries:
             if not info.filename.endswith(".npy"):
                 raise FileFormatError(f"{path}: unexpected entry {info.filename!r} in the archive")
-            with archive.open(info) as handle, warnings.catch_warnings():
-                warnings.simplefilter("ignore")  # a damaged header's text may warn as numpy parses it
-                version = npy.read_magic(handle)
-                read_header = npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0
-                shape, fortran, dtype = read_header(handle)
-                if dtype.hasobject:
-                    raise FileFormatError(
-                        f"{path}: array {info.filename!r} holds Python objects; flockkit never reads those"
-                    )
-                needed = math.prod(shape) * dtype.itemsize
-                if needed != info.file_size - handle.tell():
-                    raise FileFormatError(
-                        f"{path}: array {info.filename!r} claims shape {shape} ({needed} bytes) but its entry holds "
-                        f"{info.file_size - handle.tell()} bytes"
-                    )
-                data = handle.read(needed)
-            array = np.frombuffer(data, dtype=dtype)
-            arrays[info.filename.removesuffix(".npy")] = array.reshape(shape, order="F" if fortran else "C").copy()
+            with archive.open(info) as handle:
+                array = read_array(handle, info.file_size, source=f"{path}: array {info.filename!r}")
+            arrays[info.filename.removesuffix(".npy")] = array
     return arrays
+
+
+def read_array(handle, size: int, *, source: str) -> np.ndarray:
+    """The .npy array in the `size` bytes `handle` reads: its header is parsed and checked (numbers
+    and flags only; a shape whose data fills exactly the bytes that follow) before its data is
+    read. FileFormatError naming `source` otherwise."""
+    from numpy.lib import format as npy
+
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # a damaged header's text may warn as numpy parses it
+            version = npy.read_magic(handle)
+            read_header = npy.read_array_header_1_0 if version == (1, 0) else npy.read_array_header_2_0
+            shape, fortran, dtype = read_header(handle)
+    except (ValueError, EOFError, SyntaxError, TypeError) as exc:
+        raise FileFormatError(f"{source}: not a .npy array: {type(exc).__name__}: {exc}") from None
+    if dtype.kind not in _NUMERIC or dtype.hasobject:
+        raise FileFormatError(f"{source} holds {dtype}; flockkit reads numbers and flags only")
+    needed = math.prod(shape) * dtype.itemsize
+    if needed != size - handle.tell():
+        raise FileFormatError(f"{source} claims shape {shape} ({needed} bytes) but holds {size - handle.tell()} bytes")
+    data = handle.read(needed)
+    if len(data) != needed:
+        raise FileFormatError(f"{source} ends after {len(data)} of its {needed} bytes (truncated?)")
+    return np.frombuffer(data, dtype=dtype).reshape(shape, order="F" if fortran else "C").copy()

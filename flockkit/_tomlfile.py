@@ -5,17 +5,15 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
+from . import _files
 from .errors import FileFormatError
 
 
 def read(path, what: str) -> dict:
     """The tables of the TOML file at `path`; FileNotFoundError when there is none,
-    FileFormatError ("not a TOML <what>") when it does not parse."""
+    FileFormatError ("not a TOML <what>") when it is not a regular file or does not parse."""
     path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
     try:
-        with open(path, "rb") as handle:
-            return tomllib.load(handle)
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise FileFormatError(f"{path}: not a TOML {what}: {exc}") from None
+        return tomllib.loads(_files.read_text(path))
+    except (tomllib.TOMLDecodeError, RecursionError) as exc:
+        raise FileFormatError(f"{path}: not a TOML {what}: {type(exc).__name__}: {exc}") from None

@@ -19,11 +19,12 @@ import contextlib
 import csv
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
 
-from . import validate
+from . import _files, _npzfile, validate
 from ._atomic import atomic_path
 from ._gltf import FLOAT, UNSIGNED_SHORT, glb_bytes
 from .crowd.skeleton import read_clips
@@ -150,9 +151,7 @@ def _motion(
 
 def _table(path: Path, delimiter) -> tuple[np.ndarray, int]:
     """The numeric rows of a delimited text file (header lines skipped) and the first data line."""
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
-    text = path.read_text(encoding="utf-8-sig", errors="replace").splitlines()  # -sig: drop a BOM
+    text = _files.read_bytes(path).decode("utf-8-sig", errors="replace").splitlines()  # -sig: drop a BOM
     lines = [
         (number, line) for number, line in enumerate(text, 1) if line.strip() and not line.lstrip().startswith("#")
     ]
@@ -308,18 +307,11 @@ def read_npy(path, *, dt=None, fps=None, max_gap: int = DEFAULT_MAX_GAP, agents=
     `image_height` as in read_wide."""
     path = Path(path)
     dt = _dt(dt, fps)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such file")
-    try:
-        array = np.load(path, allow_pickle=False)
-    except (ValueError, OSError, EOFError) as exc:
-        raise FileFormatError(f"{path}: not a readable .npy array: {exc}") from None
-    if (
-        not isinstance(array, np.ndarray)
-        or array.ndim != 3
-        or array.shape[2] not in (2, 3)
-        or array.dtype.kind not in "fiu"
-    ):
+    with os.fdopen(_files.open_regular(path), "rb") as handle:
+        size = os.fstat(handle.fileno()).st_size
+        validate.allocation(size, f"{path}: reading {size} bytes", itemsize=1)
+        array = _npzfile.read_array(handle, size, source=str(path))
+    if array.ndim != 3 or array.shape[2] not in (2, 3) or array.dtype.kind not in "fiu":
         raise FileFormatError(
             f"{path}: expected a numeric (T, N, D) array with D in {{2, 3}}; got {getattr(array, 'shape', '?')}"
         )

@@ -52,6 +52,10 @@ class Segmentation:
     def __attrs_post_init__(self):
         if isinstance(self.n_parts, bool) or not isinstance(self.n_parts, int | np.integer) or self.n_parts < 1:
             raise ValidationError(f"Segmentation.n_parts must be a positive integer; got {self.n_parts!r}")
+        if self.n_parts > len(self.labels):
+            raise ValidationError(
+                f"Segmentation.n_parts is {self.n_parts}, more than its {len(self.labels)} points: some part is empty"
+            )
         if self.labels.min() < 0 or self.labels.max() >= self.n_parts:
             raise ValidationError(
                 f"Segmentation.labels must lie in 0..{self.n_parts - 1}; got {self.labels.min()}..{self.labels.max()}"

@@ -431,6 +431,9 @@ class Motion:
     def _from_arrays(cls, arrays: Mapping[str, np.ndarray], dt) -> Motion:
         """The inverse of :meth:`_to_arrays`; KeyError if positions are missing, ValidationError if invalid."""
         channels = {name.removeprefix("channel."): a for name, a in arrays.items() if name.startswith("channel.")}
+        for name, array in (("positions", arrays["positions"]), *channels.items()):
+            if array.dtype.kind != "f":
+                raise ValidationError(f"{name} must hold floating-point numbers; got {array.dtype}")
         return cls(positions=arrays["positions"], dt=dt, channels=channels)
 
     def save(self, path) -> None:

@@ -20,13 +20,14 @@ from __future__ import annotations
 
 import math
 import os
+import re
 
 import attrs
 import numpy as np
 
 from .errors import ValidationError
 
-__all__ = ["number", "integer", "dims", "flag", "seed", "window", "parameter", "allocation"]
+__all__ = ["number", "integer", "dims", "flag", "seed", "window", "parameter", "allocation", "memory_limit"]
 
 _NO_DEFAULT = object()
 
@@ -89,14 +90,38 @@ def seed(value, field: str = "seed") -> int | None:
     return integer(value, field, minimum=0, optional=True)
 
 
+# What one request may take unless FLOCKKIT_MEMORY_LIMIT says otherwise: the decompression-bomb
+# rule of image libraries (Pillow refuses images above about 179 megapixels, 0.5 GiB of RGB),
+# scaled to animation: a mesh of 100 000 vertices over 900 frames, a crowd of a million agents.
+DEFAULT_MEMORY_LIMIT = 2 * 1024**3
+_UNITS = {"": 1, "K": 1024, "M": 1024**2, "G": 1024**3, "T": 1024**4}
+
+
+def memory_limit() -> float:
+    """The most bytes one request may take: FLOCKKIT_MEMORY_LIMIT (bytes, or a number with a K,
+    M, G or T suffix, powers of 1024) or DEFAULT_MEMORY_LIMIT, and never more than this machine
+    has available (/proc/meminfo's MemAvailable, else physical memory)."""
+    text = os.environ.get("FLOCKKIT_MEMORY_LIMIT", "").strip()
+    limit = float(DEFAULT_MEMORY_LIMIT)
+    if text:
+        match = re.fullmatch(r"(\d+(?:\.\d+)?)\s*([KMGT]?)(?:i?B)?", text, re.IGNORECASE)
+        if not match:
+            raise ValidationError(f"FLOCKKIT_MEMORY_LIMIT must be a number of bytes such as 8G; got {text!r}")
+        limit = float(match.group(1)) * _UNITS[match.group(2).upper()]
+    return min(limit, _available_memory())
+
+
 def allocation(n_values, what: str, *, itemsize: int = 8) -> None:
-    """Refuse, before any work, a result of `n_values` numbers (`itemsize` bytes each) larger
-    than this machine's memory: ValidationError stating the memory `what` would need and what
-    there is (from /proc/meminfo's MemAvailable, else physical memory)."""
+    """Refuse, before any work, a request of `n_values` numbers (`itemsize` bytes each) above the
+    memory budget (:func:`memory_limit`): ValidationError stating the memory `what` would need,
+    the budget, and how to raise it."""
     needed = float(n_values) * itemsize
-    available = _available_memory()
-    if needed > available:
-        raise ValidationError(f"{what} needs {_size(needed)} of memory; this machine has {_size(available)} available")
+    limit = memory_limit()
+    if not needed <= limit:
+        raise ValidationError(
+            f"{what} needs {_size(needed)} of memory; the budget is {_size(limit)} (the smaller of "
+            f"FLOCKKIT_MEMORY_LIMIT, default {_size(DEFAULT_MEMORY_LIMIT)}, and the memory available)"
+        )
 
 
 def _available_memory() -> float:

@@ -33,6 +33,9 @@ ENTRY_FLOATS = 12  # per joint: rotation 4, translation 3, scale 3, reserved 2: 
 # Frames a stream's controller is evaluated ahead; refills are staggered over this many frames.
 PREFETCH_FRAMES = 32
 STATES = ("Running", "Stopped")
+# The fastest animation system a pool runs (frames a second): above any display's refresh rate.
+# A pool runs at least one frame a second.
+MAX_FPS = 1000.0
 
 
 def _controller(value):
@@ -126,7 +129,8 @@ class StreamPool:
     ----------
     streams : sequence of Stream
     fps : float
-        Frames per second of the animation system (animFrameRate): one ``advance`` is one frame.
+        Frames per second of the animation system (animFrameRate), 1 to MAX_FPS: one ``advance``
+        is one frame.
     xp : array namespace, optional
         Where the store lives (default numpy): a GPU array library's namespace (``cupy``) keeps
         it on the device, where ``Crowd.poses`` samples and blends it through the same code.
@@ -138,21 +142,25 @@ class StreamPool:
         self.streams = tuple(streams)
         if not self.streams or not all(isinstance(s, Stream) for s in self.streams):
             raise ValidationError("StreamPool needs a non-empty sequence of flockkit.crowd.Stream")
-        self.fps = validate.number(fps, "StreamPool.fps", minimum=0, strict=True)
+        self.fps = validate.number(fps, "StreamPool.fps", minimum=1, maximum=MAX_FPS)
         s = len(self.streams)
         self.history = np.array([st.history for st in self.streams], dtype=np.int64)
         self.bones = np.array([st.skeleton.n_joints for st in self.streams], dtype=np.int64)
         longest = int(self.history.max())
+        floats = float(np.sum(self.history.astype(float) * self.bones)) * ENTRY_FLOATS
+        validate.allocation(
+            4 * floats + 8 * 3 * s * float(longest) + 4 * float(self.bones.sum()) * PREFETCH_FRAMES * ENTRY_FLOATS,
+            f"StreamPool: {s} streams, histories up to {longest} frames",
+            itemsize=1,
+        )
         # Figure 6: block by block (slot I of every stream holding more than I frames), so that a
         # stream's slot is found by one lookup and no stream is padded.
-        self.lookup = np.full((s, longest), -1, dtype=np.int64)
-        offset = 0
-        for slot in range(longest):
-            for k in np.flatnonzero(self.history > slot):
-                self.lookup[k, slot] = offset
-                offset += int(self.bones[k]) * ENTRY_FLOATS
+        held = self.history[:, None] > np.arange(longest)  # (streams, slots)
+        sizes = np.where(held, self.bones[:, None] * ENTRY_FLOATS, 0)
+        block_start = np.cumsum(sizes.sum(axis=0)) - sizes.sum(axis=0)
+        self.lookup = np.where(held, block_start + np.cumsum(sizes, axis=0) - sizes, -1)
         self.xp = np if xp is None else xp
-        self.store = self.xp.zeros(offset, dtype=self.xp.float32)
+        self.store = self.xp.zeros(int(sizes.sum()), dtype=self.xp.float32)
         self.head = np.zeros(s, dtype=np.int64)  # the slot written last
         self.filled = np.zeros(s, dtype=np.int64)  # frames written since the stream (re)started
         self.clock = np.zeros(s, dtype=np.int64)  # frames evaluated since the stream (re)started
@@ -172,8 +180,7 @@ class StreamPool:
         self._events: dict[int, dict] = {}  # stream -> {frame: events} ahead, for streams that have some
         self._stops = np.array([st.default == "Stopped" for st in self.streams])
         self._scales = [st.skeleton.scales.astype(np.float32) for st in self.streams]
-        for k in np.flatnonzero(self.running):
-            self._restart(int(k))
+        self._restart(np.flatnonzero(self.running))
 
     # -- lookups --------------------------------------------------------------------------------
 
@@ -231,12 +238,16 @@ class StreamPool:
 
     # -- running --------------------------------------------------------------------------------
 
-    def _restart(self, k: int) -> None:
-        self.running[k] = True
-        self.head[k], self.filled[k], self.clock[k] = -1 % self.history[k], 0, 0
-        self._count[k] = 0
-        self._events.pop(k, None)
-        self._write(np.array([k]))  # a started stream has its first pose at once: offset 0 reads it
+    def _restart(self, streams: np.ndarray) -> None:
+        """Start `streams` from their clocks' zero: nothing written, nothing prefetched, then the
+        first pose written at once (offset 0 reads it)."""
+        self.running[streams] = True
+        self.head[streams] = self.history[streams] - 1
+        self.filled[streams], self.clock[streams] = 0, 0
+        self._first[streams], self._count[streams] = 0, 0
+        for k in streams.tolist():
+            self._events.pop(k, None)
+        self._write(streams)
 
     def acquire(self, streams: np.ndarray) -> np.ndarray:
         """Count agent parts arriving on `streams` (repeats count); start Stopped ones. Returns the
@@ -244,8 +255,7 @@ class StreamPool:
         counts = np.bincount(streams, minlength=len(self.streams))
         starting = np.flatnonzero((counts > 0) & ~self.running)
         self.users += counts
-        for k in starting:
-            self._restart(int(k))
+        self._restart(starting)
         return starting
 
     def release(self, streams: np.ndarray) -> None:
@@ -318,7 +328,9 @@ class UniquePool:
     def __init__(self, size: int, *, max_bones: int, fps: float = 30.0):
         self.size = validate.integer(size, "UniquePool.size", minimum=0)
         self.max_bones = validate.integer(max_bones, "UniquePool.max_bones", minimum=1)
-        self.fps = validate.number(fps, "UniquePool.fps", minimum=0, strict=True)
+        self.fps = validate.number(fps, "UniquePool.fps", minimum=1, maximum=MAX_FPS)
+        validate.allocation(self.size * (self.max_bones * ENTRY_FLOATS * 4 + 16), f"UniquePool: {self.size} slots "
+                            f"of {self.max_bones} joints", itemsize=1)  # fmt: skip
         self.store = np.zeros((self.size, self.max_bones, ENTRY_FLOATS), dtype=np.float32)
         self.controllers: list = [None] * self.size
         self.clock = np.zeros(self.size, dtype=np.int64)

@@ -104,6 +104,9 @@ class Crowd:
         self.time = 0.0
         self.frame = 0
         n, c = self.n_agents, len(self.clusters)
+        # the instance buffer, the dilation state and the temporaries of an update, per agent part
+        validate.allocation(float(n) * c * (INSTANCE.itemsize + 8) * 4, f"Crowd: {n} agents x {c} clusters",
+                            itemsize=1)  # fmt: skip
         buffer = np.zeros((n, c), dtype=INSTANCE)
         buffer["stream"] = buffer["target"] = -1
         self.skeletons = []

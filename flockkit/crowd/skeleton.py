@@ -14,7 +14,7 @@ from pathlib import Path
 import attrs
 import numpy as np
 
-from .. import rigid
+from .. import rigid, validate
 from .._arrays import readonly_float, readonly_int
 from ..errors import ValidationError
 
@@ -348,7 +348,7 @@ class SkeletalClip:
         return Pose._adopt(self.rotations[frame], self.translations[frame])
 
 
-def read_clips(path, *, fps=None) -> dict[str, SkeletalClip]:
+def read_clips(path, *, fps=None, allow_outside: bool = False) -> dict[str, SkeletalClip]:
     """Every skeletal clip in a file: glTF (.gltf, .glb: every animation of each skin) or BVH
     (.bvh: the take, named after the file).
 
@@ -357,6 +357,8 @@ def read_clips(path, *, fps=None) -> dict[str, SkeletalClip]:
     path : path-like
     fps : float, optional
         Resample to this rate; default each clip's own (glTF: its key rate; BVH: its frame time).
+    allow_outside : bool
+        Let a glTF file's external buffers lie outside its folder (see docs/security.md).
 
     Returns
     -------
@@ -388,8 +390,10 @@ def read_clips(path, *, fps=None) -> dict[str, SkeletalClip]:
         clip = SkeletalClip(skeleton=skeleton, fps=rate, rotations=rotations, translations=translations, name=path.stem)
         return {path.stem: _resampled(clip, fps)}
     if suffix not in (".gltf", ".glb"):
-        raise ValidationError(f"{path}: read_clips reads .gltf, .glb and .bvh files; got {suffix or 'no suffix'!r}")
-    skins = list(_gltf.skin_clips(path, fps))
+        raise ValidationError(
+            f"{path}: read_clips reads .gltf, .glb and .bvh files; got {suffix or 'a file without a suffix'!r}"
+        )
+    skins = list(_gltf.skin_clips(path, fps, allow_outside=allow_outside))
     found = {}
     for skin, names, parents, translations, rotations, scales, clips in skins:
         skeleton = Skeleton(
@@ -406,6 +410,8 @@ def read_clips(path, *, fps=None) -> dict[str, SkeletalClip]:
 def _resampled(clip: SkeletalClip, fps: float | None) -> SkeletalClip:
     if fps is None or fps == clip.fps:
         return clip
+    validate.allocation((clip.duration * fps + 1) * clip.skeleton.n_joints * 7 * 3,
+                        f"clip {clip.name!r} ({clip.duration:g} s) resampled at {fps:g} fps")  # fmt: skip
     times = np.arange(int(round(clip.duration * fps)) + 1) / fps
     pose = clip.sample(times)
     return SkeletalClip(

@@ -73,13 +73,17 @@ class ClipPlayer:
         period = self.clip.duration
         if not self.loop or period <= 0:
             found = [(e.time, e.name) for e in self.clip.events if low <= e.time < high]
-        else:
+        elif not self.clip.events:
             found = []
-            for cycle in range(math.floor(low / period), math.floor(high / period) + 1):
-                for e in self.clip.events:
-                    at = cycle * period + e.time % period  # an event at the very end is the next loop's start
-                    if low <= at < high:
-                        found.append((at, e.name))
+        else:
+            first, last = math.floor(low / period), math.floor(high / period)
+            validate.allocation((last - first + 1) * len(self.clip.events),
+                                f"clip: the events of {high - low:g} s of a {period:g} s loop")  # fmt: skip
+            # an event at the very end is the next loop's start
+            at = np.arange(first, last + 1)[:, None] * period + np.array([e.time % period for e in self.clip.events])
+            names = np.broadcast_to(np.array([e.name for e in self.clip.events], dtype=object), at.shape)
+            inside = (low <= at) & (at < high)
+            found = list(zip(at[inside].tolist(), names[inside].tolist()))
         return [Event(time=(at - self.start) / self.rate, name=name) for at, name in sorted(found)]
 
 
