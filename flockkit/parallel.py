@@ -18,7 +18,7 @@ from collections.abc import Callable, Iterable, Iterator
 
 from .errors import MissingDependencyError, ValidationError
 
-__all__ = ["jobs", "imap"]
+__all__ = ["jobs", "imap", "one_thread"]
 
 
 def jobs(n_jobs: int | None = None) -> int:
@@ -40,6 +40,7 @@ def imap(function: Callable, calls: Iterable[tuple], *, n_jobs: int | None = Non
     once where it cannot (Ray). Raises MissingDependencyError, naming the module, when the workers
     cannot import what the work needs."""
     count = jobs(n_jobs)
+    function = one_thread(function)
     if count == 1:
         return (function(*args) for args in calls)
     from joblib import Parallel, delayed
@@ -57,6 +58,21 @@ def imap(function: Callable, calls: Iterable[tuple], *, n_jobs: int | None = Non
         raise _missing(exc) from exc
 
 
+class one_thread:  # noqa: N801 - used as a function, like functools.partial
+    """`function` run with one BLAS and OpenMP thread: sums split over threads round differently,
+    and workers get different thread counts (loky gives each cores / n_jobs), so the same job
+    would give results a few ulps apart in this process and on a worker."""
+
+    def __init__(self, function: Callable):
+        self.function = getattr(function, "function", function)
+
+    def __call__(self, *args):
+        from threadpoolctl import threadpool_limits
+
+        with threadpool_limits(limits=1):
+            return self.function(*args)
+
+
 # joblib's own backends run workers from this very environment; others (Dask, Ray) may not
 _SAME_ENVIRONMENT = {"LokyBackend", "MultiprocessingBackend", "ThreadingBackend", "SequentialBackend"}
 
@@ -69,7 +85,7 @@ def _probe(count, function, calls) -> None:
 
     from joblib import Parallel, delayed
 
-    modules = {"flockkit", function.__module__}
+    modules = {"flockkit", function.function.__module__}
     for args in calls[:1]:
         modules.update(type(arg).__module__ for arg in args)
     modules = sorted(m.split(".")[0] for m in modules if m and m.split(".")[0] not in ("builtins", "numpy"))

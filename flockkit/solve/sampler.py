@@ -388,7 +388,7 @@ def _chains_here(arguments, seeds, iterations, callback, progress) -> list:
                 else (lambda done, base=index * iterations: report(base + done, len(seeds) * iterations, "sampling"))
             )
             chain_callback = None if callback is None else (lambda i, g, a, chain=index: callback(chain, i, g, a))
-            results.append(_chain(*arguments, chain_seed, chain_callback, tick))
+            results.append(parallel.one_thread(_chain)(*arguments, chain_seed, chain_callback, tick))
     return results
 
 
