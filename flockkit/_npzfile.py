@@ -18,7 +18,7 @@ import numpy as np
 
 from . import _files, validate
 from ._atomic import atomic_path
-from .errors import FileFormatError
+from .errors import FileFormatError, ValidationError
 
 METADATA_KEY = "__metadata__"
 _NUMERIC = "biuf"  # flags, integers, floats: never Python objects, strings, records or complex numbers
@@ -49,7 +49,7 @@ def read(path, *, kind: str, versions: tuple[int, ...]) -> tuple[dict[str, np.nd
     path = _existing_file(path)
     try:
         arrays = _arrays(path)
-    except FileFormatError:
+    except (FileFormatError, ValidationError):  # damaged, or larger than the memory budget
         raise
     except Exception as exc:  # noqa: BLE001 - zlib, zipfile, numpy header parsing: all mean a bad file
         raise FileFormatError(
