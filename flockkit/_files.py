@@ -92,9 +92,10 @@ def read_text(path) -> str:
         raise FileFormatError(f"{Path(path)}: not UTF-8 text (byte {exc.start})") from None
 
 
-def confined(folder, reference, *, source, where: str, allow_outside: bool = False) -> Path:
-    """The file that `reference`, a relative URI written in the file `source` at `where` (a JSON
-    path such as ``buffers[0].uri``), names in `folder`.
+def confined(folder, reference, *, source, where: str, allow_outside: bool = False, uri: bool = True) -> Path:
+    """The file that `reference`, a relative URI (or with ``uri=False`` a plain relative path, as
+    TOML files hold them) written in the file `source` at `where` (a JSON path such as
+    ``buffers[0].uri``), names in `folder`.
 
     Refused with a FileFormatError naming `source` and `where`: anything but a non-empty string, a
     URI with a scheme (``file:``, ``http:``), an absolute path, a ``..`` segment, a
@@ -109,12 +110,12 @@ def confined(folder, reference, *, source, where: str, allow_outside: bool = Fal
 
     if not isinstance(reference, str) or not reference:
         raise FileFormatError(f"{source}: {where} must be a non-empty string; got {reference!r}")
-    if _SCHEME.match(reference):
+    if uri and _SCHEME.match(reference):
         raise FileFormatError(f"{source}: {where}: {reference[:60]!r} is a URI with a scheme; flockkit reads local "
                               "files only")  # fmt: skip
-    if _ENCODED_SEPARATOR.search(reference) or "\\" in reference or "\0" in reference:
+    if (uri and _ENCODED_SEPARATOR.search(reference)) or "\\" in reference or "\0" in reference:
         refuse(f"{reference[:60]!r} holds an encoded or Windows path separator or a NUL")
-    relative = unquote(reference)
+    relative = unquote(reference) if uri else reference
     if not allow_outside:
         if relative.startswith("/"):
             refuse(f"{reference[:60]!r} is an absolute path")

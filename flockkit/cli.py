@@ -147,7 +147,7 @@ def _progress(args) -> bool:
 
 def _cmd_build(args) -> int:
     output = _require_suffix(args.output, (".npz",), "-o")
-    source = _source(args.motion, args.clip, args.fps)
+    source = _source(args.motion, args.clip, args.fps, args.allow_outside)
     params = _parameters(args.param, "build")
     if args.threshold is not None:
         params["threshold"] = args.threshold
@@ -218,13 +218,15 @@ def _cmd_walk(args) -> int:
 MESH_SUFFIXES = (".glb", ".gltf", ".usda", ".usdc", ".usdz", ".usd", ".obj")
 
 
-def _source(path: str, clip=None, fps=None):
+def _source(path: str, clip=None, fps=None, allow_outside=False):
     """A Motion or an AnimatedMesh: a flockkit .npz of either, or an animated-mesh file (glTF,
     USD, an OBJ folder or glob) read at `fps` (default 30) for `clip`."""
     from ._npzfile import kind_of
 
-    if Path(path).suffix.lower() in MESH_SUFFIXES or Path(path).is_dir() or any(c in path for c in "*?["):
-        return flockkit.io.read_mesh_animation(path, clip=clip, fps=fps or 30.0)
+    glob = not Path(path).exists() and any(c in path for c in "*?[")
+    if Path(path).suffix.lower() in MESH_SUFFIXES or Path(path).is_dir() or glob:
+        return flockkit.io.read_mesh_animation(path, clip=clip, fps=30.0 if fps is None else fps,
+                                               allow_outside=allow_outside)  # fmt: skip
     if kind_of(path) == "mesh":
         return flockkit.AnimatedMesh.load(path)
     return flockkit.Motion.load(path)
@@ -241,7 +243,7 @@ def _cmd_scene(args) -> int:
     folder = Path(args.output)
     if folder.exists() and not folder.is_dir():
         raise ValidationError(f"-o must be a folder; {folder} is a file")
-    scene = read_scene(args.scene, n_jobs=args.jobs)
+    scene = read_scene(args.scene, n_jobs=args.jobs, allow_outside=args.allow_outside)
     with _backend(args):
         animation = scene.synthesize(progress=not args.quiet)
     folder.mkdir(parents=True, exist_ok=True)
@@ -272,7 +274,7 @@ def _cmd_crowd(args) -> int:
     folder = Path(args.output)
     if folder.exists() and not folder.is_dir():
         raise ValidationError(f"-o must be a folder; {folder} is a file")
-    scene = read_crowd_scene(args.scene)
+    scene = read_crowd_scene(args.scene, allow_outside=args.allow_outside)
     if not args.no_usd:  # fail before the run, not after it, when usd-core is missing
         from .io import _usd_modules
 
@@ -306,7 +308,7 @@ def _cmd_crowd(args) -> int:
 
 def _cmd_segment(args) -> int:
     output = _require_suffix(args.output, (".npz",), "-o")
-    source = _source(args.source, args.clip, args.fps)
+    source = _source(args.source, args.clip, args.fps, args.allow_outside)
     params = _parameters(args.param, "segmenter")
     if args.parts is not None:
         params["n_parts"] = args.parts
@@ -553,6 +555,15 @@ def _simulate_arguments(parser) -> None:
 def _mesh_options(parser) -> None:
     parser.add_argument("--clip", help="the clip of an animated-mesh file (default: its first)")
     parser.add_argument("--fps", type=float, help="frames per second to sample an animated-mesh file at (default 30)")
+    _allow_outside(parser)
+
+
+def _allow_outside(parser) -> None:
+    parser.add_argument(
+        "--allow-outside",
+        action="store_true",
+        help="let the input refer to files outside its folder (absolute paths, ..; see docs/security.md)",
+    )
 
 
 def _build_arguments(parser) -> None:
@@ -683,6 +694,7 @@ def _scene_arguments(parser) -> None:
     parser.add_argument(
         "--no-pictures", action="store_true", help="skip the top view and animation (need flockkit[viz])"
     )
+    _allow_outside(parser)
     _scale_out(parser)
     _quiet(parser)
 
@@ -692,6 +704,7 @@ def _crowd_arguments(parser) -> None:
     parser.add_argument("-o", "--output", required=True, help="folder to write crowd.usdc, crowd.gif, crowd.json")
     parser.add_argument("--no-usd", action="store_true", help="skip the USD export (needs flockkit[usd])")
     parser.add_argument("--no-pictures", action="store_true", help="skip the animation (needs flockkit[viz])")
+    _allow_outside(parser)
     _quiet(parser)
 
 

@@ -48,7 +48,7 @@ from pathlib import Path
 import attrs
 import numpy as np
 
-from .. import _tomlfile
+from .. import _files, _tomlfile
 from ..errors import FlockkitError, ValidationError
 from ..motion import Motion
 from ..registry import resolve
@@ -102,7 +102,7 @@ def _table(data, key: str, keys: set, required: set, where: str) -> dict:
     return entry
 
 
-def _trajectories(path: Path, entry: dict, fps: float, seconds: float) -> Motion:
+def _trajectories(path: Path, entry: dict, fps: float, seconds: float, inside) -> Motion:
     from ..convenience import simulate, walk
     from ..graph import MotionGraph
     from ..synthesis import synthesize_many
@@ -116,27 +116,34 @@ def _trajectories(path: Path, entry: dict, fps: float, seconds: float) -> Motion
         return simulate(n_agents=spec["agents"], steps=steps, dt=1.0 / fps, seed=spec.get("seed", 0),
                         dims=spec.get("dims", 2))  # fmt: skip
     if "motion" in entry:
-        return Motion.load(path.parent / entry["motion"])
+        return Motion.load(inside(entry["motion"], "trajectories.motion"))
     spec = _table(entry, "walk", {"graph", "flocks", "seed"}, {"graph", "flocks"}, "[trajectories] walk")
-    graph = MotionGraph.load(path.parent / spec["graph"])
+    graph = MotionGraph.load(inside(spec["graph"], "trajectories.walk.graph"))
     seed = spec.get("seed", 0)
     return synthesize_many(graph, [walk(graph, duration=seconds, seed=seed + k) for k in range(spec["flocks"])])
 
 
-def read_crowd_scene(path) -> CrowdScene:
-    """The CrowdScene a TOML crowd scene file describes; errors name the file and the entry."""
+def read_crowd_scene(path, *, allow_outside: bool = False) -> CrowdScene:
+    """The CrowdScene a TOML crowd scene file describes; errors name the file and the entry. The
+    files it names (trajectories, clips) must lie in its folder (below it), unless
+    `allow_outside` is True."""
     path = Path(path)
     data = _tomlfile.read(path, "crowd scene")
+
+    def inside(reference, where):
+        return _files.confined(path.parent, reference, source=path, where=where, allow_outside=allow_outside,
+                               uri=False)  # fmt: skip
+
     try:
         _table(data, "", _KEYS, {"seconds", "trajectories", "character", "streams", "states"}, "the file")
         seconds, fps = float(data["seconds"]), float(data.get("fps", 30.0))
         if not (seconds > 0 and fps > 0):
             raise ValidationError("seconds and fps must be positive")
         sources = _table(data, "trajectories", {"simulate", "motion", "walk"}, set(), "[trajectories]")
-        motion = _trajectories(path, sources, fps, seconds)
+        motion = _trajectories(path, sources, fps, seconds, inside)
         keys = {"clips", "up", "forward", "scale", "feet", "legs", "plant"}
         character = _table(data, "character", keys, {"clips"}, "[character]")
-        clips = read_clips(path.parent / character["clips"])
+        clips = read_clips(inside(character["clips"], "character.clips"))
         up, forward = character.get("up", "y"), character.get("forward", "z")
         if "legs" in character and "feet" not in character:
             character["feet"] = [leg[-1] for leg in character["legs"]]
@@ -222,4 +229,4 @@ def read_crowd_scene(path) -> CrowdScene:
     except (TypeError, KeyError) as exc:
         raise ValidationError(f"{path}: {exc}") from None
     except FlockkitError as exc:
-        raise type(exc)(f"{path}: {exc}") from None
+        raise type(exc)(str(exc) if str(exc).startswith(str(path)) else f"{path}: {exc}") from None

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from .. import _tomlfile
+from .. import _files, _tomlfile
 from ..constraints import Polygon
 from ..errors import FlockkitError, ValidationError
 from ..graph import MotionGraph
@@ -41,8 +41,9 @@ __all__ = ["read_scene"]
 _KEYS = {"duration", "seed", "region", "scale", "headings", "templates", "arrows", "self_movement", "walk", "n_jobs"}
 
 
-def read_scene(path, *, n_jobs: int | None = None) -> Scene:
-    """The Scene a TOML scene file describes; errors name the file and the entry."""
+def read_scene(path, *, n_jobs: int | None = None, allow_outside: bool = False) -> Scene:
+    """The Scene a TOML scene file describes; errors name the file and the entry. The template
+    files it names must lie in its folder (below it), unless `allow_outside` is True."""
     path = Path(path)
     data = _tomlfile.read(path, "scene")
     unknown = sorted(set(data) - _KEYS)
@@ -57,7 +58,8 @@ def read_scene(path, *, n_jobs: int | None = None) -> Scene:
             kinds = [key for key in ("layers", "graph") if key in entry]
             if len(kinds) != 1 or "count" not in entry or set(entry) - {"layers", "graph", "count"}:
                 raise ValidationError(f"[[templates]] {k} needs one of layers or graph, and count")
-            file = path.parent / entry[kinds[0]]
+            file = _files.confined(path.parent, entry[kinds[0]], source=path, where=f"templates[{k}].{kinds[0]}",
+                                   allow_outside=allow_outside, uri=False)  # fmt: skip
             templates.append((GraphLayers if kinds[0] == "layers" else MotionGraph).load(file))
             counts.append(entry["count"])
         for table, keys in (("arrows", {"position", "keyframes"}), ("self_movement", {"object", "keyframes"})):
@@ -88,4 +90,4 @@ def read_scene(path, *, n_jobs: int | None = None) -> Scene:
     except TypeError as exc:
         raise ValidationError(f"{path}: {exc}") from None
     except FlockkitError as exc:
-        raise type(exc)(f"{path}: {exc}") from None
+        raise type(exc)(str(exc) if str(exc).startswith(str(path)) else f"{path}: {exc}") from None

@@ -531,6 +531,8 @@ def test_crowd_drives_foxes_along_a_flock_and_writes_usd_an_animation_and_a_summ
     scene = tmp_path / "crowd.toml"
     scene.write_text(CROWD.replace("FOX", str(shared_data / "fox-gltf" / "Fox.glb")))
     code, out, err = run(capsys, "crowd", str(scene), "-o", str(tmp_path / "out"), "--quiet")
+    assert code == 1 and "character.clips" in err and "is an absolute path" in err  # the file names one
+    code, out, err = run(capsys, "crowd", str(scene), "-o", str(tmp_path / "out"), "--quiet", "--allow-outside")
     assert code == 0, err
     assert "40 agents, 72 frames" in out
     summary = json.loads((tmp_path / "out" / "crowd.json").read_text())
@@ -566,7 +568,7 @@ def test_crowd_drives_foxes_along_a_flock_and_writes_usd_an_animation_and_a_summ
 def test_bad_crowd_scenes_are_named_in_one_line_and_nothing_is_written(capsys, tmp_path, shared_data, edit, message):
     scene = tmp_path / "bad.toml"
     scene.write_text(edit(CROWD).replace("FOX", str(shared_data / "fox-gltf" / "Fox.glb")))
-    code, _, err = run(capsys, "crowd", str(scene), "-o", str(tmp_path / "out"), "--quiet")
+    code, _, err = run(capsys, "crowd", str(scene), "-o", str(tmp_path / "out"), "--quiet", "--allow-outside")
     assert code == 1 and message in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "out").exists()
 
@@ -581,10 +583,20 @@ def test_crowd_without_usd_core_names_the_extra_before_the_run(capsys, tmp_path,
     monkeypatch.setattr(flockkit.io, "_usd_modules", missing)
     scene = tmp_path / "crowd.toml"
     scene.write_text(CROWD.replace("FOX", str(shared_data / "fox-gltf" / "Fox.glb")))
-    code, _, err = run(capsys, "crowd", str(scene), "-o", str(tmp_path / "out"), "--quiet")
+    code, _, err = run(capsys, "crowd", str(scene), "-o", str(tmp_path / "out"), "--quiet", "--allow-outside")
     assert code == 1 and "flockkit[usd]" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "out").exists()
-    code, _, err = run(capsys, "crowd", str(scene), "-o", str(tmp_path / "out"), "--quiet", "--no-usd", "--no-pictures")
+    code, _, err = run(
+        capsys,
+        "crowd",
+        str(scene),
+        "-o",
+        str(tmp_path / "out"),
+        "--quiet",
+        "--allow-outside",
+        "--no-usd",
+        "--no-pictures",
+    )
     assert code == 0 and sorted(p.name for p in (tmp_path / "out").iterdir()) == ["crowd.json"]
 
 
