@@ -753,7 +753,9 @@ def mesh_animation(path, clip, fps, *, allow_outside: bool = False):
 def _primitive(document, where, primitive, weights, frames):
     """Positions (T, V, 3) of a primitive with its morph targets applied, and its triangles."""
     attributes = primitive["attributes"]
+    # integer positions (KHR_mesh_quantization) are numbers like any other once read
     base = document.typed(attributes["POSITION"], f"{where}.attributes.POSITION", ("VEC3",), tuple(_COMPONENTS))
+    base = base.astype(np.float64, copy=False)
     points = np.broadcast_to(base, (frames, *base.shape)).copy()
     targets = primitive.get("targets", [])
     if targets and weights is not None:
