@@ -4,8 +4,10 @@
 
 Areas: the replayed library and CLI cases, arbitrary values for every field of the value types and
 convenience calls, every single-byte flip (two ways) and truncation of a saved motion and graph,
-arbitrary CLI arguments, SIGTERM in the middle of writes, and byte-for-byte determinism across
-n_jobs and joblib backends. A row counts: tried, named (a documented flockkit error; for the CLI
+arbitrary CLI arguments, SIGTERM in the middle of writes, byte-for-byte determinism across n_jobs
+and joblib backends, the untrusted-assets cases by area (escapes from the asset folder, damaged
+glTF fields and buffers, sizes before allocation, hangs, damaged BVH, OBJ and npz files, silent
+nonsense), and every input the fuzzer found. A row counts: tried, named (a documented flockkit error; for the CLI
 one line and a non-zero exit), worked, crash (anything else), hang (past the time limit).
 """
 
@@ -25,7 +27,7 @@ import numpy as np
 import flockkit
 from flockkit.testing import strategies as fst
 
-from . import cases
+from . import cases, fuzz, untrusted
 from .harness import cli_outcome, outcome, say
 from .test_fuzz import _BASE, CALLS, _argv, _junk
 
@@ -113,13 +115,17 @@ def _signals(folder, runs):
 def _determinism():
     import joblib
 
+    from flockkit.solve.scenario import load_scenario
+
     recording = flockkit.simulate(n_agents=6, steps=200, seed=3)
-    problem = flockkit.Problem(n_agents=6, duration=2.0, constraints=[
-        flockkit.PointConstraint(agent=0, time=1.0, position=[0.0, 0.0], velocity=[1.0, 0.0])])  # fmt: skip
+    # 20 agents squeezing past obstacles: where chains once drifted apart with the BLAS threads
+    problem, _ = load_scenario(Path(__file__).resolve().parents[2] / "examples" / "scenarios" / "obstacle-squeeze.toml")
 
     def results(n_jobs=None):
         graph = flockkit.build_graph(recording, seed=0, n_jobs=n_jobs)
-        solution = flockkit.solve(problem, iterations=10, chains=2, seed=1, n_jobs=n_jobs)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", flockkit.errors.FlockkitWarning)
+            solution = flockkit.solve(problem, iterations=5, chains=2, starts=1, seed=1, n_jobs=n_jobs)
         return graph, [m.positions.tobytes() for m in solution.motions]
 
     reference, found = results(1), []
@@ -134,6 +140,25 @@ def _determinism():
     except ImportError:
         pass
     return found
+
+
+def _untrusted(folder) -> list:
+    """(area, outcomes) of the untrusted-assets cases, each under 10 s; a file that should have
+    been refused and was read counts as a crash ("accepted"), as does a refused correct file."""
+    areas: dict[str, list] = {}
+    for area, name, call, expected in untrusted.cases(folder / "untrusted"):
+        kind, what = outcome(call, seconds=10)
+        if (expected, kind) in (("named", "ok"), ("ok", "named")):
+            kind, what = "crash", f"expected {expected}: {what or 'accepted'}"
+        areas.setdefault(area, []).append((kind, f"{name}: {what}"))
+    findings = sorted(p for p in fuzz.CRASHES.glob("*/*") if p.suffix != ".txt")
+    replayed = []
+    for path in findings:
+        kind, what = fuzz.outcome(path.parent.name, path.read_bytes(), folder)
+        replayed.append(("named" if kind == "ok" else kind, f"{path.name}: {what}"))
+    return [(f"untrusted: {area}", results) for area, results in areas.items()] + [
+        ("fuzzer findings replayed", replayed)
+    ]
 
 
 def main(argv=None) -> int:
@@ -153,6 +178,7 @@ def main(argv=None) -> int:
         ("arbitrary CLI arguments", _cli_random(folder, args.cli)),
         ("SIGTERM during writes (named = exit 143, nothing left)", _signals(folder, args.signals)),
         ("determinism across n_jobs and backends", _determinism()),
+        *_untrusted(folder),
     ]
     print("| area | tried | named error | worked | crash | hang |")
     print("|---|---|---|---|---|---|")
