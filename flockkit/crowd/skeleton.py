@@ -388,7 +388,7 @@ def read_clips(path, *, fps=None, allow_outside: bool = False) -> dict[str, Skel
         # files round the frame time (.0083333 for 120 fps): the rate to 0.01 fps is what was meant
         rate = round(1.0 / frame_time, 2)
         clip = SkeletalClip(skeleton=skeleton, fps=rate, rotations=rotations, translations=translations, name=path.stem)
-        return {path.stem: _resampled(clip, fps)}
+        return {path.stem: _resampled(clip, fps, path)}
     if suffix not in (".gltf", ".glb"):
         raise ValidationError(
             f"{path}: read_clips reads .gltf, .glb and .bvh files; got {suffix or 'a file without a suffix'!r}"
@@ -407,11 +407,11 @@ def read_clips(path, *, fps=None, allow_outside: bool = False) -> dict[str, Skel
     return found
 
 
-def _resampled(clip: SkeletalClip, fps: float | None) -> SkeletalClip:
+def _resampled(clip: SkeletalClip, fps: float | None, source) -> SkeletalClip:
     if fps is None or fps == clip.fps:
         return clip
     validate.allocation((clip.duration * fps + 1) * clip.skeleton.n_joints * 7 * 3,
-                        f"clip {clip.name!r} ({clip.duration:g} s) resampled at {fps:g} fps")  # fmt: skip
+                        f"{source}: clip {clip.name!r} ({clip.duration:g} s) resampled at {fps:g} fps")  # fmt: skip
     times = np.arange(int(round(clip.duration * fps)) + 1) / fps
     pose = clip.sample(times)
     return SkeletalClip(
