@@ -276,9 +276,9 @@ def _cmd_crowd(args) -> int:
         raise ValidationError(f"-o must be a folder; {folder} is a file")
     scene = read_crowd_scene(args.scene, allow_outside=args.allow_outside)
     if not args.no_usd:  # fail before the run, not after it, when usd-core is missing
-        from .io import _usd_modules
+        from .io.usd import require_usd_core
 
-        _usd_modules()
+        require_usd_core()
     driver = scene.driver()
     recording = record(driver, scene.seconds, agents=range(scene.record))
     folder.mkdir(parents=True, exist_ok=True)

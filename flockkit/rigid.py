@@ -29,6 +29,7 @@ __all__ = [
     "trs",
     "slerp",
     "nlerp",
+    "facing",
 ]
 
 
@@ -200,3 +201,16 @@ def nlerp(a, b, u) -> np.ndarray:
     b = np.where(np.vecdot(a, b)[..., None] < 0, -b, b)  # vecdot: far faster than summing a * b over 4
     mixed = a + u * (b - a)
     return mixed / np.sqrt(np.vecdot(mixed, mixed))[..., None]
+
+
+def facing(velocities) -> np.ndarray:
+    """Unit quaternions (w, x, y, z) turning +x onto each of the 3D `velocities` (N, 3): the
+    shortest turn, half a turn about z for -x, the identity for a still agent (what an exported
+    agent faces)."""
+    velocities = np.asarray(velocities, dtype=np.float64)
+    speed = np.linalg.norm(velocities, axis=1, keepdims=True)
+    u = np.divide(velocities, speed, out=np.tile([1.0, 0.0, 0.0], (len(velocities), 1)), where=speed > 1e-12)
+    q = np.column_stack([1.0 + u[:, 0], np.zeros(len(u)), -u[:, 2], u[:, 1]])  # half-way rotation
+    backwards = q[:, 0] < 1e-9
+    q[backwards] = [0.0, 0.0, 0.0, 1.0]  # facing -x: half a turn about z
+    return q / np.linalg.norm(q, axis=1, keepdims=True)

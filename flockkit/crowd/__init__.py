@@ -1,18 +1,17 @@
 """Massive crowds (paper 003): skeletons and clips, shared streams of poses, the crowd runtime."""
 
+from ..skeleton import Event, Pose, SkeletalClip, Skeleton, stream_times
 from .drive import Cue, Driver, State, StateMachine
 from .feet import driven_sliding, foot_sliding, ground_speed, plant_feet
 from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
 from .record import CrowdRecording, record, write_engine_buffers
 from .runtime import INSTANCE, Crowd, CrowdEvent
-from .skeleton import Event, Pose, SkeletalClip, Skeleton, read_clips, stream_times
 
 __all__ = [
     "SkeletalClip",
     "Event",
     "Pose",
     "Skeleton",
-    "read_clips",
     "stream_times",
     "Stream",
     "StreamPool",

@@ -17,8 +17,8 @@ from scipy.spatial.transform import Rotation
 
 from .. import validate
 from ..errors import ValidationError
+from ..skeleton import Pose, SkeletalClip
 from .drive import CLIP_CONTROLLER, _axis
-from .skeleton import Pose, SkeletalClip
 
 __all__ = ["ground_speed", "foot_sliding", "driven_sliding", "plant_feet"]
 

@@ -50,13 +50,13 @@ import numpy as np
 
 from .. import _files, _tomlfile
 from ..errors import FlockkitError, ValidationError
+from ..io import read_clips
 from ..motion import Motion
 from ..registry import resolve
 from .drive import CLIP_CONTROLLER, Cue, Driver, State, StateMachine
 from .feet import ground_speed, plant_feet
 from .pool import Stream, StreamPool
 from .runtime import Crowd
-from .skeleton import read_clips
 
 __all__ = ["CrowdScene", "read_crowd_scene"]
 

@@ -25,7 +25,7 @@ import numpy as np
 
 from .. import validate
 from ..errors import ValidationError
-from .skeleton import Pose, Skeleton
+from ..skeleton import Pose, Skeleton
 
 __all__ = ["Stream", "StreamPool", "UniquePool", "ENTRY_FLOATS", "PREFETCH_FRAMES", "equation_5", "equation_4"]
 

@@ -10,7 +10,7 @@ import numpy as np
 
 from .. import rigid, validate
 from ..errors import ValidationError
-from .skeleton import Skeleton
+from ..skeleton import Skeleton
 
 __all__ = ["CrowdRecording", "record", "write_engine_buffers"]
 
@@ -42,7 +42,7 @@ class CrowdRecording:
 
     def world(self) -> np.ndarray:
         """World joint matrices (F, N, J, 4, 4): each agent's root times its pose's forward kinematics."""
-        from .skeleton import Pose
+        from ..skeleton import Pose
 
         local = self.skeleton.world(
             Pose._adopt(self.rotations.astype(np.float64), self.translations.astype(np.float64))
@@ -55,37 +55,21 @@ class CrowdRecording:
         bound to a SkelAnimation with the agent's local joint rotations, translations and scales
         at each frame. Up axis z, `meters_per_unit`, frames per second the recording's; saved
         atomically. usd-core (extra ``usd``) is needed."""
-        from ..io import _usd_modules, _usd_stage
+        from ..io.usd import write_skeletons
 
-        Gf, _, _, Vt = _usd_modules()  # names the extra when usd-core is missing
-        from pxr import UsdSkel
-
-        joints = _joint_paths(self.skeleton)
-        rest = self.skeleton.world(self.skeleton.rest)  # model-space rest: the bind transforms
-        local_rest = rigid.trs(self.skeleton.rest.translations, self.skeleton.rest.rotations, self.skeleton.scales)
-        scales = Vt.Vec3hArray.FromNumpy(self.skeleton.scales.astype(np.float16))
-        with _usd_stage(path, "/Crowd", dt=1.0 / self.fps, n_frames=self.n_frames, fps=self.fps,
-                        meters_per_unit=meters_per_unit) as (stage, times):  # fmt: skip
-            for agent in range(self.n_agents):
-                root = UsdSkel.Root.Define(stage, f"/Crowd/Agent_{agent}")
-                transform = root.AddTransformOp()
-                skeleton = UsdSkel.Skeleton.Define(stage, f"/Crowd/Agent_{agent}/Skeleton")
-                skeleton.CreateJointsAttr(joints)
-                skeleton.CreateBindTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(m.T.tolist()) for m in rest]))
-                skeleton.CreateRestTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(m.T.tolist()) for m in local_rest]))
-                animation = UsdSkel.Animation.Define(stage, f"/Crowd/Agent_{agent}/Skeleton/Animation")
-                animation.CreateJointsAttr(joints)
-                animation.CreateScalesAttr(scales)
-                rotations, translations = animation.CreateRotationsAttr(), animation.CreateTranslationsAttr()
-                UsdSkel.BindingAPI.Apply(skeleton.GetPrim()).CreateAnimationSourceRel().SetTargets(
-                    [animation.GetPath()]
-                )
-                for frame, when in enumerate(times):
-                    transform.Set(Gf.Matrix4d(self.roots[frame, agent].T.tolist()), when)
-                    rotations.Set(Vt.QuatfArray.FromNumpy(np.ascontiguousarray(self.rotations[frame, agent])), when)
-                    translations.Set(
-                        Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(self.translations[frame, agent])), when
-                    )
+        skeleton = self.skeleton
+        write_skeletons(
+            path,
+            joints=_joint_paths(skeleton),
+            bind=skeleton.world(skeleton.rest),  # model-space rest: the bind transforms
+            rest=rigid.trs(skeleton.rest.translations, skeleton.rest.rotations, skeleton.scales),
+            scales=skeleton.scales,
+            roots=self.roots,
+            rotations=self.rotations,
+            translations=self.translations,
+            fps=self.fps,
+            meters_per_unit=meters_per_unit,
+        )
 
 
 def _joint_paths(skeleton: Skeleton) -> list[str]:

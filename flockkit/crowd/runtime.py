@@ -14,8 +14,8 @@ import numpy as np
 
 from .. import validate
 from ..errors import ValidationError
+from ..skeleton import Event, Pose
 from .pool import StreamPool, UniquePool, blend_entries, entries_pose
-from .skeleton import Event, Pose
 
 __all__ = ["Crowd", "CrowdEvent", "INSTANCE", "NONE", "STREAMED", "UNIQUE", "DILATION_RATE", "MAX_DILATION_RATE"]
 

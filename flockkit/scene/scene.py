@@ -679,25 +679,14 @@ def _load(path) -> SceneAnimation:
 def _export_usd(animation: SceneAnimation, path, *, fps, meters_per_unit) -> None:
     """Each object an animated UsdGeom.Mesh (a template with faces) or UsdGeom.Points under
     /Scene, on the stage flockkit.io writes motions on."""
-    from ..io import _usd_modules, _usd_stage
+    from ..io.usd import write_meshes
 
-    _, Usd, UsdGeom, Vt = _usd_modules()
-    with _usd_stage(path, "/Scene", dt=animation.dt, n_frames=animation.n_frames, fps=fps,
-                    meters_per_unit=meters_per_unit) as (stage, times):  # fmt: skip
-        for i, motion in enumerate(animation.motions):
-            template = animation.templates[animation.placement.templates[i]]
-            faces = template.faces if isinstance(template, GraphLayers) else None
-            name = f"/Scene/Object{i:0{len(str(animation.placement.n_objects))}d}"
-            prim = UsdGeom.Mesh.Define(stage, name) if faces is not None else UsdGeom.Points.Define(stage, name)
-            if faces is not None:
-                faces = np.asarray(faces)
-                prim.CreateFaceVertexCountsAttr(Vt.IntArray([faces.shape[1]] * len(faces)))
-                prim.CreateFaceVertexIndicesAttr(Vt.IntArray(faces.ravel().tolist()))
-            else:
-                prim.CreateWidthsAttr(Vt.FloatArray([0.05]))
-            points = prim.CreatePointsAttr()
-            positions = np.zeros((motion.n_frames, motion.n_agents, 3), dtype=np.float32)
-            positions[..., : motion.dims] = motion.positions
-            for frame, when in enumerate(times):
-                points.Set(Vt.Vec3fArray.FromNumpy(positions[frame]), Usd.TimeCode(float(when)))
-            prim.GetPrim().SetCustomDataByKey("flockkit:template", int(animation.placement.templates[i]))
+    width = len(str(animation.placement.n_objects))
+    objects = []
+    for i, motion in enumerate(animation.motions):
+        template = animation.templates[animation.placement.templates[i]]
+        faces = template.faces if isinstance(template, GraphLayers) else None
+        objects.append((f"/Scene/Object{i:0{width}d}", motion.positions, faces,
+                        {"flockkit:template": int(animation.placement.templates[i])}))  # fmt: skip
+    write_meshes(path, objects, dt=animation.dt, n_frames=animation.n_frames, fps=fps,
+                 meters_per_unit=meters_per_unit)  # fmt: skip

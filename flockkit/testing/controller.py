@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..crowd.skeleton import Event, Pose, Skeleton
+from ..skeleton import Event, Pose, Skeleton
 from ._expect import expect_validation_error
 
 TIMES = np.linspace(0.0, 7.3, 74)  # seconds on the stream's clock: past several loops of a short clip

@@ -151,7 +151,7 @@ def walker(*, fps: float = 30.0, seconds: float = 2.0, swing: float = 30.0):
     hands, legs, feet; z up, facing y) whose legs swing `swing` degrees each way once per
     `seconds` and arms swing against them, its spine swaying and hips bobbing, first frame equal
     to the last (it loops), with a "step" event at each quarter and three quarters of the cycle."""
-    from ..crowd.skeleton import Event, Pose, SkeletalClip, Skeleton
+    from ..skeleton import Event, Pose, SkeletalClip, Skeleton
 
     names = ["hips", "spine", "head", "arm.L", "hand.L", "arm.R", "hand.R", "leg.L", "foot.L", "leg.R", "foot.R"]
     parents = [-1, 0, 1, 1, 3, 1, 5, 0, 7, 0, 9]
@@ -180,7 +180,7 @@ def bird(*, flapping: bool = True, fps: float = 30.0, seconds: float = 0.5):
     """A bird's skeletal clip in closed form (z up, facing y): a body with a head, a tail and two
     two-joint wings that beat 50 degrees each way (`flapping`, 2 beats a second at the default
     length) or hold a shallow glide with a slow sway; first frame equal to the last (it loops)."""
-    from ..crowd.skeleton import Pose, SkeletalClip, Skeleton
+    from ..skeleton import Pose, SkeletalClip, Skeleton
 
     names = ["body", "head", "tail", "wing.L", "tip.L", "wing.R", "tip.R"]
     parents = [-1, 0, 0, 0, 3, 0, 5]
@@ -202,7 +202,7 @@ def bird(*, flapping: bool = True, fps: float = 30.0, seconds: float = 0.5):
 def random_clip(joints: int, *, frames: int = 60, fps: float = 30.0, seed: int = 0):
     """A skeletal clip of `joints` joints (a random tree) whose rotations wander smoothly (a few
     random sines per joint): any size of skeleton, for crowds and benchmarks."""
-    from ..crowd.skeleton import Pose, SkeletalClip, Skeleton
+    from ..skeleton import Pose, SkeletalClip, Skeleton
 
     rng = np.random.default_rng(seed)
     parents = np.concatenate([[-1], [int(rng.integers(0, j)) for j in range(1, joints)]])

@@ -574,13 +574,13 @@ def test_bad_crowd_scenes_are_named_in_one_line_and_nothing_is_written(capsys, t
 
 
 def test_crowd_without_usd_core_names_the_extra_before_the_run(capsys, tmp_path, shared_data, monkeypatch):
-    import flockkit.io
+    import flockkit.io.usd
     from flockkit.errors import MissingDependencyError
 
     def missing():
         raise MissingDependencyError("USD export needs usd-core: pip install 'flockkit[usd]'")
 
-    monkeypatch.setattr(flockkit.io, "_usd_modules", missing)
+    monkeypatch.setattr(flockkit.io.usd, "require_usd_core", missing)
     scene = tmp_path / "crowd.toml"
     scene.write_text(CROWD.replace("FOX", str(shared_data / "fox-gltf" / "Fox.glb")))
     code, _, err = run(capsys, "crowd", str(scene), "-o", str(tmp_path / "out"), "--quiet", "--allow-outside")

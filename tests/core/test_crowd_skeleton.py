@@ -8,8 +8,9 @@ import pytest
 from scipy.spatial.transform import Rotation, Slerp
 
 import flockkit
-from flockkit.crowd import Event, Pose, SkeletalClip, Skeleton, read_clips
+from flockkit.crowd import Event, Pose, SkeletalClip, Skeleton
 from flockkit.errors import FileFormatError, ValidationError
+from flockkit.io import read_clips
 
 
 def chain(n=3):

@@ -121,7 +121,7 @@ def offset(document: dict, accessor: int) -> int:
 def write(path, document: dict, buffer: bytes, *, uri: str | None = None) -> None:
     """Write `document` to `path`: a .glb with `buffer` as its binary chunk, or a .gltf with the
     buffer as a data URI (or as `uri`, when given, leaving the file there to the caller)."""
-    from flockkit._gltf import glb_bytes
+    from flockkit.io.gltf import glb_bytes
 
     document = copy.deepcopy(document)
     if str(path).endswith(".glb"):

@@ -5,7 +5,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import flockkit
-from flockkit.crowd import read_clips
+from flockkit.io import read_clips
 from flockkit.errors import ValidationError
 from flockkit.testing import inputs
 

@@ -6,14 +6,14 @@ from sklearn.metrics import adjusted_rand_score
 
 import flockkit
 import flockkit.testing.inputs
-from flockkit import _gltf
 from flockkit.errors import ValidationError
+from flockkit.io import gltf
 
 
 @pytest.fixture(scope="module")
 def morph(shared_data):
     path = shared_data / "morph-stress-test-gltf" / "MorphStressTest.gltf"
-    document = _gltf.Document(path)
+    document = gltf.Document(path)
     moved = []
     for primitive in document.json["meshes"][0]["primitives"]:
         offsets = np.stack([document.accessor(t["POSITION"]) for t in primitive["targets"]])

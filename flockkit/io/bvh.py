@@ -13,8 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _files, rigid, validate
-from .errors import FileFormatError
+from .. import _files, rigid, validate
+from ..errors import FileFormatError
 
 _AXES = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
 _CHANNEL = re.compile(r"^([XYZ])(position|rotation)$", re.IGNORECASE)

@@ -1,7 +1,5 @@
-"""Files in and out: captured motion read into a Motion (wide and long text tables, (T, N, D)
-.npy arrays), animated meshes (glTF, OBJ sequences, USD; ``read_mesh_animation``, from
-``flockkit.mesh``), skeletal clips (glTF skins, BVH; ``read_clips``, from ``flockkit.crowd``),
-and motions exported for other tools (CSV, JSON, glTF, USD).
+"""Captured motion in tables: wide and long text tables (CSV, TSV, whitespace) and (T, N, D)
+.npy arrays read into a Motion, and motions written back as CSV and JSON.
 
 Captures do not record their frame rate in a form these readers can trust, so every reader takes
 ``dt=`` (seconds per frame) or ``fps=``.
@@ -15,7 +13,6 @@ of the recording; a longer run raises ValidationError naming the file, the agent
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import json
 import math
@@ -24,29 +21,13 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _files, _npzfile, validate
-from ._atomic import atomic_path
-from ._gltf import FLOAT, UNSIGNED_SHORT, glb_bytes
-from .crowd.skeleton import read_clips
-from .errors import FileFormatError, ValidationError
-from .mesh import list_clips, read_mesh_animation
-from .motion import Motion
-from .validate import allocation, integer
+from .. import _files, _npzfile, validate
+from .._atomic import atomic_path
+from ..errors import FileFormatError, ValidationError
+from ..motion import Motion
+from ..validate import allocation, integer
 
-__all__ = [
-    "read_wide",
-    "read_long",
-    "read_npy",
-    "read_mesh_animation",
-    "list_clips",
-    "read_clips",
-    "fill_gaps",
-    "export",
-    "write_csv",
-    "write_json",
-    "write_usd",
-    "EXPORT_SUFFIXES",
-]
+__all__ = ["read_wide", "read_long", "read_npy", "fill_gaps", "write_csv", "write_json", "DEFAULT_MAX_GAP"]
 
 # Longest run of missing frames filled by interpolation: 10 frames is 0.4 s at the 25 fps of the
 # pedestrian captures, 0.67 s at the sticklebacks' 15 fps; longer gaps are more than a blink of
@@ -318,34 +299,6 @@ def read_npy(path, *, dt=None, fps=None, max_gap: int = DEFAULT_MAX_GAP, agents=
     return _motion(array, dt, max_gap, str(path), agents=agents, image_height=image_height)
 
 
-# -- writing: exports for animation tools ------------------------------------------------------
-
-EXPORT_SUFFIXES = (".csv", ".json", ".usda", ".usdc", ".glb", ".gltf")
-
-
-def export(motion: Motion, path, **options) -> Path:
-    """Write `motion` in the format its suffix names: .csv (long format: frame, agent, x, y[, z],
-    readable by :func:`read_long`), .json, .glb / .gltf (glTF 2.0, for game engines and the web),
-    or .usda / .usdc (Universal Scene Description, needs the ``usd`` extra; `options` ``fps`` and
-    ``meters_per_unit`` as for :func:`write_usd`).
-    Atomic: an interrupted export leaves nothing behind."""
-    if not isinstance(motion, Motion):
-        raise ValidationError(f"export needs a flockkit.Motion; got {type(motion).__name__}")
-    path = Path(path)
-    suffix = path.suffix.lower()
-    if suffix not in EXPORT_SUFFIXES:
-        raise ValidationError(
-            f"{path}: unknown export extension {path.suffix!r}; expected {', '.join(EXPORT_SUFFIXES)}"
-        )
-    if suffix in (".csv", ".json", ".glb", ".gltf"):
-        if options:
-            raise ValidationError(f"{path}: options {', '.join(options)} are for USD exports")
-        {".csv": write_csv, ".json": write_json}.get(suffix, write_gltf)(motion, path)
-    else:
-        write_usd(motion, path, **options)
-    return path
-
-
 def write_csv(motion: Motion, path) -> None:
     """Long format, one row per frame and agent: frame, agent, x, y[, z] (header first)."""
     frames, agents = np.meshgrid(np.arange(motion.n_frames), np.arange(motion.n_agents), indexing="ij")
@@ -371,190 +324,3 @@ def write_json(motion: Motion, path) -> None:
     }
     with atomic_path(path) as tmp, open(tmp, "w") as handle:
         json.dump(document, handle)
-
-
-# The frame rate of the time line a USD export is written on, unless asked otherwise: 24, the
-# default scene rate of Blender, Houdini and Maya. Blender ignores a stage's framesPerSecond and
-# reads its time codes as its own frames, so a time line at the rate the scene has is what plays
-# at the right speed there; every USD reader that honours timeCodesPerSecond agrees.
-USD_FPS = 24.0
-
-
-def write_usd(motion: Motion, path, *, fps: float | None = USD_FPS, meters_per_unit: float = 1.0) -> None:
-    """A USD stage (.usda text or .usdc binary) holding /Flock/Agents, a UsdGeom.PointInstancer
-    with, per frame of the motion, a time sample of positions, orientations (facing the velocity,
-    the prototype's +x), velocities and angular velocities; fixed ``ids`` (the agent indices), so
-    identity never rests on point order.
-
-    The stage's time line runs at `fps` (timeCodesPerSecond = framesPerSecond = fps; None: one
-    time code per frame, fps = 1 / dt), each frame sampled at its time, t * fps; USD interpolates
-    between samples. metersPerUnit is `meters_per_unit` (flockkit's units are meters by default),
-    the up axis z; a 2D motion lies in the ground plane z = 0. Blender, Houdini and Maya import it
-    at the right size and speed."""
-    Gf, Usd, UsdGeom, Vt = _usd_modules()
-    positions = np.zeros((motion.n_frames, motion.n_agents, 3))
-    positions[..., : motion.dims] = motion.positions
-    velocities = np.zeros_like(positions)
-    velocities[..., : motion.dims] = motion.velocities()
-    quaternions = _facing(velocities.reshape(-1, 3)).reshape(motion.n_frames, motion.n_agents, 4)
-    turning = _angular_velocities(velocities, motion.dt)
-    with _usd_stage(path, "/Flock", dt=motion.dt, n_frames=motion.n_frames, fps=fps,
-                   meters_per_unit=meters_per_unit) as (stage, times):  # fmt: skip
-        instancer = UsdGeom.PointInstancer.Define(stage, "/Flock/Agents")
-        body = UsdGeom.Cone.Define(stage, "/Flock/Agents/Prototypes/Agent")
-        body.CreateAxisAttr(UsdGeom.Tokens.x)
-        body.CreateHeightAttr(0.5)
-        body.CreateRadiusAttr(0.15)
-        instancer.CreatePrototypesRel().SetTargets([body.GetPath()])
-        instancer.CreateProtoIndicesAttr(Vt.IntArray([0] * motion.n_agents))
-        instancer.CreateIdsAttr(Vt.Int64Array(list(range(motion.n_agents))))
-        points, turns = instancer.CreatePositionsAttr(), instancer.CreateOrientationsAttr()
-        speeds, spins = instancer.CreateVelocitiesAttr(), instancer.CreateAngularVelocitiesAttr()
-        for frame, when in enumerate(times):
-            time = Usd.TimeCode(float(when))
-            points.Set(Vt.Vec3fArray.FromNumpy(positions[frame].astype(np.float32)), time)
-            speeds.Set(Vt.Vec3fArray.FromNumpy(velocities[frame].astype(np.float32)), time)
-            spins.Set(Vt.Vec3fArray.FromNumpy(turning[frame].astype(np.float32)), time)
-            turns.Set(
-                Vt.QuathArray(
-                    [Gf.Quath(float(w), Gf.Vec3h(float(x), float(y), float(z))) for w, x, y, z in quaternions[frame]]
-                ),
-                time,
-            )
-
-
-def _usd_modules():
-    """pxr's (Gf, Usd, UsdGeom, Vt); MissingDependencyError naming the extra when usd-core is absent."""
-    try:
-        from pxr import Gf, Usd, UsdGeom, Vt
-    except ImportError:
-        from .errors import MissingDependencyError
-
-        raise MissingDependencyError("USD export needs usd-core: pip install 'flockkit[usd]'") from None
-    return Gf, Usd, UsdGeom, Vt
-
-
-@contextlib.contextmanager
-def _usd_stage(path, root: str, *, dt: float, n_frames: int, fps: float | None = USD_FPS, meters_per_unit: float = 1.0):
-    """A new USD stage, saved atomically to `path` on leaving: up axis z, metersPerUnit
-    `meters_per_unit`, a time line at `fps` (timeCodesPerSecond = framesPerSecond; None: 1 / dt)
-    over `n_frames` frames `dt` apart, and an Xform `root` as its default prim. Yields (stage,
-    the time code of each frame)."""
-    _, Usd, UsdGeom, _ = _usd_modules()
-    fps = 1.0 / dt if fps is None else validate.number(fps, "USD fps", minimum=0, strict=True)
-    meters_per_unit = validate.number(meters_per_unit, "USD meters_per_unit", minimum=0, strict=True)
-    times = np.arange(n_frames) * dt * fps
-    with atomic_path(Path(path), create=False) as tmp:  # USD creates the layer itself
-        stage = Usd.Stage.CreateNew(str(tmp))
-        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
-        UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
-        stage.SetTimeCodesPerSecond(fps)
-        stage.SetFramesPerSecond(fps)
-        stage.SetStartTimeCode(0)
-        stage.SetEndTimeCode(float(times[-1]))
-        stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, root).GetPrim())
-        yield stage, times
-        stage.GetRootLayer().Save()
-
-
-def _angular_velocities(velocities: np.ndarray, dt: float) -> np.ndarray:
-    """Degrees per second (USD's unit) about the axis turning each agent's heading at frame t
-    onto its heading at t + 1 (zero at the last frame and for agents at rest), shape (T, N, 3)."""
-    speed = np.linalg.norm(velocities, axis=2, keepdims=True)
-    heading = np.divide(velocities, speed, out=np.zeros_like(velocities), where=speed > 1e-12)
-    turning = np.zeros_like(velocities)
-    axis = np.cross(heading[:-1], heading[1:])
-    sine = np.linalg.norm(axis, axis=2, keepdims=True)
-    angle = np.arctan2(sine, np.sum(heading[:-1] * heading[1:], axis=2, keepdims=True))
-    unit = np.divide(axis, sine, out=np.zeros_like(axis), where=sine > 1e-12)
-    turning[:-1] = unit * np.degrees(angle) / dt
-    return turning
-
-
-def _facing(velocities: np.ndarray) -> np.ndarray:
-    """Unit quaternions (w, x, y, z) turning +x onto each velocity (identity for a still agent)."""
-    speed = np.linalg.norm(velocities, axis=1, keepdims=True)
-    u = np.divide(velocities, speed, out=np.tile([1.0, 0.0, 0.0], (len(velocities), 1)), where=speed > 1e-12)
-    q = np.column_stack([1.0 + u[:, 0], np.zeros(len(u)), -u[:, 2], u[:, 1]])  # half-way rotation
-    backwards = q[:, 0] < 1e-9
-    q[backwards] = [0.0, 0.0, 0.0, 1.0]  # facing -x: half a turn about z
-    return q / np.linalg.norm(q, axis=1, keepdims=True)
-
-
-# glTF is y up and flockkit (like USD here) z up: (x, y, z) -> (x, z, -y), a quarter turn about x
-_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
-# the shared agent mesh: an arrow head 0.5 long and 0.3 wide pointing along +x (as the USD cone)
-_ARROW = np.array([[0.25, 0, 0], [-0.25, 0.15, 0], [-0.25, -0.075, 0.13], [-0.25, -0.075, -0.13]], dtype=np.float32)
-_ARROW_FACES = np.array([0, 1, 2, 0, 2, 3, 0, 3, 1, 1, 3, 2], dtype=np.uint16)
-
-
-def write_gltf(motion: Motion, path) -> None:
-    """A glTF 2.0 file (.glb binary, or .gltf with its buffer embedded as a data URI) that game
-    engines, three.js and Blender read: a node "Flock" with one child node per agent ("Agent k",
-    k the agent index) sharing a small arrow mesh that points along +x, and one animation,
-    "flock", with a translation and a rotation channel per agent (linear, one key per frame at
-    t = frame * dt seconds, the rotation facing the velocity). glTF is y up in meters: flockkit's
-    (x, y, z) becomes (x, z, -y), so a 2D motion lies in the ground plane y = 0."""
-    import base64
-
-    path = Path(path)
-    positions = np.zeros((motion.n_frames, motion.n_agents, 3))
-    positions[..., : motion.dims] = motion.positions
-    velocities = np.zeros_like(positions)
-    velocities[..., : motion.dims] = motion.velocities()
-    quaternions = _facing(velocities.reshape(-1, 3)).reshape(motion.n_frames, motion.n_agents, 4)  # w, x, y, z
-    rotations = np.concatenate([quaternions[..., 1:] @ _Y_UP.T, quaternions[..., :1]], axis=2)  # x, y, z, w
-    translations = positions @ _Y_UP.T
-    times = (np.arange(motion.n_frames) * motion.dt).astype(np.float32)
-    buffer, views, accessors = bytearray(), [], []
-
-    def accessor(array, kind, component=FLOAT, bounds=False, target=None):
-        array = np.ascontiguousarray(array)
-        buffer.extend(b"\0" * (-len(buffer) % 4))
-        views.append({"buffer": 0, "byteOffset": len(buffer), "byteLength": array.nbytes})
-        if target is not None:
-            views[-1]["target"] = target
-        buffer.extend(array.tobytes())
-        entry = {"bufferView": len(views) - 1, "componentType": component, "count": len(array), "type": kind}
-        if bounds:
-            flat = array.reshape(len(array), -1)
-            entry["min"], entry["max"] = flat.min(axis=0).tolist(), flat.max(axis=0).tolist()
-        accessors.append(entry)
-        return len(accessors) - 1
-
-    mesh = {
-        "name": "agent",
-        "primitives": [{"attributes": {"POSITION": accessor(_ARROW, "VEC3", bounds=True, target=34962)},
-                        "indices": accessor(_ARROW_FACES, "SCALAR", UNSIGNED_SHORT, target=34963)}],
-    }  # fmt: skip
-    clock = accessor(times, "SCALAR", bounds=True)  # every sampler shares the key times
-    nodes = [{"name": "Flock", "children": list(range(1, motion.n_agents + 1))}]
-    samplers, channels = [], []
-    for agent in range(motion.n_agents):
-        nodes.append({
-            "name": f"Agent {agent}", "mesh": 0,
-            "translation": translations[0, agent].tolist(), "rotation": rotations[0, agent].tolist(),
-        })  # fmt: skip
-        for target, values, kind in (("translation", translations, "VEC3"), ("rotation", rotations, "VEC4")):
-            samplers.append({"input": clock, "output": accessor(values[:, agent].astype(np.float32), kind)})
-            channels.append({"sampler": len(samplers) - 1, "target": {"node": agent + 1, "path": target}})
-    buffer.extend(b"\0" * (-len(buffer) % 4))
-    document = {
-        "asset": {"version": "2.0", "generator": f"flockkit {_version()}"},
-        "scene": 0, "scenes": [{"name": "flock", "nodes": [0]}], "nodes": nodes, "meshes": [mesh],
-        "animations": [{"name": "flock", "samplers": samplers, "channels": channels}],
-        "accessors": accessors, "bufferViews": views, "buffers": [{"byteLength": len(buffer)}],
-    }  # fmt: skip
-    with atomic_path(path) as tmp, open(tmp, "wb") as handle:
-        if path.suffix.lower() == ".gltf":
-            data = base64.b64encode(bytes(buffer)).decode("ascii")
-            document["buffers"][0]["uri"] = f"data:application/octet-stream;base64,{data}"
-            handle.write(json.dumps(document).encode("utf-8"))
-            return
-        handle.write(glb_bytes(document, buffer))
-
-
-def _version() -> str:
-    from . import __version__
-
-    return __version__

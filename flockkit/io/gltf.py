@@ -28,8 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import _files, rigid, validate
-from .errors import FileFormatError, ValidationError
+from .. import _files, rigid, validate
+from .._atomic import atomic_path
+from ..errors import FileFormatError, ValidationError
+from ..motion import Motion
 
 _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
@@ -886,3 +888,80 @@ def skin_clips(path, fps, *, allow_outside: bool = False):
             scale[0],
             clips,
         )
+
+
+# glTF is y up and flockkit (like USD here) z up: (x, y, z) -> (x, z, -y), a quarter turn about x
+_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+# the shared agent mesh: an arrow head 0.5 long and 0.3 wide pointing along +x (as the USD cone)
+_ARROW = np.array([[0.25, 0, 0], [-0.25, 0.15, 0], [-0.25, -0.075, 0.13], [-0.25, -0.075, -0.13]], dtype=np.float32)
+_ARROW_FACES = np.array([0, 1, 2, 0, 2, 3, 0, 3, 1, 1, 3, 2], dtype=np.uint16)
+
+
+def write_gltf(motion: Motion, path) -> None:
+    """A glTF 2.0 file (.glb binary, or .gltf with its buffer embedded as a data URI) that game
+    engines, three.js and Blender read: a node "Flock" with one child node per agent ("Agent k",
+    k the agent index) sharing a small arrow mesh that points along +x, and one animation,
+    "flock", with a translation and a rotation channel per agent (linear, one key per frame at
+    t = frame * dt seconds, the rotation facing the velocity). glTF is y up in meters: flockkit's
+    (x, y, z) becomes (x, z, -y), so a 2D motion lies in the ground plane y = 0."""
+    path = Path(path)
+    positions = np.zeros((motion.n_frames, motion.n_agents, 3))
+    positions[..., : motion.dims] = motion.positions
+    velocities = np.zeros_like(positions)
+    velocities[..., : motion.dims] = motion.velocities()
+    quaternions = rigid.facing(velocities.reshape(-1, 3)).reshape(motion.n_frames, motion.n_agents, 4)  # w, x, y, z
+    rotations = np.concatenate([quaternions[..., 1:] @ _Y_UP.T, quaternions[..., :1]], axis=2)  # x, y, z, w
+    translations = positions @ _Y_UP.T
+    times = (np.arange(motion.n_frames) * motion.dt).astype(np.float32)
+    buffer, views, accessors = bytearray(), [], []
+
+    def accessor(array, kind, component=FLOAT, bounds=False, target=None):
+        array = np.ascontiguousarray(array)
+        buffer.extend(b"\0" * (-len(buffer) % 4))
+        views.append({"buffer": 0, "byteOffset": len(buffer), "byteLength": array.nbytes})
+        if target is not None:
+            views[-1]["target"] = target
+        buffer.extend(array.tobytes())
+        entry = {"bufferView": len(views) - 1, "componentType": component, "count": len(array), "type": kind}
+        if bounds:
+            flat = array.reshape(len(array), -1)
+            entry["min"], entry["max"] = flat.min(axis=0).tolist(), flat.max(axis=0).tolist()
+        accessors.append(entry)
+        return len(accessors) - 1
+
+    mesh = {
+        "name": "agent",
+        "primitives": [{"attributes": {"POSITION": accessor(_ARROW, "VEC3", bounds=True, target=34962)},
+                        "indices": accessor(_ARROW_FACES, "SCALAR", UNSIGNED_SHORT, target=34963)}],
+    }  # fmt: skip
+    clock = accessor(times, "SCALAR", bounds=True)  # every sampler shares the key times
+    nodes = [{"name": "Flock", "children": list(range(1, motion.n_agents + 1))}]
+    samplers, channels = [], []
+    for agent in range(motion.n_agents):
+        nodes.append({
+            "name": f"Agent {agent}", "mesh": 0,
+            "translation": translations[0, agent].tolist(), "rotation": rotations[0, agent].tolist(),
+        })  # fmt: skip
+        for target, values, kind in (("translation", translations, "VEC3"), ("rotation", rotations, "VEC4")):
+            samplers.append({"input": clock, "output": accessor(values[:, agent].astype(np.float32), kind)})
+            channels.append({"sampler": len(samplers) - 1, "target": {"node": agent + 1, "path": target}})
+    buffer.extend(b"\0" * (-len(buffer) % 4))
+    document = {
+        "asset": {"version": "2.0", "generator": f"flockkit {_version()}"},
+        "scene": 0, "scenes": [{"name": "flock", "nodes": [0]}], "nodes": nodes, "meshes": [mesh],
+        "animations": [{"name": "flock", "samplers": samplers, "channels": channels}],
+        "accessors": accessors, "bufferViews": views, "buffers": [{"byteLength": len(buffer)}],
+    }  # fmt: skip
+    with atomic_path(path) as tmp, open(tmp, "wb") as handle:
+        if path.suffix.lower() == ".gltf":
+            data = base64.b64encode(bytes(buffer)).decode("ascii")
+            document["buffers"][0]["uri"] = f"data:application/octet-stream;base64,{data}"
+            handle.write(json.dumps(document).encode("utf-8"))
+            return
+        handle.write(glb_bytes(document, buffer))
+
+
+def _version() -> str:
+    from .. import __version__
+
+    return __version__

@@ -1,5 +1,6 @@
 """Skeletons, poses and clips (paper 003, sections 3.1 and 3.4): the value types of skeletal
-animation, and forward kinematics vectorized over frames and over many poses at once.
+animation (what ``flockkit.io.read_clips`` reads from glTF skins and BVH, and the crowd runtime
+plays), and forward kinematics vectorized over frames and over many poses at once.
 
 A pose gives every joint a local transform relative to its parent: a rotation (a unit quaternion
 x, y, z, w) and a translation; scales are the skeleton's, fixed at rest (clips do not animate
@@ -9,16 +10,14 @@ composes its nodes.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import attrs
 import numpy as np
 
-from .. import rigid, validate
-from .._arrays import readonly_float, readonly_int
-from ..errors import ValidationError
+from . import rigid
+from ._arrays import readonly_float, readonly_int
+from .errors import ValidationError
 
-__all__ = ["Pose", "Skeleton", "SkeletalClip", "Event", "read_clips", "stream_times"]
+__all__ = ["Pose", "Skeleton", "SkeletalClip", "Event", "stream_times"]
 
 # Quaternions whose length is this close to 1 are normalized (file formats store float32 and
 # round); farther ones are refused, since they are not rotations somebody meant.
@@ -346,79 +345,3 @@ class SkeletalClip:
     def pose(self, frame: int) -> Pose:
         """The stored pose of frame `frame` (J, ...)."""
         return Pose._adopt(self.rotations[frame], self.translations[frame])
-
-
-def read_clips(path, *, fps=None, allow_outside: bool = False) -> dict[str, SkeletalClip]:
-    """Every skeletal clip in a file: glTF (.gltf, .glb: every animation of each skin) or BVH
-    (.bvh: the take, named after the file).
-
-    Parameters
-    ----------
-    path : path-like
-    fps : float, optional
-        Resample to this rate; default each clip's own (glTF: its key rate; BVH: its frame time).
-    allow_outside : bool
-        Let a glTF file's external buffers lie outside its folder (see docs/security.md).
-
-    Returns
-    -------
-    dict of str to SkeletalClip
-        By clip name; a glTF file with several distinct skins names them "skin/clip". The clips of
-        one skin share one Skeleton: the skin's joints and, above them, the nodes that place the
-        model (an armature's rotation and scale), parents before children.
-
-    Raises
-    ------
-    FileNotFoundError, FileFormatError (a malformed or truncated file, naming it and where),
-    ValidationError (no skin, no animation, an unknown suffix, a bad `fps`).
-    """
-    from .. import _bvh, _gltf
-
-    path = Path(path)
-    if fps is not None:
-        fps = _fps(fps)
-    suffix = path.suffix.lower()
-    if suffix == ".bvh":
-        names, parents, offsets, frame_time, rotations, translations = _bvh.read(path)
-        skeleton = Skeleton(
-            names=names,
-            parents=parents,
-            rest=Pose(rotations=np.tile([0.0, 0, 0, 1], (len(names), 1)), translations=offsets),
-        )
-        # files round the frame time (.0083333 for 120 fps): the rate to 0.01 fps is what was meant
-        rate = round(1.0 / frame_time, 2)
-        clip = SkeletalClip(skeleton=skeleton, fps=rate, rotations=rotations, translations=translations, name=path.stem)
-        return {path.stem: _resampled(clip, fps, path)}
-    if suffix not in (".gltf", ".glb"):
-        raise ValidationError(
-            f"{path}: read_clips reads .gltf, .glb and .bvh files; got {suffix or 'a file without a suffix'!r}"
-        )
-    skins = list(_gltf.skin_clips(path, fps, allow_outside=allow_outside))
-    found = {}
-    for skin, names, parents, translations, rotations, scales, clips in skins:
-        skeleton = Skeleton(
-            names=names, parents=parents, rest=Pose(rotations=rotations, translations=translations), scales=scales
-        )
-        for name, (rate, r, t) in clips.items():
-            key = f"{skin}/{name}" if len(skins) > 1 else name
-            found[key] = SkeletalClip(skeleton=skeleton, fps=rate, rotations=r, translations=t, name=key)
-    if not found:
-        raise ValidationError(f"{path}: no animation moves a skin's joints")
-    return found
-
-
-def _resampled(clip: SkeletalClip, fps: float | None, source) -> SkeletalClip:
-    if fps is None or fps == clip.fps:
-        return clip
-    validate.allocation((clip.duration * fps + 1) * clip.skeleton.n_joints * 7 * 3,
-                        f"{source}: clip {clip.name!r} ({clip.duration:g} s) resampled at {fps:g} fps")  # fmt: skip
-    times = np.arange(int(round(clip.duration * fps)) + 1) / fps
-    pose = clip.sample(times)
-    return SkeletalClip(
-        skeleton=clip.skeleton,
-        fps=fps,
-        rotations=pose.rotations,
-        translations=pose.translations,
-        events=clip.events,
-        name=clip.name,
-    )

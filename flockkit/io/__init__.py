@@ -1,0 +1,214 @@
+"""Files in and out: captured motion read into a Motion (wide and long text tables, (T, N, D)
+.npy arrays), animated meshes (glTF, OBJ sequences, USD) and skeletal clips (glTF skins, BVH)
+read for analysis and crowds, and motions exported for other tools (CSV, JSON, glTF, USD).
+
+One module per format: ``tables``, ``gltf``, ``bvh``, ``obj``, ``usd`` (the only one that imports
+usd-core). Every file is read as untrusted (docs/security.md): regular files only, the files it
+names confined to its folder unless ``allow_outside=True``, and sizes checked against the memory
+budget (``flockkit.validate.memory_limit``) before anything is allocated.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from .. import validate
+from ..errors import ValidationError
+from ..mesh import AnimatedMesh
+from ..motion import Motion
+from ..skeleton import Pose, SkeletalClip, Skeleton
+from . import bvh, gltf, obj, usd
+from .gltf import write_gltf
+from .tables import DEFAULT_MAX_GAP, fill_gaps, read_long, read_npy, read_wide, write_csv, write_json
+from .usd import USD_FPS, write_usd
+
+__all__ = [
+    "read_wide",
+    "read_long",
+    "read_npy",
+    "read_mesh_animation",
+    "list_clips",
+    "read_clips",
+    "fill_gaps",
+    "export",
+    "write_csv",
+    "write_json",
+    "write_gltf",
+    "write_usd",
+    "EXPORT_SUFFIXES",
+    "DEFAULT_MAX_GAP",
+    "USD_FPS",
+]
+
+GLTF_SUFFIXES, USD_SUFFIXES = (".glb", ".gltf"), (".usda", ".usdc", ".usdz", ".usd")
+
+
+def list_clips(path, *, allow_outside: bool = False) -> dict[str, float]:
+    """The clips of an animated-mesh file and their durations in seconds: a glTF file's
+    animations, a USD stage's time range (one clip, named after the file), an OBJ sequence (one,
+    of no duration: its rate is the reader's `fps`). `allow_outside` as for
+    :func:`read_mesh_animation`."""
+    path = Path(path)
+    suffix = _format(path)
+    if suffix in GLTF_SUFFIXES:
+        return gltf.Document(path, allow_outside=allow_outside).clips()
+    if suffix in USD_SUFFIXES:
+        return {path.stem: usd.time_range(path, allow_outside=allow_outside)}
+    obj.read_sequence(str(path))
+    return {path.stem: 0.0}
+
+
+def _format(path: Path) -> str:
+    """The suffix naming `path`'s format ("obj" for a folder or a glob of OBJ files); a
+    ValidationError for any other."""
+    text = str(path)
+    if path.is_dir() or (not path.exists() and any(c in text for c in "*?[")):
+        return ".obj"
+    suffix = path.suffix.lower()
+    if suffix not in GLTF_SUFFIXES + USD_SUFFIXES + (".obj",):
+        raise ValidationError(
+            f"{path}: unknown mesh animation format {suffix or 'without a suffix'!r}; expected .glb, .gltf, .usda, "
+            ".usdc, .usdz, .usd, .obj, a folder of .obj files or a glob"
+        )
+    return suffix
+
+
+def read_mesh_animation(path, *, clip=None, fps: float = 30.0, allow_outside: bool = False) -> AnimatedMesh:
+    """An animated mesh from `path`, sampled at `fps` frames a second.
+
+    - glTF 2.0 (.glb, .gltf with GLB, external or data-URI buffers): every mesh of the default
+      scene, morph targets weighted and skinned meshes skinned (linear blend skinning), for the
+      named `clip` (a name or an index; default the first; ``list_clips`` names them).
+    - OBJ sequences (a folder of .obj files, or a glob such as ``frames/*.obj``): one file per
+      frame in natural order (frame2 before frame10), the same faces in every one; `fps` is the
+      sequence's rate. A path that exists is never read as a glob, whatever its characters.
+    - USD (.usda, .usdc, .usdz, .usd; extra ``usd``): every ``UsdGeom.Mesh`` with its
+      time-sampled points, in world space, sampled at `fps` over the stage's time range.
+
+    Faces are triangles or quads (larger polygons are split into a fan of triangles).
+
+    Files are read as untrusted (see docs/security.md): the files a glTF or USD file refers to
+    must lie inside its folder, unless `allow_outside` is True; an OBJ folder's files must be
+    regular files inside it. Sizes are checked against the memory budget
+    (``flockkit.validate.memory_limit``) before anything is sampled.
+    """
+    fps = validate.number(fps, "read_mesh_animation: fps", minimum=0, strict=True)
+    path = Path(path)
+    suffix = _format(path)
+    if suffix in GLTF_SUFFIXES:
+        name, positions, faces, clip_name = gltf.mesh_animation(path, clip, fps, allow_outside=allow_outside)
+        name = f"{name}:{clip_name}"
+    elif suffix in USD_SUFFIXES:
+        (positions, faces), name = usd.read_meshes(path, fps, allow_outside=allow_outside), path.stem
+    else:
+        positions, faces, name = obj.read_sequence(str(path))
+    return AnimatedMesh(motion=_motion(positions, fps, path), faces=faces, name=name)
+
+
+def _motion(positions, fps, source) -> Motion:
+    try:
+        return Motion(positions=positions, dt=1.0 / fps)
+    except ValidationError as exc:
+        raise ValidationError(f"{source}: {exc}") from None
+
+
+def read_clips(path, *, fps=None, allow_outside: bool = False) -> dict[str, SkeletalClip]:
+    """Every skeletal clip in a file: glTF (.gltf, .glb: every animation of each skin) or BVH
+    (.bvh: the take, named after the file).
+
+    Parameters
+    ----------
+    path : path-like
+    fps : float, optional
+        Resample to this rate; default each clip's own (glTF: its key rate; BVH: its frame time).
+    allow_outside : bool
+        Let a glTF file's external buffers lie outside its folder (see docs/security.md).
+
+    Returns
+    -------
+    dict of str to SkeletalClip
+        By clip name; a glTF file with several distinct skins names them "skin/clip". The clips of
+        one skin share one Skeleton: the skin's joints and, above them, the nodes that place the
+        model (an armature's rotation and scale), parents before children.
+
+    Raises
+    ------
+    FileNotFoundError, FileFormatError (a malformed or truncated file, naming it and where),
+    ValidationError (no skin, no animation, an unknown suffix, a bad `fps`).
+    """
+    path = Path(path)
+    if fps is not None:
+        fps = validate.number(fps, "read_clips: fps", minimum=0, strict=True)
+    suffix = path.suffix.lower()
+    if suffix == ".bvh":
+        names, parents, offsets, frame_time, rotations, translations = bvh.read(path)
+        skeleton = Skeleton(
+            names=names,
+            parents=parents,
+            rest=Pose(rotations=np.tile([0.0, 0, 0, 1], (len(names), 1)), translations=offsets),
+        )
+        # files round the frame time (.0083333 for 120 fps): the rate to 0.01 fps is what was meant
+        rate = round(1.0 / frame_time, 2)
+        clip = SkeletalClip(skeleton=skeleton, fps=rate, rotations=rotations, translations=translations, name=path.stem)
+        return {path.stem: _resampled(clip, fps, path)}
+    if suffix not in (".gltf", ".glb"):
+        raise ValidationError(
+            f"{path}: read_clips reads .gltf, .glb and .bvh files; got {suffix or 'a file without a suffix'!r}"
+        )
+    skins = list(gltf.skin_clips(path, fps, allow_outside=allow_outside))
+    found = {}
+    for skin, names, parents, translations, rotations, scales, clips in skins:
+        skeleton = Skeleton(
+            names=names, parents=parents, rest=Pose(rotations=rotations, translations=translations), scales=scales
+        )
+        for name, (rate, r, t) in clips.items():
+            key = f"{skin}/{name}" if len(skins) > 1 else name
+            found[key] = SkeletalClip(skeleton=skeleton, fps=rate, rotations=r, translations=t, name=key)
+    if not found:
+        raise ValidationError(f"{path}: no animation moves a skin's joints")
+    return found
+
+
+def _resampled(clip: SkeletalClip, fps: float | None, source) -> SkeletalClip:
+    if fps is None or fps == clip.fps:
+        return clip
+    validate.allocation((clip.duration * fps + 1) * clip.skeleton.n_joints * 7 * 3,
+                        f"{source}: clip {clip.name!r} ({clip.duration:g} s) resampled at {fps:g} fps")  # fmt: skip
+    times = np.arange(int(round(clip.duration * fps)) + 1) / fps
+    pose = clip.sample(times)
+    return SkeletalClip(
+        skeleton=clip.skeleton,
+        fps=fps,
+        rotations=pose.rotations,
+        translations=pose.translations,
+        events=clip.events,
+        name=clip.name,
+    )
+
+
+EXPORT_SUFFIXES = (".csv", ".json", ".usda", ".usdc", ".glb", ".gltf")
+
+
+def export(motion: Motion, path, **options) -> Path:
+    """Write `motion` in the format its suffix names: .csv (long format: frame, agent, x, y[, z],
+    readable by :func:`read_long`), .json, .glb / .gltf (glTF 2.0, for game engines and the web),
+    or .usda / .usdc (Universal Scene Description, needs the ``usd`` extra; `options` ``fps`` and
+    ``meters_per_unit`` as for :func:`write_usd`).
+    Atomic: an interrupted export leaves nothing behind."""
+    if not isinstance(motion, Motion):
+        raise ValidationError(f"export needs a flockkit.Motion; got {type(motion).__name__}")
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in EXPORT_SUFFIXES:
+        raise ValidationError(
+            f"{path}: unknown export extension {path.suffix!r}; expected {', '.join(EXPORT_SUFFIXES)}"
+        )
+    if suffix in (".csv", ".json", ".glb", ".gltf"):
+        if options:
+            raise ValidationError(f"{path}: options {', '.join(options)} are for USD exports")
+        {".csv": write_csv, ".json": write_json}.get(suffix, write_gltf)(motion, path)
+    else:
+        write_usd(motion, path, **options)
+    return path

@@ -1,0 +1,302 @@
+"""USD (Universal Scene Description), through usd-core: the one module that imports pxr.
+
+Writes, each on a stage with the conventions tools import unchanged (up axis z, metersPerUnit,
+a time line at a frame rate Blender, Houdini and Maya play at the right speed), saved atomically:
+a motion's agents as a PointInstancer (:func:`write_usd`), animated meshes and point clouds
+(:func:`write_meshes`, for scenes), and skeletons with their animation (:func:`write_skeletons`,
+for crowds). Reads the time-sampled ``UsdGeom.Mesh`` points of a stage (:func:`read_meshes`),
+after checking that every layer it composes lies inside its folder.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from .. import _files, rigid, validate
+from .._atomic import atomic_path
+from ..errors import FileFormatError, MissingDependencyError, ValidationError
+from ..mesh import fan_triangles
+from ..motion import Motion
+
+__all__ = ["USD_FPS", "write_usd", "write_meshes", "write_skeletons", "read_meshes", "time_range", "require_usd_core"]
+
+
+# The frame rate of the time line a USD export is written on, unless asked otherwise: 24, the
+# default scene rate of Blender, Houdini and Maya. Blender ignores a stage's framesPerSecond and
+# reads its time codes as its own frames, so a time line at the rate the scene has is what plays
+# at the right speed there; every USD reader that honours timeCodesPerSecond agrees.
+USD_FPS = 24.0
+
+
+def write_usd(motion: Motion, path, *, fps: float | None = USD_FPS, meters_per_unit: float = 1.0) -> None:
+    """A USD stage (.usda text or .usdc binary) holding /Flock/Agents, a UsdGeom.PointInstancer
+    with, per frame of the motion, a time sample of positions, orientations (facing the velocity,
+    the prototype's +x), velocities and angular velocities; fixed ``ids`` (the agent indices), so
+    identity never rests on point order.
+
+    The stage's time line runs at `fps` (timeCodesPerSecond = framesPerSecond = fps; None: one
+    time code per frame, fps = 1 / dt), each frame sampled at its time, t * fps; USD interpolates
+    between samples. metersPerUnit is `meters_per_unit` (flockkit's units are meters by default),
+    the up axis z; a 2D motion lies in the ground plane z = 0. Blender, Houdini and Maya import it
+    at the right size and speed."""
+    Gf, Usd, UsdGeom, Vt = _modules()
+    positions = np.zeros((motion.n_frames, motion.n_agents, 3))
+    positions[..., : motion.dims] = motion.positions
+    velocities = np.zeros_like(positions)
+    velocities[..., : motion.dims] = motion.velocities()
+    quaternions = rigid.facing(velocities.reshape(-1, 3)).reshape(motion.n_frames, motion.n_agents, 4)
+    turning = _angular_velocities(velocities, motion.dt)
+    with _stage(path, "/Flock", dt=motion.dt, n_frames=motion.n_frames, fps=fps,
+                   meters_per_unit=meters_per_unit) as (stage, times):  # fmt: skip
+        instancer = UsdGeom.PointInstancer.Define(stage, "/Flock/Agents")
+        body = UsdGeom.Cone.Define(stage, "/Flock/Agents/Prototypes/Agent")
+        body.CreateAxisAttr(UsdGeom.Tokens.x)
+        body.CreateHeightAttr(0.5)
+        body.CreateRadiusAttr(0.15)
+        instancer.CreatePrototypesRel().SetTargets([body.GetPath()])
+        instancer.CreateProtoIndicesAttr(Vt.IntArray([0] * motion.n_agents))
+        instancer.CreateIdsAttr(Vt.Int64Array(list(range(motion.n_agents))))
+        points, turns = instancer.CreatePositionsAttr(), instancer.CreateOrientationsAttr()
+        speeds, spins = instancer.CreateVelocitiesAttr(), instancer.CreateAngularVelocitiesAttr()
+        for frame, when in enumerate(times):
+            time = Usd.TimeCode(float(when))
+            points.Set(Vt.Vec3fArray.FromNumpy(positions[frame].astype(np.float32)), time)
+            speeds.Set(Vt.Vec3fArray.FromNumpy(velocities[frame].astype(np.float32)), time)
+            spins.Set(Vt.Vec3fArray.FromNumpy(turning[frame].astype(np.float32)), time)
+            turns.Set(
+                Vt.QuathArray(
+                    [Gf.Quath(float(w), Gf.Vec3h(float(x), float(y), float(z))) for w, x, y, z in quaternions[frame]]
+                ),
+                time,
+            )
+
+
+def write_meshes(path, objects, *, dt: float, n_frames: int, fps: float | None = USD_FPS,
+                 meters_per_unit: float = 1.0) -> None:  # fmt: skip
+    """A USD stage of objects under /Scene, each (name, positions (T, N, D), faces (F, K) or None,
+    custom data {key: int}): an animated UsdGeom.Mesh where it has faces, else UsdGeom.Points,
+    its points time-sampled at each of the `n_frames` frames `dt` apart (a 2D object lies in
+    z = 0). The stage as :func:`write_usd` makes it."""
+    _, Usd, UsdGeom, Vt = _modules()
+    with _stage(path, "/Scene", dt=dt, n_frames=n_frames, fps=fps, meters_per_unit=meters_per_unit) as (stage, times):
+        for name, motion_positions, faces, custom in objects:
+            prim = UsdGeom.Mesh.Define(stage, name) if faces is not None else UsdGeom.Points.Define(stage, name)
+            if faces is not None:
+                faces = np.asarray(faces)
+                prim.CreateFaceVertexCountsAttr(Vt.IntArray([faces.shape[1]] * len(faces)))
+                prim.CreateFaceVertexIndicesAttr(Vt.IntArray(faces.ravel().tolist()))
+            else:
+                prim.CreateWidthsAttr(Vt.FloatArray([0.05]))
+            points = prim.CreatePointsAttr()
+            positions = np.zeros((*motion_positions.shape[:2], 3), dtype=np.float32)
+            positions[..., : motion_positions.shape[2]] = motion_positions
+            for frame, when in enumerate(times):
+                points.Set(Vt.Vec3fArray.FromNumpy(positions[frame]), Usd.TimeCode(float(when)))
+            for key, value in custom.items():
+                prim.GetPrim().SetCustomDataByKey(key, value)
+
+
+def write_skeletons(path, *, joints, bind, rest, scales, roots, rotations, translations, fps: float,
+                    meters_per_unit: float = 1.0) -> None:  # fmt: skip
+    """A USD stage of agents under /Crowd: /Crowd/Agent_k a UsdSkel.Root whose transform is
+    `roots` (F, N, 4, 4) at each frame, holding a Skeleton (`joints` as paths, `bind` model-space
+    and `rest` local transforms (J, 4, 4)) bound to a SkelAnimation with the agent's local joint
+    `rotations` (F, N, J, 4; x, y, z, w), `translations` (F, N, J, 3) and the fixed `scales`
+    (J, 3). The time line runs at `fps`."""
+    Gf, _, _, Vt = _modules()
+    from pxr import UsdSkel
+
+    frames, agents = roots.shape[:2]
+    scales = Vt.Vec3hArray.FromNumpy(np.asarray(scales).astype(np.float16))
+    with _stage(path, "/Crowd", dt=1.0 / fps, n_frames=frames, fps=fps,
+                meters_per_unit=meters_per_unit) as (stage, times):  # fmt: skip
+        for agent in range(agents):
+            root = UsdSkel.Root.Define(stage, f"/Crowd/Agent_{agent}")
+            transform = root.AddTransformOp()
+            skeleton = UsdSkel.Skeleton.Define(stage, f"/Crowd/Agent_{agent}/Skeleton")
+            skeleton.CreateJointsAttr(joints)
+            skeleton.CreateBindTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(m.T.tolist()) for m in bind]))
+            skeleton.CreateRestTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(m.T.tolist()) for m in rest]))
+            animation = UsdSkel.Animation.Define(stage, f"/Crowd/Agent_{agent}/Skeleton/Animation")
+            animation.CreateJointsAttr(joints)
+            animation.CreateScalesAttr(scales)
+            turns, moves = animation.CreateRotationsAttr(), animation.CreateTranslationsAttr()
+            UsdSkel.BindingAPI.Apply(skeleton.GetPrim()).CreateAnimationSourceRel().SetTargets([animation.GetPath()])
+            for frame, when in enumerate(times):
+                transform.Set(Gf.Matrix4d(roots[frame, agent].T.tolist()), when)
+                turns.Set(Vt.QuatfArray.FromNumpy(np.ascontiguousarray(rotations[frame, agent])), when)
+                moves.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(translations[frame, agent])), when)
+
+
+def require_usd_core() -> None:
+    """Nothing, where usd-core is installed; MissingDependencyError naming the extra where it is
+    not (what a command checks before a long run that ends in a USD export)."""
+    _modules()
+
+
+def _modules():
+    """pxr's (Gf, Usd, UsdGeom, Vt); MissingDependencyError naming the extra when usd-core is absent."""
+    try:
+        from pxr import Gf, Usd, UsdGeom, Vt
+    except ImportError:
+        raise MissingDependencyError("USD export needs usd-core: pip install 'flockkit[usd]'") from None
+    return Gf, Usd, UsdGeom, Vt
+
+
+@contextlib.contextmanager
+def _stage(path, root: str, *, dt: float, n_frames: int, fps: float | None = USD_FPS, meters_per_unit: float = 1.0):
+    """A new USD stage, saved atomically to `path` on leaving: up axis z, metersPerUnit
+    `meters_per_unit`, a time line at `fps` (timeCodesPerSecond = framesPerSecond; None: 1 / dt)
+    over `n_frames` frames `dt` apart, and an Xform `root` as its default prim. Yields (stage,
+    the time code of each frame)."""
+    _, Usd, UsdGeom, _ = _modules()
+    fps = 1.0 / dt if fps is None else validate.number(fps, "USD fps", minimum=0, strict=True)
+    meters_per_unit = validate.number(meters_per_unit, "USD meters_per_unit", minimum=0, strict=True)
+    times = np.arange(n_frames) * dt * fps
+    with atomic_path(Path(path), create=False) as tmp:  # USD creates the layer itself
+        stage = Usd.Stage.CreateNew(str(tmp))
+        UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
+        UsdGeom.SetStageMetersPerUnit(stage, meters_per_unit)
+        stage.SetTimeCodesPerSecond(fps)
+        stage.SetFramesPerSecond(fps)
+        stage.SetStartTimeCode(0)
+        stage.SetEndTimeCode(float(times[-1]))
+        stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, root).GetPrim())
+        yield stage, times
+        stage.GetRootLayer().Save()
+
+
+def _angular_velocities(velocities: np.ndarray, dt: float) -> np.ndarray:
+    """Degrees per second (USD's unit) about the axis turning each agent's heading at frame t
+    onto its heading at t + 1 (zero at the last frame and for agents at rest), shape (T, N, 3)."""
+    speed = np.linalg.norm(velocities, axis=2, keepdims=True)
+    heading = np.divide(velocities, speed, out=np.zeros_like(velocities), where=speed > 1e-12)
+    turning = np.zeros_like(velocities)
+    axis = np.cross(heading[:-1], heading[1:])
+    sine = np.linalg.norm(axis, axis=2, keepdims=True)
+    angle = np.arctan2(sine, np.sum(heading[:-1] * heading[1:], axis=2, keepdims=True))
+    unit = np.divide(axis, sine, out=np.zeros_like(axis), where=sine > 1e-12)
+    turning[:-1] = unit * np.degrees(angle) / dt
+    return turning
+
+
+def _open(path, allow_outside: bool = False):
+    """The USD stage at `path`, opened only after every layer it would compose (sublayers,
+    references, payloads, value clips) is found to be a regular file inside its folder; once open,
+    the layers it uses are checked again. `allow_outside` lifts the folder rule."""
+    try:
+        from pxr import Sdf, Tf, Usd
+    except ImportError:
+        raise MissingDependencyError("reading USD needs usd-core: pip install 'flockkit[usd]'") from None
+    path = Path(path)
+    os.close(_files.open_regular(path))
+    try:
+        if not allow_outside:
+            _confine_layers(path, Sdf)
+        stage = Usd.Stage.Open(str(path))
+    except Tf.ErrorException as exc:
+        raise FileFormatError(f"{path}: not a USD stage usd-core can open: {str(exc).strip()[:200]}") from None
+    if stage is None:
+        raise FileFormatError(f"{path}: not a USD stage usd-core can open")
+    folder = path.parent.resolve()
+    for layer in stage.GetUsedLayers(includeClipLayers=True):
+        real = layer.realPath.split("[", 1)[0]  # a layer inside a package: package.usdz[layer.usdc]
+        if real and not allow_outside and not Path(real).resolve().is_relative_to(folder):
+            raise FileFormatError(f"{path}: composes layer {real}, outside {folder}; flockkit reads only files inside "
+                                  "a stage's folder")  # fmt: skip
+    return stage
+
+
+def _confine_layers(path: Path, Sdf) -> None:
+    """Walk the layers `path` refers to, checking each reference (``flockkit._files.confined``)
+    and each file (a regular file) before usd-core opens it."""
+    seen, todo = set(), [path.resolve()]
+    while todo:
+        file = todo.pop()
+        if file in seen:
+            continue
+        seen.add(file)
+        os.close(_files.open_regular(file))
+        layer = Sdf.Layer.FindOrOpen(str(file))
+        if layer is None:
+            raise FileFormatError(f"{file}: not a USD layer usd-core can open")
+        for reference in [*layer.GetCompositionAssetDependencies(), *_clip_assets(layer, Sdf)]:
+            target = _files.confined(file.parent, reference, source=file, where="a layer it composes")
+            if file.suffix.lower() != ".usdz" and target.exists():  # a package's layers lie inside it
+                todo.append(target)
+
+
+def _clip_assets(layer, Sdf) -> list[str]:
+    """The asset paths of the value clips a layer's prims name (their ``clips`` metadata)."""
+    found = []
+
+    def visit(spec_path):
+        spec = layer.GetPrimAtPath(spec_path) if spec_path.IsPrimPath() else None
+        if spec is None or not spec.HasInfo("clips"):
+            return
+        for clip_set in dict(spec.GetInfo("clips")).values():
+            found.extend(getattr(a, "path", str(a)) for a in clip_set.get("assetPaths", []))
+            for key in ("manifestAssetPath", "templateAssetPath"):
+                if clip_set.get(key):
+                    found.append(getattr(clip_set[key], "path", str(clip_set[key])).replace("#", "0"))
+
+    layer.Traverse(Sdf.Path.absoluteRootPath, visit)
+    return [f for f in found if f]
+
+
+def read_meshes(path, fps: float, *, allow_outside: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(positions (T, V, 3), faces (F, 3)) of every ``UsdGeom.Mesh`` of the stage at `path`, in
+    world space, sampled at `fps` over the stage's time range (polygons split into fans)."""
+    from pxr import Usd, UsdGeom
+
+    path = Path(path)
+    stage = _open(path, allow_outside)
+    meshes = [UsdGeom.Mesh(p) for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
+    if not meshes:
+        raise ValidationError(f"{path}: the stage has no UsdGeom.Mesh")
+    rate = stage.GetTimeCodesPerSecond()
+    start, end = stage.GetStartTimeCode(), stage.GetEndTimeCode()
+    if not (rate > 0 and math.isfinite(start) and math.isfinite(end) and end >= start):
+        raise FileFormatError(
+            f"{path}: the stage's time range {start:g}..{end:g} at {rate:g} codes a second is not one"
+        )
+    points = sum(len(mesh.GetPointsAttr().Get(Usd.TimeCode(start)) or []) for mesh in meshes)
+    validate.allocation(((end - start) / rate + 1e-9) * fps * points * 3 * 2,
+                        f"{path}: {(end - start) / rate:g} s at {fps:g} fps of {points} points")  # fmt: skip
+    codes = start + np.arange(0.0, (end - start) / rate + 1e-9, 1.0 / fps) * rate
+    positions, faces, count = [], [], 0
+    cache = UsdGeom.XformCache()
+    for mesh in meshes:
+        frames = []
+        for code in codes:
+            time = Usd.TimeCode(float(code))
+            points = np.array(mesh.GetPointsAttr().Get(time), dtype=float).reshape(-1, 3)
+            if frames and len(points) != len(frames[0]):
+                raise FileFormatError(
+                    f"{path}: {mesh.GetPath()} has {len(points)} points at time {code:g} and {len(frames[0])} at the "
+                    "start; an animated mesh keeps one topology"
+                )
+            cache.SetTime(time)
+            matrix = np.array(cache.GetLocalToWorldTransform(mesh.GetPrim()), dtype=float)  # row vectors: p @ M
+            frames.append(points @ matrix[:3, :3] + matrix[3, :3])
+        counts = np.array(mesh.GetFaceVertexCountsAttr().Get() or [], dtype=np.int64)
+        indices = np.array(mesh.GetFaceVertexIndicesAttr().Get() or [], dtype=np.int64)
+        if np.any(counts < 0) or counts.sum() != len(indices) or np.any(indices < 0) or np.any(
+                indices >= len(frames[0])):  # fmt: skip
+            raise FileFormatError(f"{path}: {mesh.GetPath()}'s faceVertexCounts and faceVertexIndices do not describe "
+                                  f"faces of its {len(frames[0])} points")  # fmt: skip
+        positions.append(np.stack(frames))
+        faces.append(fan_triangles(counts, indices) + count)
+        count += positions[-1].shape[1]
+    return np.concatenate(positions, axis=1), np.concatenate(faces)
+
+
+def time_range(path, *, allow_outside: bool = False) -> float:
+    """Seconds from the start of the stage at `path` to its end."""
+    stage = _open(path, allow_outside)
+    return (stage.GetEndTimeCode() - stage.GetStartTimeCode()) / stage.GetTimeCodesPerSecond()
