@@ -42,10 +42,10 @@ import attrs
 import numpy as np
 
 import flockkit
-from flockkit.solve import initial_trajectories, load_scenario, refine, solve
-from flockkit.solve.aims import com_aims
-from flockkit.solve.reach import speeds, unconstrained
-from flockkit.solve.sampler import pinned_frames
+from flockkit.constrained import initial_trajectories, load_scenario, refine, solve
+from flockkit.constrained.aims import com_aims
+from flockkit.constrained.reach import speeds, unconstrained
+from flockkit.constrained.sampler import pinned_frames
 
 REFERENCE = 0.66
 TODAY = {"obstacle-squeeze": -214.8, "looping-3d": -453.0, "arrows": -872.4}

@@ -6,18 +6,9 @@ convenience layer (``simulate``, ``build_graph``, ``walk``, ``solve``), rigid mo
 (``flockkit.rigid``) and the checks plugins share (``flockkit.validate``).
 """
 
-from . import crowd, errors, graph, io, layers, parallel, rigid, scene, validate
-from .constraints import (
-    Ball,
-    Box,
-    ComConstraint,
-    PointConstraint,
-    Polygon,
-    Problem,
-    Region,
-    ShapeConstraint,
-    fence,
-)
+from . import constrained, crowd, errors, graph, io, layers, parallel, rigid, scene, validate
+from .constrained import Proposal, Solution, solve
+from .constrained.problem import ComConstraint, PointConstraint, Problem, ShapeConstraint
 from .convenience import build_graph, build_layers, random_flock, segment, simulate, walk
 from .crowd import Crowd, Event, Pose, SkeletalClip, Skeleton, Stream, StreamPool, UniquePool
 from .features import Features
@@ -27,9 +18,9 @@ from .interfaces import Capabilities, capabilities
 from .layers import GraphLayers, LayeredWalk, Segmentation
 from .mesh import AnimatedMesh
 from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State, heading_axes
+from .regions import Ball, Box, Polygon, Region, fence
 from .registry import available, get, resolve
 from .scene import Scene, SceneAnimation
-from .solve import Proposal, Solution, solve
 from .synthesis import synthesize, synthesize_many
 
 __version__ = "0.1.0"
@@ -87,6 +78,7 @@ __all__ = [
     "Solution",
     "Proposal",
     "random_flock",
+    "constrained",
     "crowd",
     "errors",
     "graph",

@@ -358,14 +358,14 @@ def _cmd_info(args) -> int:
 
 
 def _cmd_solve(args) -> int:
-    from .solve import load_scenario
+    from .constrained import load_scenario
 
     output = _require_suffix(args.output, (".npz",), "-o")
     problem, settings = load_scenario(args.scenario)
     for option in ("iterations", "refine", "starts", "chains", "seed"):
         if getattr(args, option) is not None:
             settings[option] = getattr(args, option)
-    from .solve.sampler import unmet
+    from .constrained.sampler import unmet
 
     with _backend(args):
         solution = flockkit.solve(problem, n_jobs=args.jobs, progress=_progress(args), **settings)
@@ -465,7 +465,7 @@ def _cmd_render(args) -> int:
     motion = flockkit.Motion.load(args.motion)
     problem = None
     if args.scenario:
-        from .solve import load_scenario
+        from .constrained import load_scenario
 
         problem = load_scenario(args.scenario)[0]
     from . import viz

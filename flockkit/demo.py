@@ -29,10 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .constraints import Box, ComConstraint, PointConstraint, Problem
-from .constraints import fence as arena
+from .constrained.problem import ComConstraint, PointConstraint, Problem
 from .convenience import build_graph, simulate, walk
 from .errors import MissingDependencyError, ValidationError
+from .regions import Box
+from .regions import fence as arena
 from .synthesis import synthesize
 
 STICKLEBACKS = Path("sticklebacks-5") / "ground_truth.csv"
@@ -173,7 +174,7 @@ def _data_driven(tour: _Tour) -> tuple[dict, object]:
 def _scene(tour: _Tour, graph) -> dict:
     """Paper 002: a scene of flocks following arrows that turn halfway."""
     from . import viz
-    from .constraints import Polygon
+    from .regions import Polygon
     from .scene import Arrow, FlowField, Scene
 
     wind = FlowField(arrows=[Arrow(position=[0.0, 0.0], keyframes=[(0.0, [0.7, 0.0]), (19.0, [0.7, 0.0]),
@@ -317,7 +318,7 @@ def _foxes(tour: _Tour, folder: Path) -> dict:
 def _constrained(tour: _Tour) -> dict:
     """Paper 004: the come-from-behind scenario and its sampler trace."""
     from . import viz
-    from .solve import solve
+    from .constrained import solve
 
     problem = come_from_behind()
     with tour.step("solve come-from-behind"):

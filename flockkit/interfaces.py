@@ -98,7 +98,7 @@ class Capabilities:
         (stop - start, N, K) whose squares, summed over agents and components and halved, are
         what ``log_plausibility`` subtracts from a constant per frame (for boids: each wander
         impulse over its sigma). ``solve`` then improves its initial trajectories by least
-        squares on them before sampling (``flockkit.solve.refine``).
+        squares on them before sampling (``flockkit.constrained.refine``).
     coupling : bool
         Behavior, with ``residuals``: it offers ``plausibility_coupling(motion)``, a scipy sparse
         matrix (T N K, T N D) of the derivatives of each agent's residuals (rows, flattened

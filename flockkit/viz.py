@@ -9,7 +9,7 @@ import numpy as np
 
 from ._atomic import atomic_path
 from ._progress import progress_bar
-from .constraints import ComConstraint, PointConstraint, ShapeConstraint
+from .constrained.problem import ComConstraint, PointConstraint, ShapeConstraint
 from .errors import MissingDependencyError, ValidationError
 from .motion import Motion
 from .validate import integer, number
@@ -123,7 +123,7 @@ _REGION_COLORS = ("tab:green", "tab:olive", "tab:cyan", "tab:brown")
 
 def _named(regions) -> dict:
     """`regions` (a sequence of regions, or a mapping from legend label to region) as a mapping."""
-    from .constraints import Region
+    from .regions import Region
 
     named = dict(regions) if isinstance(regions, dict) else {f"region {i + 1}": r for i, r in enumerate(regions)}
     if len(named) == 1 and not isinstance(regions, dict):
@@ -588,7 +588,7 @@ def plot_graph(graph, path=None):
 def plot_trace(solution, path=None):
     """The sampler's log g per iteration for every chain of a flockkit.Solution, accepted
     proposals marked."""
-    from .solve import Solution
+    from .constrained import Solution
 
     if not isinstance(solution, Solution):
         raise ValidationError(f"plot_trace needs a flockkit.Solution; got {type(solution).__name__}")

@@ -8,8 +8,8 @@ target feature arrow (``flockkit.Features``' form: length in [0, 1], direction).
 the duplicates and walks each after its targets; ``SceneAnimation`` is the result.
 """
 
-from .constraints import Arrow, FlowField, SelfMovement
 from .file import read_scene
+from .flow import Arrow, FlowField, SelfMovement
 from .scene import Placement, Scene, SceneAnimation
 
 __all__ = ["Arrow", "FlowField", "Placement", "Scene", "SceneAnimation", "SelfMovement", "read_scene"]

@@ -29,11 +29,11 @@ from __future__ import annotations
 from pathlib import Path
 
 from .. import _files, _tomlfile
-from ..constraints import Polygon
 from ..errors import FlockkitError, ValidationError
 from ..graph import MotionGraph
 from ..layers import GraphLayers
-from .constraints import Arrow, FlowField, SelfMovement
+from ..regions import Polygon
+from .flow import Arrow, FlowField, SelfMovement
 from .scene import Scene
 
 __all__ = ["read_scene"]

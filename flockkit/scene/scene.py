@@ -22,15 +22,15 @@ import numpy as np
 
 from .. import _npzfile, rigid
 from .._arrays import readonly_float
-from ..constraints import Polygon
 from ..errors import FileFormatError, ValidationError
 from ..features import Features
 from ..graph import MotionGraph, Walk
 from ..io import USD_FPS
 from ..layers import GraphLayers, LayeredWalk
 from ..motion import DEFAULT_UP, Motion
+from ..regions import Polygon
 from ..validate import integer, number
-from .constraints import Arrow, FlowField, SelfMovement
+from .flow import Arrow, FlowField, SelfMovement
 
 __all__ = ["Placement", "Scene", "SceneAnimation"]
 

@@ -9,8 +9,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
+from ..constrained.problem import ComConstraint, PointConstraint, Problem, ShapeConstraint
 from ..motion import Motion
+from ..regions import Ball, Box, Polygon
 from ._expect import dims_of, expect_validation_error, on_input
 from .inputs import recording
 

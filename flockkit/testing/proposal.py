@@ -11,9 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..constraints import Ball, ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
-from ..solve import Proposal, ProposalContext, initial_trajectories, windows
-from ..solve.sampler import pinned_frames
+from ..constrained import Proposal, ProposalContext, initial_trajectories, windows
+from ..constrained.problem import ComConstraint, PointConstraint, Problem, ShapeConstraint
+from ..constrained.sampler import pinned_frames
+from ..regions import Ball, Polygon
 from ._expect import dims_of, needs, partner
 
 SEED = 5077

@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from hypothesis.errors import InvalidArgument
 from hypothesis.extra import numpy as hnp
 
-from ..constraints import ComConstraint
+from ..constrained.problem import ComConstraint
 from ..motion import Configuration, Motion, State
 
 __all__ = ["configurations", "states", "motions", "com_tracks", "difference_matrices", "anything", "damaged"]

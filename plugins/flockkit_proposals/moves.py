@@ -1,4 +1,4 @@
-"""Proposal moves of paper 004, section 3.4.1. Each returns a flockkit.solve.Proposal (the new
+"""Proposal moves of paper 004, section 3.4.1. Each returns a flockkit.constrained.Proposal (the new
 motion and the frames and agents it changed) or None, never mutates the current motion, and never
 moves a point-constrained agent at a constrained frame."""
 
@@ -13,7 +13,7 @@ from scipy.interpolate import CubicSpline
 
 import flockkit
 from flockkit import validate
-from flockkit.solve import Proposal, initial_trajectories, regenerate
+from flockkit.constrained import Proposal, initial_trajectories, regenerate
 
 
 def _segment(context, n_frames, rng, short_probability):

@@ -10,8 +10,8 @@ import pytest
 
 import flockkit
 from flockkit import registry
+from flockkit.constrained.sampler import Scorer
 from flockkit.errors import FlockkitWarning, PluginError, ValidationError
-from flockkit.solve.sampler import Scorer
 from flockkit.testing import check_plugin, checks_for, skipped_checks
 
 from ..testing.fakes import (

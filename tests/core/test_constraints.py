@@ -4,9 +4,9 @@ from hypothesis import given, settings
 
 import flockkit
 from flockkit import ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
-from flockkit.constraints import track_path
+from flockkit.constrained import windows
+from flockkit.constrained.problem import track_path
 from flockkit.errors import ValidationError
-from flockkit.solve import windows
 from flockkit.testing import strategies as fst
 
 

@@ -10,8 +10,8 @@ from hypothesis import strategies as st
 
 import flockkit
 from flockkit import ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
+from flockkit.constrained.sampler import Scorer
 from flockkit.errors import FlockkitWarning, UnknownPluginError, ValidationError
-from flockkit.solve.sampler import Scorer
 from flockkit.testing import strategies as fst
 
 from ..conftest import free_impulse_lengths
@@ -63,8 +63,8 @@ def test_initial_and_regenerated_trajectories_keep_clear_of_obstacles(seed):
     """A COM path squeezed past a ball: every agent-frame stays Problem.clearance outside it
     (point-constrained ones aside), and every constraint is still met exactly; without clearance
     the blends carry agents into it."""
-    from flockkit.solve import initial_trajectories, regenerate
-    from flockkit.solve.sampler import residuals
+    from flockkit.constrained import initial_trajectories, regenerate
+    from flockkit.constrained.sampler import residuals
 
     ball = flockkit.Ball(center=[2.5, 1.6], radius=1.0)
     problem = Problem(
@@ -135,8 +135,8 @@ def test_the_lead_in_to_a_first_point_and_com_constraint_is_model_like(seed):
     simulated forward, the group then translated onto its center: its agents' impulses there are
     a free flock's (medians 0.08-0.13 against 0.08-0.09), where the backward simulation they were
     left as gave 0.46-0.67. Both constraints are met exactly."""
-    from flockkit.solve import initial_trajectories
-    from flockkit.solve.sampler import residuals
+    from flockkit.constrained import initial_trajectories
+    from flockkit.constrained.sampler import residuals
 
     rest = list(range(1, 12))
     problem = Problem(
@@ -189,7 +189,7 @@ def test_same_seed_same_solution_and_chains_are_ranked():
 def test_same_bytes_in_this_process_and_on_workers_with_fewer_threads():
     """Loky gives each worker cores / n_jobs BLAS threads; a chain run here with more threads once
     ended 3e-4 away from the same chain run on a worker (obstacle-squeeze, 5 iterations)."""
-    from flockkit.solve.scenario import load_scenario
+    from flockkit.constrained.scenario import load_scenario
 
     problem, _ = load_scenario(EXAMPLES / "scenarios" / "obstacle-squeeze.toml")
     with warnings.catch_warnings():
@@ -261,8 +261,8 @@ def test_refining_without_sampling_fits_zero_residuals():
     """sample=False aims every residual at zero: smaller residuals than the sampled refinement,
     whose targets are the model's own draws, and every constraint still met. (small_problem's
     point track leaves residuals of about 4e5 that no step removes, larger than the difference.)"""
-    from flockkit.solve import refine
-    from flockkit.solve.sampler import pinned_frames, residuals
+    from flockkit.constrained import refine
+    from flockkit.constrained.sampler import pinned_frames, residuals
 
     problem = attrs.evolve(small_problem(), constraints=small_problem().constraints[3:])  # its COM and shape
     boids = flockkit.get("behavior", "boids")
@@ -279,8 +279,8 @@ def test_refining_without_sampling_fits_zero_residuals():
 
 
 def test_refine_needs_a_model_that_declares_residuals():
-    from flockkit.solve import refine
-    from flockkit.solve.sampler import pinned_frames
+    from flockkit.constrained import refine
+    from flockkit.constrained.sampler import pinned_frames
 
     problem = small_problem()
     motion = flockkit.solve(problem, iterations=0, refine=0, starts=1, seed=1).motion
@@ -341,7 +341,7 @@ def test_the_model_s_speeds_are_measured_in_open_space(seed):
     problem's obstacles (the model avoids them): an obstacle where the flock would start leaves
     the speeds as they are without one. Started among them, obstacle-squeeze's seed 6 measured a
     90th percentile of 1.25 and aimed its COM track that fast."""
-    from flockkit.solve.reach import speeds, unconstrained
+    from flockkit.constrained.reach import speeds, unconstrained
 
     ball = flockkit.Ball(center=[0.5, 0.5], radius=1.0)
     track = [ComConstraint(time=t, position=[t, 0.0]) for t in (0.5, 2.5, 4.5)]
@@ -356,7 +356,7 @@ def test_a_track_turning_harder_than_the_model_warns_naming_its_corner_and_is_st
     """A point track that doubles back at 1 m/s (its legs' mean velocities differ by 2 m/s over
     4 s: 0.5 m/s^2 on average) warns at its corner; the same corner on a COM track, within what
     the COM may miss by, does not."""
-    from flockkit.solve.reach import IMPLAUSIBLE_TURN, _turning, unconstrained
+    from flockkit.constrained.reach import IMPLAUSIBLE_TURN, _turning, unconstrained
 
     corner = [[0.0, 0.0], [2.0, 0.0], [0.0, 0.0]]
     problem = Problem(
@@ -391,7 +391,7 @@ def test_com_aims_stay_within_reach_and_never_make_a_path_ask_more(track, extra)
     """Each COM constraint of a track moves at most AIM_REACH x 3 sigma_com, the path through the
     aims costs no more than the path through the constraints, and every other constraint (a
     point track, a lone COM constraint of another subset) stays as it is."""
-    from flockkit.solve.aims import AIM_REACH, PathCost, com_aims
+    from flockkit.constrained.aims import AIM_REACH, PathCost, com_aims
 
     dims = len(track[0].position)
     others = {
@@ -410,7 +410,7 @@ def test_com_aims_stay_within_reach_and_never_make_a_path_ask_more(track, extra)
 
 
 def test_a_straight_com_track_at_the_model_s_speed_is_met_where_it_is():
-    from flockkit.solve.aims import com_aims
+    from flockkit.constrained.aims import com_aims
 
     track = [ComConstraint(time=t, position=[t, 0.5 * t]) for t in (0.0, 2.0, 5.0)]  # 1.118 per second
     problem = Problem(n_agents=6, duration=5.0, constraints=track)
@@ -424,7 +424,7 @@ def test_a_com_track_faster_than_the_model_is_met_within_its_tolerance_and_more_
     """A group whose center must travel 1.32 m/s (boids cruise at 1.0): solve meets each COM
     within 3 sigma_com, at its aim, and the refined motion is far more model-like than when the
     tolerance leaves no room (-22 to -26 against -56 to -63 per agent-step, seeds 1-4)."""
-    from flockkit.solve.sampler import unmet
+    from flockkit.constrained.sampler import unmet
 
     def solved(sigma):
         problem = Problem(
@@ -452,7 +452,7 @@ def test_velocities_inferred_from_a_com_track_follow_its_aims_and_given_ones_sta
     at 1.39 m/s where its aimed path runs at 1.16), while a velocity the user gave is kept."""
     from scipy.interpolate import make_interp_spline
 
-    from flockkit.solve.aims import com_aims
+    from flockkit.constrained.aims import com_aims
 
     given = np.array([0.5, 0.5])
     track = [
@@ -471,8 +471,8 @@ def test_the_model_s_coupling_makes_refine_s_jacobian_exact():
     """refine's finite differences move every agent at once, crediting each agent with its
     neighbors' share of its residuals; with boids' coupling (Capabilities.coupling) its Jacobian
     is the one finite differences measure agent by agent, and without it, it is not."""
-    from flockkit.solve.refine import _Refinement
-    from flockkit.solve.sampler import pinned_frames
+    from flockkit.constrained.least_squares import _Refinement
+    from flockkit.constrained.sampler import pinned_frames
 
     problem = small_problem()
     boids = flockkit.get("behavior", "boids")
@@ -501,7 +501,7 @@ def test_many_starts_are_ranked_cheaply_then_their_best_again(monkeypatch):
     steps towards the most regular motion, the SURVIVORS best of them again after SCREEN_STEPS
     (with sampled targets, as fewer draws are), and the best of those is refined in full (the
     ranking read from the calls it makes)."""
-    sampler = importlib.import_module("flockkit.solve.sampler")
+    sampler = importlib.import_module("flockkit.constrained.sampler")
     monkeypatch.setattr(sampler, "SURVIVORS", 3)
     calls, scores = [], {}
     real_refine, real_frames = sampler.refine_motion, sampler.Scorer.frames

@@ -78,9 +78,9 @@ def reader_calls(reader: str, path: Path):
             loaders.get(_npzfile.kind_of(path), flockkit.Motion.load)(path)
 
         return [load]
+    from flockkit.constrained.scenario import load_scenario
     from flockkit.crowd.file import read_crowd_scene
     from flockkit.scene import read_scene
-    from flockkit.solve.scenario import load_scenario
 
     return [lambda: load_scenario(path), lambda: read_scene(path), lambda: read_crowd_scene(path)]
 
@@ -210,10 +210,10 @@ def _child(reader: str, seconds: float, corpus: Path, runs: int | None, crashes:
 
     with atheris.instrument_imports(include=["flockkit", "flockkit_controllers"]):
         import flockkit  # noqa: F401
+        import flockkit.constrained.scenario  # noqa: F401
         import flockkit.crowd.file  # noqa: F401
         import flockkit.io  # noqa: F401
         import flockkit.scene  # noqa: F401
-        import flockkit.solve.scenario  # noqa: F401
     folder = Path(tempfile.mkdtemp(prefix=f"flockkit-fuzz-{reader}-"))
     for k, data in enumerate(seeds(reader, folder)):
         (corpus / f"seed{k}").write_bytes(data)  # libFuzzer adds what it finds to this folder

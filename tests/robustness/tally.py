@@ -115,7 +115,7 @@ def _signals(folder, runs):
 def _determinism():
     import joblib
 
-    from flockkit.solve.scenario import load_scenario
+    from flockkit.constrained.scenario import load_scenario
 
     recording = flockkit.simulate(n_agents=6, steps=200, seed=3)
     # 20 agents squeezing past obstacles: where chains once drifted apart with the BLAS threads

@@ -5,8 +5,8 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 import flockkit
-from flockkit.io import read_clips
 from flockkit.errors import ValidationError
+from flockkit.io import read_clips
 from flockkit.testing import inputs
 
 WALKER = inputs.walker()  # 2 s cycle at 30 fps, steps at 0.5 s and 1.5 s

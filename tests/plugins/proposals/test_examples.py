@@ -10,8 +10,8 @@ from flockkit_objectives.terms import count_flocks
 
 import flockkit
 from flockkit import ComConstraint, PointConstraint
+from flockkit.constrained import load_scenario
 from flockkit.errors import FlockkitWarning
-from flockkit.solve import load_scenario
 
 from ...conftest import free_impulse_lengths
 
@@ -26,7 +26,7 @@ def test_the_five_examples_are_there():
 def test_a_default_run_meets_the_constraints_and_improves_plausibility(path):
     problem, settings = load_scenario(path)
     # come-from-behind's runner must average 1.92 m/s, and one-agent's S and looping-3d's loop turn
-    # harder than boids do (flockkit.solve.reach); the others warn of nothing
+    # harder than boids do (flockkit.constrained.reach); the others warn of nothing
     beyond = {
         "come-from-behind": r"constraint 1 \(PointConstraint at t=7\) is 1.92 length units per second",
         "one-agent": r"constraint 1 \(PointConstraint at t=3\) turns its agent at 0.2 length units per second squared",

@@ -6,8 +6,8 @@ from hypothesis import strategies as st
 
 import flockkit
 from flockkit import PointConstraint, Problem
-from flockkit.solve import ProposalContext, initial_trajectories, windows
-from flockkit.solve.sampler import pinned_frames
+from flockkit.constrained import ProposalContext, initial_trajectories, windows
+from flockkit.constrained.sampler import pinned_frames
 
 
 def context_for(problem, motion):

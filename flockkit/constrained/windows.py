@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..constraints import Problem, ShapeConstraint
+from .problem import Problem, ShapeConstraint
 
 
 def windows(problem: Problem) -> list[tuple[int, int]]:

@@ -27,8 +27,9 @@ from __future__ import annotations
 from pathlib import Path
 
 from .. import _tomlfile, validate
-from ..constraints import Ball, Box, ComConstraint, PointConstraint, Polygon, Problem, ShapeConstraint
 from ..errors import FlockkitError, ValidationError
+from ..regions import Ball, Box, Polygon
+from .problem import ComConstraint, PointConstraint, Problem, ShapeConstraint
 
 _PROBLEM_KEYS = {
     "agents": "n_agents",

@@ -24,7 +24,6 @@ import numpy as np
 
 from .. import parallel
 from .._progress import progress_bar
-from ..constraints import ComConstraint, PointConstraint, Problem
 from ..errors import ValidationError
 from ..interfaces import capabilities
 from ..motion import Motion
@@ -33,8 +32,9 @@ from ..validate import allocation, integer, number
 from ..validate import seed as validate_seed
 from .aims import com_aims
 from .initial import initial_trajectories
+from .least_squares import refine as refine_motion
+from .problem import ComConstraint, PointConstraint, Problem
 from .reach import shapes_apart, speeds, unconstrained, warn_beyond
-from .refine import refine as refine_motion
 from .windows import windows
 
 # Paper 004 draws velocity (re-timing) moves with weight 0.3. Accepted most often (a quarter of
@@ -62,7 +62,7 @@ class Proposal:
 @attrs.frozen(kw_only=True, eq=False)
 class ProposalContext:
     """What a proposal move may read: the problem (in ``solve``, with its COM constraints at
-    the aims the initial trajectories met, ``flockkit.solve.com_aims``), the behavior model, the
+    the aims the initial trajectories met, ``flockkit.constrained.com_aims``), the behavior model, the
     windows of the initial trajectories, the current per-frame log g (`scores`), the
     point-constrained agent-frames (`pinned`, boolean (T, N)), which a move must leave exactly
     where they are, and `scale`, a factor for the size of a move's changes that the sampler adapts
@@ -283,7 +283,7 @@ def solve(
 
     Point and shape constraints are met exactly; COM constraints within 3 ``problem.sigma_com``:
     each chain's initial trajectories (refined and regenerated alike) meet the COM constraints of
-    each track at their aims (``flockkit.solve.com_aims``), and the sampler scores every COM
+    each track at their aims (``flockkit.constrained.com_aims``), and the sampler scores every COM
     against its own position.
 
     Parameters
@@ -298,7 +298,7 @@ def solve(
         Sampler iterations per chain (at most, with `stable`); 0 returns the starting motion.
     refine : int
         For a behavior declaring ``Capabilities(residuals=True)``: at most this many least-squares
-        steps (``flockkit.solve.refine``) improve each chain's initial trajectories before
+        steps (``flockkit.constrained.refine``) improve each chain's initial trajectories before
         sampling, so that the motion looks like the model made it; 0 samples from the initial
         trajectories as they are (paper 004).
     starts : int

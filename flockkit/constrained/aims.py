@@ -29,7 +29,7 @@ import attrs
 import numpy as np
 from scipy.optimize import minimize
 
-from ..constraints import ComConstraint, Problem, track_path
+from .problem import ComConstraint, Problem, track_path
 
 __all__ = ["com_aims", "PathCost"]
 
@@ -100,7 +100,7 @@ def _aims(times, positions: np.ndarray, speeds, reach: float) -> np.ndarray:
 
 
 class PathCost:
-    """The cost of the path through knots at `times` (``flockkit.constraints.track_path``): the
+    """The cost of the path through knots at `times` (``flockkit.constrained.track_path``): the
     integral of |acceleration|^2 + (speed outside `speeds`)^2 / TAU^2. The spline is
     linear in its knots, so velocity and acceleration at the quadrature samples are matrices
     (samples x knots) times the knots."""

@@ -34,10 +34,10 @@ from scipy.sparse import bmat, coo_matrix, diags, tril
 from scipy.sparse.csgraph import reverse_cuthill_mckee
 from scipy.sparse.linalg import spsolve
 
-from ..constraints import ComConstraint, Problem, ShapeConstraint
 from ..errors import ValidationError
 from ..interfaces import capabilities
 from ..motion import Motion
+from .problem import ComConstraint, Problem, ShapeConstraint
 
 __all__ = ["refine"]
 

@@ -47,10 +47,10 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.optimize import linear_sum_assignment
 
 from .. import rigid
-from ..constraints import ComConstraint, PointConstraint, Problem, ShapeConstraint, track_path
 from ..convenience import random_flock
 from ..interfaces import capabilities
 from ..motion import Motion, State
+from .problem import ComConstraint, PointConstraint, Problem, ShapeConstraint, track_path
 from .windows import windows
 
 # Steps of unconstrained simulation behind a snapshot: 3 s at the paper's 10 Hz, long enough for

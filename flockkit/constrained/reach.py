@@ -30,10 +30,10 @@ import warnings
 
 import numpy as np
 
-from ..constraints import ComConstraint, Problem, ShapeConstraint
 from ..convenience import random_flock
 from ..errors import FlockkitWarning
 from ..motion import Motion, State
+from .problem import ComConstraint, Problem, ShapeConstraint
 
 # A constraint asking for more than this many times the model's 99th percentile of speed, or of a
 # track's turn, is one no model-like motion meets. Turns are told apart less sharply (seeds 1-10):
