@@ -8,7 +8,7 @@ synthetic flag of 10 000 vertices and 300 frames (a 100 x 100 grid waving in two
 halves) it prints the seconds of each stage, the peak memory of the analysis (tracemalloc, in a
 second, untimed pass), and the cost of synthesizing 60 s (the best of 3 runs), in milliseconds per
 second of output per 1 000 vertices, with the seams smoothed (the default) and without
-(``flockkit.layers.SEAM_PASSES = 0``).
+(``flockkit.scene.layers.SEAM_PASSES = 0``).
 Targets (2 cores): the whole analysis of the 10 000-vertex, 300-frame object under 10 s;
 synthesis at most 1 ms per second of output per 1 000 vertices.
 """
@@ -72,9 +72,9 @@ def main():
         # the best of 3 runs: on a virtual machine a large fresh allocation's page faults vary a lot
         played, synthesis = timed(lambda layers=layers, walk=walk: flockkit.synthesize(layers, walk), repeat=3)
         per = synthesis * 1000 / played.duration / (mesh.motion.n_agents / 1000)
-        passes, flockkit.layers.SEAM_PASSES = flockkit.layers.SEAM_PASSES, 0
+        passes, flockkit.scene.layers.SEAM_PASSES = flockkit.scene.layers.SEAM_PASSES, 0
         _, plain = timed(lambda layers=layers, walk=walk: flockkit.synthesize(layers, walk), repeat=3)
-        flockkit.layers.SEAM_PASSES = passes
+        flockkit.scene.layers.SEAM_PASSES = passes
         plain = plain * 1000 / played.duration / (mesh.motion.n_agents / 1000)
         analysis = reading + segmenting + building
         row = (

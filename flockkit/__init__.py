@@ -6,22 +6,19 @@ convenience layer (``simulate``, ``build_graph``, ``walk``, ``solve``), rigid mo
 (``flockkit.rigid``) and the checks plugins share (``flockkit.validate``).
 """
 
-from . import constrained, crowd, errors, graph, io, layers, parallel, rigid, scene, validate
+from . import constrained, crowd, errors, graphs, io, parallel, rigid, scene, validate
 from .constrained import Proposal, Solution, solve
 from .constrained.problem import ComConstraint, PointConstraint, Problem, ShapeConstraint
-from .convenience import build_graph, build_layers, random_flock, segment, simulate, walk
+from .convenience import build_graph, build_layers, segment, simulate, synthesize, walk
 from .crowd import Crowd, Event, Pose, SkeletalClip, Skeleton, Stream, StreamPool, UniquePool
-from .features import Features
-from .graph import Clip, MotionGraph, Transition, Walk
+from .graphs import Clip, MotionGraph, Transition, Walk, synthesize_many
 from .hookspecs import hookimpl
 from .interfaces import Capabilities, capabilities
-from .layers import GraphLayers, LayeredWalk, Segmentation
 from .mesh import AnimatedMesh
-from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State, heading_axes
+from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State, heading_axes, random_flock
 from .regions import Ball, Box, Polygon, Region, fence
 from .registry import available, get, resolve
-from .scene import Scene, SceneAnimation
-from .synthesis import synthesize, synthesize_many
+from .scene import Features, GraphLayers, LayeredWalk, Scene, SceneAnimation, Segmentation
 
 __version__ = "0.1.0"
 
@@ -81,9 +78,8 @@ __all__ = [
     "constrained",
     "crowd",
     "errors",
-    "graph",
+    "graphs",
     "io",
-    "layers",
     "scene",
     "parallel",
     "rigid",

@@ -2,51 +2,24 @@
 
 from __future__ import annotations
 
-import math
-
 import attrs
 import numpy as np
 
+from . import graphs
 from ._progress import progress_bar
 from .errors import ValidationError
-from .graph import MotionGraph, Walk
+from .graphs import MotionGraph
 from .interfaces import capabilities
-from .layers import GraphLayers, Segmentation, motion_of, part_motion
 from .mesh import AnimatedMesh
-from .motion import Motion, State
+from .motion import Motion, State, random_flock
 from .registry import get, label, require_dims, resolve
-from .validate import allocation, integer, number
+from .scene.layers import GraphLayers, part_motion, synthesize_layers, walk_layers
+from .scene.segmentation import Segmentation, motion_of
+from .validate import allocation, integer
 from .validate import dims as validate_dims
 from .validate import seed as validate_seed
 
-__all__ = ["simulate", "random_flock", "build_graph", "walk", "segment", "build_layers"]
-
-
-def random_flock(
-    *, n_agents: int, dims: int = 2, rng: np.random.Generator, spacing: float = 1.0, speed: float = 1.0
-) -> State:
-    """A random flock, the documented start of :func:`simulate`.
-
-    Positions are uniform in a disc (2D) or ball (3D) around the origin whose area (volume) is
-    ``n_agents * spacing**dims``, so neighbors are about `spacing` apart. All agents head roughly
-    the same way: a common direction, uniform at random, plus independent Gaussian noise of
-    standard deviation 0.2 per component, normalized and scaled to `speed`. No model arrays
-    (``extra`` is empty), so a model starts its own (boids: zero wander).
-    """
-    n_agents = integer(n_agents, "n_agents", minimum=1)
-    dims = validate_dims(dims)
-    spacing = number(spacing, "spacing", minimum=0, strict=True)
-    speed = number(speed, "speed", minimum=0, strict=True)
-    unit_ball = math.pi if dims == 2 else 4.0 * math.pi / 3.0
-    radius = spacing * (n_agents / unit_ball) ** (1.0 / dims)
-    directions = rng.standard_normal((n_agents, dims))
-    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
-    positions = directions * radius * rng.random((n_agents, 1)) ** (1.0 / dims)
-    heading = rng.standard_normal(dims)
-    heading /= np.linalg.norm(heading)
-    headings = heading + 0.2 * rng.standard_normal((n_agents, dims))
-    velocities = speed * headings / np.linalg.norm(headings, axis=1, keepdims=True)
-    return State(positions=positions, velocities=velocities)
+__all__ = ["simulate", "build_graph", "walk", "synthesize", "segment", "build_layers"]
 
 
 def simulate(
@@ -167,29 +140,24 @@ def _plain(params: dict) -> dict:
     return {k: v for k, v in params.items() if isinstance(v, (int, float, str, bool, type(None))) and k != "n_jobs"}
 
 
-def walk(
-    graph: MotionGraph, *, strategy="random", duration: float | None = None, seed: int | None = None, **params
-) -> Walk:
+def walk(graph, *, strategy="random", duration: float | None = None, seed: int | None = None, **params):
     """A walk through `graph` with a walk strategy (an installed name with `params`: ``random``,
     ``region`` with ``region=``; or an instance) covering `duration` seconds (default: the length
-    of the graph's source motion). On ``flockkit.GraphLayers`` every part is walked on its own,
-    each with its own stream of random numbers from `seed`, giving a ``flockkit.LayeredWalk``."""
-    from .layers import walk_layers
-
+    of the graph's source motion): ``flockkit.graphs.walk``. On ``flockkit.GraphLayers`` every part
+    is walked on its own, each with its own stream of random numbers from `seed`, giving a
+    ``flockkit.LayeredWalk`` (``flockkit.scene.walk_layers``)."""
     if isinstance(graph, GraphLayers):
-        duration = graph.source.duration if duration is None else duration
-        return walk_layers(graph, strategy=strategy, duration=duration, seed=validate_seed(seed), params=params)
-    if not isinstance(graph, MotionGraph):
-        raise ValidationError(f"walk needs a flockkit.MotionGraph; got {type(graph).__name__}")
-    duration = graph.motion.duration if duration is None else number(duration, "walk: duration", minimum=0, strict=True)
-    made = resolve("walk", strategy, **params)
-    require_dims("walk", made, graph.motion.dims, f"a {graph.motion.dims}D graph", spec=strategy)
-    frames = duration / graph.motion.dt
-    # synthesis holds the positions, their gather indices and placed copies: about 4 times them
-    allocation(
-        4 * frames * graph.motion.n_agents * graph.motion.dims, f"walk: {duration:g} s ({frames:.3g} frames) of motion"
-    )
-    return made.walk(graph, np.random.default_rng(validate_seed(seed)), duration)
+        return walk_layers(graph, strategy=strategy, duration=duration, seed=seed, **params)
+    return graphs.walk(graph, strategy=strategy, duration=duration, seed=seed, **params)
+
+
+def synthesize(graph, walk) -> Motion:
+    """The motion of `walk` through `graph` (``flockkit.graphs.synthesize``); on
+    ``flockkit.GraphLayers`` with a ``LayeredWalk``, the whole object from its parts' walks, the
+    seams between parts of a mesh smoothed (``flockkit.scene.synthesize_layers``)."""
+    if isinstance(graph, GraphLayers):
+        return synthesize_layers(graph, walk)
+    return graphs.synthesize(graph, walk)
 
 
 def segment(source, *, segmenter="ica-kmeans", seed: int | None = None, **params) -> Segmentation:

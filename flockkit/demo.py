@@ -32,9 +32,9 @@ import numpy as np
 from .constrained.problem import ComConstraint, PointConstraint, Problem
 from .convenience import build_graph, simulate, walk
 from .errors import MissingDependencyError, ValidationError
+from .graphs import synthesize
 from .regions import Box
 from .regions import fence as arena
-from .synthesis import synthesize
 
 STICKLEBACKS = Path("sticklebacks-5") / "ground_truth.csv"
 

@@ -11,6 +11,7 @@ arrived with, ``(x[-1] - x[-2]) / dt``. A one-frame motion has zero velocities.
 from __future__ import annotations
 
 import functools
+import math
 from collections.abc import Mapping
 
 import attrs
@@ -19,9 +20,19 @@ import numpy as np
 from . import _npzfile, rigid
 from ._arrays import check_agent_array, check_finite, readonly_float, readonly_int, readonly_mapping
 from .errors import FileFormatError, ValidationError
-from .validate import number
+from .validate import dims as validate_dims
+from .validate import integer, number
 
-__all__ = ["Motion", "Configuration", "State", "ConfigurationFrame", "Alignment", "DEFAULT_UP", "heading_axes"]
+__all__ = [
+    "Motion",
+    "Configuration",
+    "State",
+    "ConfigurationFrame",
+    "Alignment",
+    "DEFAULT_UP",
+    "heading_axes",
+    "random_flock",
+]
 
 #: The world up direction used for 3D configuration frames unless another is given (z up).
 DEFAULT_UP = (0.0, 0.0, 1.0)
@@ -452,3 +463,30 @@ class Motion:
             return cls._from_arrays(arrays, header.get("dt"))
         except ValidationError as exc:
             raise FileFormatError(f"{path}: invalid motion: {exc}") from None
+
+
+def random_flock(
+    *, n_agents: int, dims: int = 2, rng: np.random.Generator, spacing: float = 1.0, speed: float = 1.0
+) -> State:
+    """A random flock, the documented start of :func:`simulate`.
+
+    Positions are uniform in a disc (2D) or ball (3D) around the origin whose area (volume) is
+    ``n_agents * spacing**dims``, so neighbors are about `spacing` apart. All agents head roughly
+    the same way: a common direction, uniform at random, plus independent Gaussian noise of
+    standard deviation 0.2 per component, normalized and scaled to `speed`. No model arrays
+    (``extra`` is empty), so a model starts its own (boids: zero wander).
+    """
+    n_agents = integer(n_agents, "n_agents", minimum=1)
+    dims = validate_dims(dims)
+    spacing = number(spacing, "spacing", minimum=0, strict=True)
+    speed = number(speed, "speed", minimum=0, strict=True)
+    unit_ball = math.pi if dims == 2 else 4.0 * math.pi / 3.0
+    radius = spacing * (n_agents / unit_ball) ** (1.0 / dims)
+    directions = rng.standard_normal((n_agents, dims))
+    directions /= np.linalg.norm(directions, axis=1, keepdims=True)
+    positions = directions * radius * rng.random((n_agents, 1)) ** (1.0 / dims)
+    heading = rng.standard_normal(dims)
+    heading /= np.linalg.norm(heading)
+    headings = heading + 0.2 * rng.standard_normal((n_agents, dims))
+    velocities = speed * headings / np.linalg.norm(headings, axis=1, keepdims=True)
+    return State(positions=positions, velocities=velocities)

@@ -150,15 +150,15 @@ def window(motion, start, stop, *, owner: str) -> tuple[int, int]:
     """The frame window (start, stop) of `motion`, ``stop=None`` meaning its end, checked as every
     windowed operation (``log_plausibility``, ``log_terms``) must: integers with
     0 <= start <= stop <= n_frames. `owner` names the component in the message."""
-    from .motion import Motion
-
-    if not isinstance(motion, Motion):
+    # a Motion by what it offers (validate stands below flockkit.motion, which it checks numbers for)
+    n_frames = getattr(motion, "n_frames", None)
+    if type(n_frames) is not int or not hasattr(motion, "positions"):
         raise ValidationError(f"{owner}: motion must be a flockkit.Motion; got {type(motion).__name__}")
-    stop = motion.n_frames if stop is None else stop
+    stop = n_frames if stop is None else stop
     start, stop = integer(start, f"{owner}: start"), integer(stop, f"{owner}: stop")
-    if not 0 <= start <= stop <= motion.n_frames:
+    if not 0 <= start <= stop <= n_frames:
         raise ValidationError(
-            f"{owner}: window start={start}, stop={stop} must satisfy 0 <= start <= stop <= {motion.n_frames} "
+            f"{owner}: window start={start}, stop={stop} must satisfy 0 <= start <= stop <= {n_frames} "
             "(the frame count)"
         )
     return start, stop

@@ -529,7 +529,7 @@ def plot_graph(graph, path=None):
     """A motion graph drawn along the source's time axis: nodes at their frames, clips as arcs
     below the axis, transitions as arcs above it coloured by cost (the colour bar), turns as
     triangles on the nodes that offer them; the legend names each."""
-    from .graph import MotionGraph
+    from .graphs import MotionGraph
 
     if not isinstance(graph, MotionGraph):
         raise ValidationError(f"plot_graph needs a flockkit.MotionGraph; got {type(graph).__name__}")

@@ -47,9 +47,8 @@ from scipy.ndimage import gaussian_filter1d
 from scipy.optimize import linear_sum_assignment
 
 from .. import rigid
-from ..convenience import random_flock
 from ..interfaces import capabilities
-from ..motion import Motion, State
+from ..motion import Motion, State, random_flock
 from .problem import ComConstraint, PointConstraint, Problem, ShapeConstraint, track_path
 from .windows import windows
 

@@ -30,9 +30,8 @@ import warnings
 
 import numpy as np
 
-from ..convenience import random_flock
 from ..errors import FlockkitWarning
-from ..motion import Motion, State
+from ..motion import Motion, State, random_flock
 from .problem import ComConstraint, Problem, ShapeConstraint
 
 # A constraint asking for more than this many times the model's 99th percentile of speed, or of a

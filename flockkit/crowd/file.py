@@ -8,7 +8,7 @@
     record = 64                  # optional: agents kept for the USD file and the picture
 
     [trajectories]               # exactly one of simulate, motion, walk
-    simulate = { agents = 300, seed = 1 }          # a boids flock (2D)
+    simulate = { agents = 300, seed = 1 }          # a 2D flock (behavior = "boids" unless named; dims = 2)
     # motion = "flock.npz"                         # a flockkit motion file (a solution, a walk)
     # walk = { graph = "graph.npz", flocks = 10, seed = 2 }   # flocks walked from one graph
 
@@ -48,17 +48,21 @@ from pathlib import Path
 import attrs
 import numpy as np
 
-from .. import _files, _tomlfile
+from .. import _files, _tomlfile, validate
 from ..errors import FlockkitError, ValidationError
 from ..io import read_clips
-from ..motion import Motion
-from ..registry import resolve
+from ..motion import Motion, random_flock
+from ..registry import get, require_dims, resolve
+from ..validate import allocation
 from .drive import CLIP_CONTROLLER, Cue, Driver, State, StateMachine
 from .feet import ground_speed, plant_feet
 from .pool import Stream, StreamPool
 from .runtime import Crowd
 
 __all__ = ["CrowdScene", "read_crowd_scene"]
+
+# The behavior model of [trajectories] simulate unless the file names one: flockkit.simulate's.
+DEFAULT_BEHAVIOR = "boids"
 
 _KEYS = {"seconds", "fps", "seed", "record", "trajectories", "character", "streams", "machine", "states", "cues"}
 
@@ -103,18 +107,22 @@ def _table(data, key: str, keys: set, required: set, where: str) -> dict:
 
 
 def _trajectories(path: Path, entry: dict, fps: float, seconds: float, inside) -> Motion:
-    from ..convenience import simulate, walk
-    from ..graph import MotionGraph
-    from ..synthesis import synthesize_many
+    from ..graphs import MotionGraph, synthesize_many, walk
 
     sources = [k for k in ("simulate", "motion", "walk") if k in entry]
     if len(sources) != 1:
         raise ValidationError("[trajectories] needs exactly one of simulate, motion, walk")
     if "simulate" in entry:
-        spec = _table(entry, "simulate", {"agents", "seed", "dims"}, {"agents"}, "[trajectories] simulate")
+        keys = {"agents", "seed", "dims", "behavior"}
+        spec = _table(entry, "simulate", keys, {"agents"}, "[trajectories] simulate")
         steps = int(math.ceil(seconds * fps))
-        return simulate(n_agents=spec["agents"], steps=steps, dt=1.0 / fps, seed=spec.get("seed", 0),
-                        dims=spec.get("dims", 2))  # fmt: skip
+        # a flock from a random start, as flockkit.simulate makes one
+        rng = np.random.default_rng(validate.seed(spec.get("seed", 0), "[trajectories] simulate seed"))
+        initial = random_flock(n_agents=spec["agents"], dims=spec.get("dims", 2), rng=rng)
+        allocation(2 * (steps + 1) * initial.n_agents * initial.dims, f"[trajectories] {steps + 1} frames")
+        model = get("behavior", spec.get("behavior", DEFAULT_BEHAVIOR), dt=1.0 / fps)
+        require_dims("behavior", model, initial.dims, f"a {initial.dims}D flock")
+        return model.forward(initial, steps, rng)
     if "motion" in entry:
         return Motion.load(inside(entry["motion"], "trajectories.motion"))
     spec = _table(entry, "walk", {"graph", "flocks", "seed"}, {"graph", "flocks"}, "[trajectories] walk")

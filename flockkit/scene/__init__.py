@@ -1,5 +1,7 @@
-"""Background scenes (paper 002, sections 5 and 6): many duplicates of a few templates, placed in
-a region and animated after constraints drawn as arrows.
+"""Background scenes (paper 002): an animated object split into parts that move independently
+(``Segmentation``, ``GraphLayers``: one motion graph per part, walked out of step and played
+together, seams smoothed), its feature arrows (``Features``), and scenes of many duplicates of a
+few templates placed in a region and animated after constraints drawn as arrows.
 
 ``FlowField`` (physical-force arrows placed anywhere, each keyframed over time, combined at an
 object's position with the inverse-distance weights of section 5.2) and ``SelfMovement`` (an arrow
@@ -8,8 +10,30 @@ target feature arrow (``flockkit.Features``' form: length in [0, 1], direction).
 the duplicates and walks each after its targets; ``SceneAnimation`` is the result.
 """
 
+from .features import Features, arrow_keyframes, interpolate_arrows
 from .file import read_scene
 from .flow import Arrow, FlowField, SelfMovement
+from .layers import GraphLayers, LayeredWalk, seam_stretch, synthesize_layers, walk_layers
 from .scene import Placement, Scene, SceneAnimation
+from .segmentation import Segmentation, canonical_labels, same_partition
 
-__all__ = ["Arrow", "FlowField", "Placement", "Scene", "SceneAnimation", "SelfMovement", "read_scene"]
+__all__ = [
+    "Segmentation",
+    "canonical_labels",
+    "same_partition",
+    "GraphLayers",
+    "LayeredWalk",
+    "walk_layers",
+    "synthesize_layers",
+    "seam_stretch",
+    "Features",
+    "arrow_keyframes",
+    "interpolate_arrows",
+    "Arrow",
+    "FlowField",
+    "SelfMovement",
+    "Placement",
+    "Scene",
+    "SceneAnimation",
+    "read_scene",
+]

@@ -30,10 +30,10 @@ from pathlib import Path
 
 from .. import _files, _tomlfile
 from ..errors import FlockkitError, ValidationError
-from ..graph import MotionGraph
-from ..layers import GraphLayers
+from ..graphs import MotionGraph
 from ..regions import Polygon
 from .flow import Arrow, FlowField, SelfMovement
+from .layers import GraphLayers
 from .scene import Scene
 
 __all__ = ["read_scene"]

@@ -9,14 +9,14 @@ import numpy as np
 
 from .._arrays import readonly_float
 from ..errors import ValidationError
-from ..features import _keyframes, interpolate_arrows
 from ..validate import integer
+from .features import arrow_keyframes, interpolate_arrows
 
 __all__ = ["Arrow", "FlowField", "SelfMovement"]
 
 
 def _frozen_keyframes(value, field):
-    times, vectors = _keyframes(value, field)
+    times, vectors = arrow_keyframes(value, field)
     times.setflags(write=False)
     vectors.setflags(write=False)
     return times, vectors

@@ -23,14 +23,14 @@ import numpy as np
 from .. import _npzfile, rigid
 from .._arrays import readonly_float
 from ..errors import FileFormatError, ValidationError
-from ..features import Features
-from ..graph import MotionGraph, Walk
+from ..graphs import MotionGraph, Walk, played_frames, synthesize, walk_parts
 from ..io import USD_FPS
-from ..layers import GraphLayers, LayeredWalk
 from ..motion import DEFAULT_UP, Motion
 from ..regions import Polygon
 from ..validate import integer, number
+from .features import Features
 from .flow import Arrow, FlowField, SelfMovement
+from .layers import GraphLayers, LayeredWalk, synthesize_layers
 
 __all__ = ["Placement", "Scene", "SceneAnimation"]
 
@@ -49,38 +49,61 @@ MIN_BATCH = 8
 PLACEMENT_TRIES = 200
 
 
-def _parts(template) -> tuple[list, list]:
-    """(graphs, point indices of each) of a template."""
-    if isinstance(template, GraphLayers):
-        return list(template.graphs), template.segmentation.parts()
-    if isinstance(template, MotionGraph):
-        return [template], [np.arange(template.motion.n_agents)]
-    raise ValidationError(
-        f"Scene.templates entries must be flockkit.GraphLayers or MotionGraph; got {type(template).__name__}"
-    )
+@attrs.frozen(eq=False)
+class _View:
+    """A template seen one way, whatever it is: a GraphLayers (parts of an object) or a MotionGraph
+    (one part: a flock's agents, a rigid object). The one place a scene asks which it is."""
 
+    template: object
+    graphs: tuple  # one graph per part
+    source: Motion
+    layered: bool
 
-def _source(template) -> Motion:
-    return template.source if isinstance(template, GraphLayers) else template.motion
+    @property
+    def dt(self) -> float:
+        return self.graphs[0].motion.dt
 
+    @property
+    def faces(self) -> np.ndarray | None:
+        return self.template.faces if self.layered else None
 
-def _template_features(template, k: int, needed: bool) -> Features | None:
-    """The template's arrows: GraphLayers' features, a plain graph's from its motion."""
-    if isinstance(template, GraphLayers):
-        if template.features is None and needed:
+    def features(self, k: int, needed: bool) -> Features | None:
+        """The template's arrows: GraphLayers' features, a plain graph's from its motion."""
+        if not self.layered:
+            return Features.from_motion(self.source)
+        if self.template.features is None and needed:
             raise ValidationError(
                 f"Scene.templates[{k}] has no features but the scene has constraints: build its layers with "
                 f"features= (flockkit.Features, e.g. Features.from_keyframes or Features.from_motion)"
             )
-        return template.features
-    return Features.from_motion(template.motion)
+        return self.template.features
+
+    def walk_of(self, walks: list):
+        """The template's walk from its parts' walks: a LayeredWalk, or the one Walk."""
+        return LayeredWalk(walks=walks) if self.layered else walks[0]
+
+    def part_walks(self, walk) -> tuple:
+        return walk.walks if self.layered else (walk,)
+
+    def synthesize(self, walk) -> Motion:
+        return synthesize_layers(self.template, walk) if self.layered else synthesize(self.template, walk)
+
+
+def _view(template) -> _View:
+    if isinstance(template, GraphLayers):
+        return _View(template=template, graphs=template.graphs, source=template.source, layered=True)
+    if isinstance(template, MotionGraph):
+        return _View(template=template, graphs=(template,), source=template.motion, layered=False)
+    raise ValidationError(
+        f"Scene.templates entries must be flockkit.GraphLayers or MotionGraph; got {type(template).__name__}"
+    )
 
 
 def _footprint(template) -> tuple[np.ndarray, np.ndarray]:
     """(center (D,), half extents (2,)): the template's mean center of mass, and the half size in
     x and y of the box around every frame's shape about its own center of mass (what it covers
     where it stands, wherever its recording travels)."""
-    source = _source(template)
+    source = _view(template).source
     com = source.center_of_mass()
     relative = source.positions[..., :2] - com[:, None, :2]
     half = np.maximum(np.abs(relative.min(axis=(0, 1))), np.abs(relative.max(axis=(0, 1))))
@@ -157,14 +180,14 @@ class Scene:
             raise ValidationError("Scene.templates needs at least one template")
         if len(self.counts) != len(self.templates):
             raise ValidationError(f"Scene.counts has {len(self.counts)} entries for {len(self.templates)} templates")
-        dts = {_parts(t)[0][0].motion.dt for t in self.templates}
+        dts = {_view(t).dt for t in self.templates}
         if len(dts) != 1 or (self.dt is not None and abs(self.dt - next(iter(dts))) > 1e-12):
             raise ValidationError(
                 f"Scene: every template must share one frame time (and dt, if given, must be it); got "
                 f"{sorted(dts)}{'' if self.dt is None else f' and dt={self.dt}'}"
             )
         for k, template in enumerate(self.templates):
-            _template_features(template, k, needed=True)
+            _view(template).features(k, needed=True)
         for k, constraint in enumerate(self.constraints):
             keyed = (
                 [a.keyframes for a in constraint.arrows]
@@ -189,7 +212,7 @@ class Scene:
 
     @property
     def frame_time(self) -> float:
-        return _parts(self.templates[0])[0][0].motion.dt
+        return _view(self.templates[0]).dt
 
     @property
     def n_frames(self) -> int:
@@ -246,7 +269,7 @@ class Scene:
     def _held_arrows(self, kind: int) -> tuple[np.ndarray, np.ndarray]:
         """Template `kind`'s arrows and, for each, how many of them lie within 0.1 of it (how
         long the source holds it): what aligned headings choose among."""
-        arrows = _template_features(self.templates[kind], kind, needed=False).vectors
+        arrows = _view(self.templates[kind]).features(kind, needed=False).vectors
         return arrows, (np.linalg.norm(arrows[:, None] - arrows[None], axis=2) < 0.1).sum(axis=1)
 
     def _heading(self, held_arrows, i: int, point, rng) -> float:
@@ -277,7 +300,7 @@ class Scene:
         flows = [c for c in self.constraints if isinstance(c, FlowField)]
         if not self.constraints:
             # the made arrow: the first template's first arrow (its longest, if that one is zero)
-            arrows = _template_features(self.templates[0], 0, needed=False).vectors
+            arrows = _view(self.templates[0]).features(0, needed=False).vectors
             first = arrows[0] if np.linalg.norm(arrows[0]) > 1e-9 else arrows[np.argmax(np.linalg.norm(arrows, axis=1))]
             if np.linalg.norm(first) <= 1e-9:
                 return np.zeros((len(positions), len(times), 3))  # a template that never moves: nothing to follow
@@ -383,26 +406,15 @@ def _walk_object(scene: Scene, i: int, placement: Placement, target: np.ndarray,
     """Object i's walk (a Walk, or a LayeredWalk of one walk per part), each part with its own
     random stream from `seed`; `avoid` (neighbours, parts, frames) of source frames to fall out
     of step with."""
-    from ..convenience import walk as walk_graph
-
     kind = int(placement.templates[i])
-    template = scene.templates[kind]
-    graphs, _ = _parts(template)
-    features = _template_features(template, kind, needed=False)
+    view = _view(scene.templates[kind])
     local = target @ _turn(placement.headings[i], 3)  # the world's arrows in the template's coordinates (R^T w)
-    track = Features(vectors=local[:, : _source(template).dims], dt=scene.frame_time)
-    streams = np.random.SeedSequence(seed).spawn(len(graphs))
-    walks = []
-    for k, (graph, stream) in enumerate(zip(graphs, streams)):
-        params = {**scene.walk_params, "target": track, "features": features}
-        if avoid is not None:
-            params["avoid"] = avoid[:, k]
-        walks.append(
-            walk_graph(
-                graph, strategy=scene.walk, duration=scene.duration, seed=int(stream.generate_state(1)[0]), **params
-            )
-        )
-    return LayeredWalk(walks=walks) if isinstance(template, GraphLayers) else walks[0]
+    track = Features(vectors=local[:, : view.source.dims], dt=scene.frame_time)
+    part_params = None if avoid is None else [{"avoid": avoid[:, k]} for k in range(len(view.graphs))]
+    params = {**scene.walk_params, "target": track, "features": view.features(kind, needed=False)}
+    walks = walk_parts(view.graphs, strategy=scene.walk, duration=scene.duration, seed=seed, part_params=part_params,
+                       **params)  # fmt: skip
+    return view.walk_of(walks)
 
 
 def _turn(heading: float, dims: int) -> np.ndarray:
@@ -501,10 +513,7 @@ class SceneAnimation:
     def motion(self, i: int) -> Motion:
         """Object i's motion in the world: its walk played, cut to n_frames, scaled, turned by its
         heading about +z and moved to its position."""
-        from ..synthesis import synthesize
-
-        template = self.templates[self.placement.templates[i]]
-        played = synthesize(template, self.walks[i])
+        played = _view(self.templates[self.placement.templates[i]]).synthesize(self.walks[i])
         center, _ = self._footprints[self.placement.templates[i]]
         dims = played.dims
         scale, turn = self.placement.scales[i], _turn(self.placement.headings[i], dims)
@@ -515,11 +524,8 @@ class SceneAnimation:
 
     @staticmethod
     def _frames_of(template, walk, n_frames: int) -> np.ndarray:
-        from ..synthesis import played_frames
-
-        graphs, _ = _parts(template)
-        walks = walk.walks if isinstance(walk, LayeredWalk) else (walk,)
-        return np.stack([played_frames(g, w)[0][:n_frames] for g, w in zip(graphs, walks)])
+        view = _view(template)
+        return np.stack([played_frames(g, w)[0][:n_frames] for g, w in zip(view.graphs, view.part_walks(walk))])
 
     def source_frames(self) -> np.ndarray:
         """(objects, parts, frames): the source frame each object's part plays at each output
@@ -617,7 +623,9 @@ def _save(animation: SceneAnimation, path) -> None:
         "scales": animation.placement.scales,
         "templates": animation.placement.templates,
     }
-    walks = [w for walk in animation.walks for w in (walk.walks if isinstance(walk, LayeredWalk) else (walk,))]
+    views = [_view(t) for t in animation.templates]
+    walks = [w for kind, walk in zip(animation.placement.templates, animation.walks)
+             for w in views[kind].part_walks(walk)]  # fmt: skip
     arrays["walk_start"] = np.array([w.start for w in walks], dtype=np.int64)
     arrays["walk_edges"] = np.array([len(w.edges) for w in walks], dtype=np.int64)
     edges = [e for w in walks for e in w.edges]
@@ -627,7 +635,7 @@ def _save(animation: SceneAnimation, path) -> None:
     for k, template in enumerate(animation.templates):
         own, header = template._payload()
         arrays.update({f"template{k}.{name}": array for name, array in own.items()})
-        kinds.append("layers" if isinstance(template, GraphLayers) else "graph")
+        kinds.append("layers" if views[k].layered else "graph")
         headers.append(header)
     metadata = {
         "dt": animation.dt,
@@ -661,10 +669,10 @@ def _load(path) -> SceneAnimation:
             for start, n, end in zip(arrays["walk_start"], arrays["walk_edges"], ends)
         ]
         walks, at = [], 0
+        views = [_view(t) for t in templates]
         for kind in placement.templates:
-            parts = len(_parts(templates[kind])[0])
-            own = flat[at : at + parts]
-            walks.append(LayeredWalk(walks=own) if isinstance(templates[kind], GraphLayers) else own[0])
+            parts = len(views[kind].graphs)
+            walks.append(views[kind].walk_of(flat[at : at + parts]))
             at += parts
         if at != len(flat):
             raise ValidationError(f"{len(flat)} walks for {at} object parts")
@@ -685,7 +693,7 @@ def _export_usd(animation: SceneAnimation, path, *, fps, meters_per_unit) -> Non
     objects = []
     for i, motion in enumerate(animation.motions):
         template = animation.templates[animation.placement.templates[i]]
-        faces = template.faces if isinstance(template, GraphLayers) else None
+        faces = _view(template).faces
         objects.append((f"/Scene/Object{i:0{width}d}", motion.positions, faces,
                         {"flockkit:template": int(animation.placement.templates[i])}))  # fmt: skip
     write_meshes(path, objects, dt=animation.dt, n_frames=animation.n_frames, fps=fps,

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..convenience import random_flock
-from ..motion import Motion, State
+from ..motion import Motion, State, random_flock
 from ._expect import applies_when, dims_of, expect_validation_error, on_input
 
 STEPS = 12

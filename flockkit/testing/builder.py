@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..graph import MotionGraph
+from ..graphs import MotionGraph
 from ._expect import applies_when, dims_of, expect_validation_error, needs, partner
 from .inputs import recording
 

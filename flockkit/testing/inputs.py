@@ -12,7 +12,7 @@ import math
 import numpy as np
 
 from .. import rigid
-from ..graph import MotionGraph
+from ..graphs import MotionGraph
 from ..motion import Alignment, Motion
 
 __all__ = ["recording", "graph", "parts", "plants", "walker", "bird", "random_clip", "WOBBLE_PERIOD"]
@@ -123,7 +123,7 @@ def plants(*, dt: float = 0.1, seconds: float = 24.0, points: int = 8, rates=(1.
     (+x, +y, -x, -y: held 4 s, turning 2 s), each fluttering at its own rate (`rates`, Hz): (Motion (T, 2 *
     points, 3), the stalk of each point (0 or 1), Features: the wind, length 0.8). A source whose
     arrows point every way, for scenes and annotated walks."""
-    from ..features import Features
+    from ..scene.features import Features
 
     keyframes = []
     for quarter in range(4):

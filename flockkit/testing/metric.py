@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..convenience import random_flock
-from ..motion import Alignment, Configuration
+from ..motion import Alignment, Configuration, random_flock
 from ._expect import applies_when, dims_of, expect_validation_error, on_input
 
 SEED = 4205

@@ -9,8 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..layers import Segmentation, same_partition
 from ..motion import Motion
+from ..scene.segmentation import Segmentation, same_partition
 from ._expect import dims_of, expect_validation_error, on_input
 from .inputs import parts
 

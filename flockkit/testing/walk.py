@@ -9,8 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..graph import Walk
-from ..synthesis import synthesize
+from ..graphs import Walk, synthesize
 from ._expect import dims_of, expect_validation_error, needs
 
 

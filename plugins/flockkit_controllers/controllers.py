@@ -235,7 +235,7 @@ class GraphWalk:
                 state["since"] = state["since"] + frames if edge[0] == "clip" else 0
                 state["node"] = self.graph.edge_target(edge)
             walk = flockkit.Walk(start=state["start"], edges=state["edges"])
-            state["frames"] = flockkit.synthesis.blended_frames(self.graph, walk)
+            state["frames"] = flockkit.graphs.blended_frames(self.graph, walk)
         return state["frames"]
 
     def _output(self, index: np.ndarray) -> Pose:

@@ -83,7 +83,7 @@ class IcaKmeans:
         seed = int(rng.integers(2**31 - 1))
         found = self._moving_parts(energy[:, moving], wanted, seed)
         labels[moving] = found + still
-        return flockkit.Segmentation(labels=flockkit.layers.canonical_labels(labels), n_parts=int(labels.max()) + 1)
+        return flockkit.Segmentation(labels=flockkit.scene.canonical_labels(labels), n_parts=int(labels.max()) + 1)
 
     def _moving_parts(self, energy: np.ndarray, wanted: int | None, seed: int) -> np.ndarray:
         """Labels 0.. of the moving points (columns of `energy`)."""

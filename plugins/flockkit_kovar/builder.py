@@ -5,7 +5,7 @@
 3. Transitions at local minima of E (over its 8 neighbors, the diagonal excluded) at least
    `min_gap` seconds apart and at most the threshold; both directions of each minimum.
 4. ``flockkit.MotionGraph.assemble``: clips between transition frames, dead ends trimmed.
-5. Turns (``flockkit.graph.turns``): every `turn_interval` seconds of the kept recording, the same
+5. Turns (``flockkit.graphs.turns``): every `turn_interval` seconds of the kept recording, the same
    motion rotated by +-`turn_angle` degrees about the group's center of mass, so that walks can
    steer a group whose recording barely turns (a default boids flock turns under 5 degrees a
    second; a region walk needs more). ``turn_angle=0`` builds the paper's graph without them.
@@ -159,7 +159,7 @@ class Kovar:
             # inside the graph the transitions make, so that turns change no choice made above
             nodes = flockkit.MotionGraph.assemble(motion, transitions).nodes
             every = max(1, round(self.turn_interval / motion.dt))
-            transitions += flockkit.graph.turns(
+            transitions += flockkit.graphs.turns(
                 motion, np.arange(nodes[0], nodes[-1] - blend + 1, every), angle=self.turn_angle, blend=blend
             )
         return flockkit.MotionGraph.assemble(motion, transitions, params=params, provenance={"builder": "kovar"})
@@ -317,10 +317,10 @@ class _Matrix:
         return found if found.ndim else float(found)
 
     def minima(self, far: int, probe: float = np.inf) -> list[tuple[int, int]]:
-        """Local minima (``flockkit.graph.local_minima``) of the cells `far` or more candidates apart,
+        """Local minima (``flockkit.graphs.local_minima``) of the cells `far` or more candidates apart,
         at most `probe`, lowest first (ties: row-major)."""
         rows, cols = np.divmod(self._keys[:-1], len(self.configs))
-        cells = flockkit.graph.local_minima_of_cells(rows, cols, self._values[:-1], np.abs(rows - cols) >= far)
+        cells = flockkit.graphs.local_minima_of_cells(rows, cols, self._values[:-1], np.abs(rows - cols) >= far)
         values = self.value(cells[:, 0], cells[:, 1])
         order = np.lexsort((cells[:, 1], cells[:, 0], values))
         return [(int(i), int(j)) for i, j in cells[order][values[order] <= probe]]

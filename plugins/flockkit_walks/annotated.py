@@ -30,7 +30,7 @@ from scipy.spatial import cKDTree
 import flockkit
 from flockkit import validate
 from flockkit.errors import ValidationError
-from flockkit.features import Features, interpolate_arrows
+from flockkit.scene import Features, interpolate_arrows
 
 # Look-ahead costs this close (as a mean arrow error) count as a tie in the initial pass, broken
 # at random (our choice, measured on bench/scene.py: neighbours in step on 27% of frames before
@@ -53,9 +53,7 @@ class _Keyframes:
 
 
 def _checked_keyframes(value):
-    from flockkit.features import _keyframes
-
-    return _keyframes(value, "walk parameter target")
+    return flockkit.scene.arrow_keyframes(value, "walk parameter target")
 
 
 def _track(target, times) -> np.ndarray:
@@ -169,7 +167,7 @@ class AnnotatedWalk:
     def energy(self, graph: flockkit.MotionGraph, walk: flockkit.Walk, duration: float | None = None) -> dict:
         """{"E", "C_T", "C_C", "N_T"} of `walk` over `duration` seconds (default: all it plays)."""
         if duration is None:
-            duration = len(flockkit.synthesis.played_frames(graph, walk)[0]) * graph.motion.dt
+            duration = len(flockkit.graphs.played_frames(graph, walk)[0]) * graph.motion.dt
         problem = _Problem(self, graph, duration)
         return problem.path(walk.start, list(walk.edges)).report()
 
@@ -198,7 +196,7 @@ class _Path:
                 self.rotation.append(problem.step((0, 0, 0, self.rotation[-1]), edge)[3])
         else:
             self.rotation = [np.eye(problem.dims)] * (len(edges) + 1)
-        # the source frame each output frame plays, as synthesis plays it (flockkit.synthesis.played_frames):
+        # the source frame each output frame plays, as synthesis plays it (flockkit.graphs.played_frames):
         # each clip's frames but its last, then the frame of the node the walk ends at
         clips = [k for k, (kind, _) in enumerate(edges) if kind == "clip"]
         lengths = problem.clip_frames[[edges[k][1] for k in clips]]

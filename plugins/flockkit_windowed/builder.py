@@ -93,7 +93,7 @@ class Windowed:
         far = np.abs(index[:, None] - index[None, :]) >= gap
         # pairs nearer than min_gap are not candidates, nor neighbors that could hide one: a motion that
         # never returns (a flock crossing the scene) still has minima, along the edge of the gap
-        minima = sorted(flockkit.graph.local_minima(np.where(far, total, np.inf), far), key=lambda pq: (total[pq], pq))
+        minima = sorted(flockkit.graphs.local_minima(np.where(far, total, np.inf), far), key=lambda pq: (total[pq], pq))
         if self.threshold is not None:
             chosen = [pq for pq in minima if total[pq] <= self.threshold]
         else:

@@ -1,10 +1,10 @@
-"""flockkit.graph.local_minima and local_minima_of_cells against a cell-by-cell reference."""
+"""flockkit.graphs.local_minima and local_minima_of_cells against a cell-by-cell reference."""
 
 import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from flockkit.graph import local_minima, local_minima_of_cells
+from flockkit.graphs import local_minima, local_minima_of_cells
 from flockkit.testing import strategies as fst
 
 

@@ -216,9 +216,9 @@ def test_the_annotated_walk_walks_every_part_of_layers_after_one_target():
     assert isinstance(walk, flockkit.LayeredWalk) and len(walk.walks) == 2
     assert walk == flockkit.walk(layers, strategy="annotated", duration=20.0, seed=3, target=target,
                                  features=layers.features)  # fmt: skip
-    wanted = flockkit.features.interpolate_arrows(np.array([0.0, 10.0, 12.0]), np.array([v for _, v in target]),
+    wanted = flockkit.scene.interpolate_arrows(np.array([0.0, 10.0, 12.0]), np.array([v for _, v in target]),
                                                   np.arange(200) * 0.1)  # fmt: skip
     for graph, part in zip(layers.graphs, walk.walks):
-        played = layers.features.vectors[flockkit.synthesis.played_frames(graph, part)[0][:200]]
+        played = layers.features.vectors[flockkit.graphs.played_frames(graph, part)[0][:200]]
         assert np.mean(np.linalg.norm(played - wanted, axis=1) <= TOLERANCE) >= 0.9
     assert flockkit.synthesize(layers, walk).n_frames >= 200

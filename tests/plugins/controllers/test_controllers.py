@@ -84,7 +84,7 @@ def test_graph_walk_is_endless_smooth_and_deterministic(shared_data):
     t = np.arange(0, 60, 1 / idle.fps)  # a minute of a 3.3 s clip
     pose = stream.pose(t)
     # it takes transitions: not the clip looped (frames played are not consecutive everywhere)
-    into = flockkit.synthesis.blended_frames(
+    into = flockkit.graphs.blended_frames(
         stream.graph, flockkit.Walk(start=stream._walk["start"], edges=stream._walk["edges"])
     )[0]
     jumps = np.count_nonzero(np.diff(into[: len(t)]) != 1)

@@ -18,9 +18,9 @@ def test_the_energy_reported_is_the_papers_sum_over_the_walk():
     assert energy["N_T"] == len(taken) > 0
     scale = np.median([t.alignment.distance for t in graph.transitions if not t.is_turn])
     assert energy["C_T"] == pytest.approx(sum(graph.transitions[i].alignment.distance for i in taken) / scale)
-    frames, rotations = flockkit.synthesis.played_frames(graph, walk)
+    frames, rotations = flockkit.graphs.played_frames(graph, walk)
     played = np.einsum("fij,fj->fi", rotations, flockkit.Features.from_motion(graph.motion).vectors[frames])[:400]
-    target = flockkit.features.interpolate_arrows(
+    target = flockkit.scene.interpolate_arrows(
         np.array([0.0, 20.0]), np.array([[1.0, 0], [0, -1.0]]), np.arange(400) * 0.1
     )
     assert energy["C_C"] == pytest.approx(np.linalg.norm(played - target, axis=1).sum() * 0.1)

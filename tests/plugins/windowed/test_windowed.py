@@ -5,7 +5,7 @@ import pytest
 
 import flockkit
 from flockkit.errors import FileFormatError, ValidationError
-from flockkit.layers import seam_stretch
+from flockkit.scene.layers import seam_stretch
 
 WINDOWED = flockkit.get("builder", "windowed")
 
@@ -60,7 +60,7 @@ def test_a_layered_fox_plays_a_minute_without_jumps_or_tears(shared_data):
 
 def test_seams_are_smoothed(shared_data, monkeypatch):
     """Without the smoothing the same walk stretches its seams more."""
-    import flockkit.layers
+    import flockkit.scene.layers
 
     survey = fox(shared_data, "Survey")
     layers = flockkit.build_layers(survey, seed=0)
@@ -68,7 +68,7 @@ def test_seams_are_smoothed(shared_data, monkeypatch):
     smooth = seam_stretch(
         flockkit.synthesize(layers, walk), survey.faces, layers.segmentation.labels, reference=survey.motion
     )
-    monkeypatch.setattr(flockkit.layers, "SEAM_PASSES", 0)
+    monkeypatch.setattr(flockkit.scene.layers, "SEAM_PASSES", 0)
     raw = seam_stretch(
         flockkit.synthesize(layers, walk), survey.faces, layers.segmentation.labels, reference=survey.motion
     )
@@ -113,7 +113,7 @@ def test_windowed_passes_the_builder_kit_on_a_boids_motion(monkeypatch):
 def test_layered_synthesis_equals_each_part_played_and_smoothed_pass_by_pass(monkeypatch):
     """The fast assembly (runs of points copied as slices, scattered points gathered) and the
     composed smoothing give what playing each part and smoothing pass by pass gives."""
-    import flockkit.layers
+    import flockkit.scene.layers
 
     side, frames = 12, 90
     u, v = np.meshgrid(np.arange(side) / side, np.arange(side) / side)
@@ -133,10 +133,10 @@ def test_layered_synthesis_equals_each_part_played_and_smoothed_pass_by_pass(mon
     expected = np.empty((n, side * side, 3))
     for points, part in zip(layers.segmentation.parts(), played):
         expected[:, points] = part[:n]
-    monkeypatch.setattr(flockkit.layers, "SEAM_PASSES", 0)
+    monkeypatch.setattr(flockkit.scene.layers, "SEAM_PASSES", 0)
     np.testing.assert_array_equal(flockkit.synthesize(layers, walk).positions, expected)
 
-    monkeypatch.setattr(flockkit.layers, "SEAM_PASSES", 3)
+    monkeypatch.setattr(flockkit.scene.layers, "SEAM_PASSES", 3)
     neighbors = [set() for _ in range(side * side)]
     for a, b in flockkit.mesh.face_edges(quads):
         neighbors[a].add(b)
@@ -171,7 +171,7 @@ def smoothed_by_hand(positions, layers):
     """The documented smoothing, point by point: the zone is the points of faces that span two
     parts and SEAM_RINGS rings around them; each pass gives every zone point the mean displacement
     (from its mean source position) of its mesh neighbors."""
-    import flockkit.layers as module
+    import flockkit.scene.layers as module
 
     labels = layers.segmentation.labels
     neighbors = [set() for _ in labels]

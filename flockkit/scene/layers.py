@@ -1,7 +1,6 @@
 """Objects split into parts, one motion graph per part (paper 002, section 4).
 
-A ``Segmentation`` labels each point of a motion (a mesh's vertices, a flock's agents) with its
-part. ``GraphLayers`` holds one MotionGraph per part over one source; walking the parts
+``GraphLayers`` holds one MotionGraph per part (of a ``Segmentation``) over one source; walking the parts
 independently ("asynchronous transitions") and playing them together gives endless, varied motion
 of the whole object from a short source. Where parts meet on a mesh, the seams are smoothed (see
 :func:`synthesize_layers`).
@@ -13,17 +12,16 @@ import attrs
 import numpy as np
 from scipy.sparse import coo_matrix, diags, identity
 
-from . import _npzfile
-from ._arrays import readonly_int
-from .errors import FileFormatError, ValidationError
+from .. import _npzfile
+from ..errors import FileFormatError, ValidationError
+from ..graphs import MotionGraph, blended_frames, played_length, played_positions, walk_parts
+from ..mesh import face_edges, faces_array
+from ..motion import Motion
 from .features import Features
-from .mesh import AnimatedMesh, face_edges, faces_array
-from .motion import Motion
-from .synthesis import _positions, blended_frames, played_length
+from .segmentation import Segmentation
 
-__all__ = ["Segmentation", "GraphLayers", "LayeredWalk", "seam_stretch"]
+__all__ = ["GraphLayers", "LayeredWalk", "walk_layers", "synthesize_layers", "seam_stretch", "part_motion"]
 
-SEGMENTATION_FORMAT_VERSION = 1
 LAYERS_FORMAT_VERSION = 1
 # Rings of mesh neighbors around a seam whose displacements are smoothed, and the smoothing
 # passes (our choice, measured on the Fox's minute: seams stretch 0.042 at most, against 0.48
@@ -33,91 +31,6 @@ SEAM_PASSES = 4
 # Synthesis gathers the points into place in blocks of frames whose indices take about this many
 # bytes, small enough to stay in cache.
 GATHER_BLOCK_BYTES = 1 << 20
-
-
-def _labels(value) -> np.ndarray:
-    array = readonly_int(value, field="Segmentation.labels")
-    if array.ndim != 1 or len(array) == 0:
-        raise ValidationError(f"Segmentation.labels must be a non-empty 1D array; got shape {array.shape}")
-    return array
-
-
-@attrs.frozen(kw_only=True, eq=False)
-class Segmentation:
-    """The part of each point: `labels` (N,) in 0..n_parts-1, every part non-empty."""
-
-    labels: np.ndarray = attrs.field(converter=_labels)
-    n_parts: int = attrs.field()
-
-    def __attrs_post_init__(self):
-        if isinstance(self.n_parts, bool) or not isinstance(self.n_parts, int | np.integer) or self.n_parts < 1:
-            raise ValidationError(f"Segmentation.n_parts must be a positive integer; got {self.n_parts!r}")
-        if self.n_parts > len(self.labels):
-            raise ValidationError(
-                f"Segmentation.n_parts is {self.n_parts}, more than its {len(self.labels)} points: some part is empty"
-            )
-        if self.labels.min() < 0 or self.labels.max() >= self.n_parts:
-            raise ValidationError(
-                f"Segmentation.labels must lie in 0..{self.n_parts - 1}; got {self.labels.min()}..{self.labels.max()}"
-            )
-        empty = np.flatnonzero(np.bincount(self.labels, minlength=self.n_parts) == 0)
-        if len(empty):
-            raise ValidationError(f"Segmentation: part {int(empty[0])} of {self.n_parts} has no point")
-
-    @property
-    def n_points(self) -> int:
-        return len(self.labels)
-
-    def parts(self) -> list[np.ndarray]:
-        """Each part's point indices, increasing."""
-        order = np.argsort(self.labels, kind="stable")
-        return np.split(order, np.cumsum(np.bincount(self.labels, minlength=self.n_parts))[:-1])
-
-    def check_fits(self, motion: Motion, what: str = "the motion") -> None:
-        """ValidationError unless there is one label per point of `motion`."""
-        if self.n_points != motion.n_agents:
-            raise ValidationError(f"the segmentation labels {self.n_points} points but {what} has {motion.n_agents}")
-
-    def __eq__(self, other):
-        if not isinstance(other, Segmentation):
-            return NotImplemented
-        return self.n_parts == other.n_parts and np.array_equal(self.labels, other.labels)
-
-    __hash__ = None
-
-    def save(self, path) -> None:
-        """Write to one .npz with JSON metadata (atomic)."""
-        _npzfile.write(path, kind="segmentation", version=SEGMENTATION_FORMAT_VERSION, arrays={"labels": self.labels},
-                       metadata={"n_parts": self.n_parts})  # fmt: skip
-
-    @classmethod
-    def load(cls, path) -> Segmentation:
-        arrays, header = _npzfile.read(path, kind="segmentation", versions=(SEGMENTATION_FORMAT_VERSION,))
-        try:
-            return cls(labels=arrays["labels"], n_parts=header["n_parts"])
-        except (KeyError, ValidationError) as exc:
-            raise FileFormatError(f"{path}: invalid segmentation: {type(exc).__name__}: {exc}") from None
-
-
-def motion_of(source, what: str = "source") -> Motion:
-    """The Motion of a Motion or an AnimatedMesh."""
-    if isinstance(source, AnimatedMesh):
-        return source.motion
-    if isinstance(source, Motion):
-        return source
-    raise ValidationError(f"{what} must be a flockkit.Motion or flockkit.AnimatedMesh; got {type(source).__name__}")
-
-
-def canonical_labels(labels) -> np.ndarray:
-    """Part labels renamed 0, 1, ... in order of each part's first point: equal partitions give
-    equal arrays, whatever the names a segmenter chose."""
-    _, first, inverse = np.unique(np.asarray(labels), return_index=True, return_inverse=True)
-    return np.argsort(np.argsort(first))[inverse]
-
-
-def same_partition(a, b) -> bool:
-    """Whether two labelings split the points the same way, whatever the part names."""
-    return np.array_equal(canonical_labels(a), canonical_labels(b))
 
 
 def _faces_or_none(value):
@@ -150,8 +63,6 @@ class GraphLayers:
     _seams: object = attrs.field(init=False, default=None, repr=False, eq=False)  # made by synthesis
 
     def __attrs_post_init__(self):
-        from .graph import MotionGraph
-
         if self.features is not None and (
             not isinstance(self.features, Features)
             or self.features.n_frames != self.source.n_frames
@@ -202,7 +113,7 @@ class GraphLayers:
     def _payload(self) -> tuple[dict, dict]:
         """(arrays, metadata) of the source, the segmentation, the faces, the features and every
         part's graph, as save writes them."""
-        from .graph import _thaw
+        from ..graphs.graph import _thaw
 
         arrays = {**self.source._to_arrays(), "labels": self.segmentation.labels}
         if self.faces is not None:
@@ -222,8 +133,6 @@ class GraphLayers:
     @classmethod
     def _from_payload(cls, arrays, header, source) -> GraphLayers:
         """The inverse of :meth:`_payload`; FileFormatError naming `source`."""
-        from .graph import MotionGraph
-
         try:
             motion = Motion._from_arrays(arrays, header["dt"])
             segmentation = Segmentation(labels=arrays["labels"], n_parts=header["n_parts"])
@@ -269,17 +178,12 @@ def part_motion(source: Motion, points: np.ndarray) -> Motion:
     return Motion(positions=source.positions[:, points], dt=source.dt)
 
 
-def walk_layers(layers: GraphLayers, *, strategy, duration, seed, params) -> LayeredWalk:
-    """Every part walked on its own, each with its own stream of random numbers from `seed`."""
-    from .convenience import walk
-
-    streams = np.random.SeedSequence(seed).spawn(layers.n_parts)
-    return LayeredWalk(
-        walks=[
-            walk(graph, strategy=strategy, duration=duration, seed=int(stream.generate_state(1)[0]), **params)
-            for graph, stream in zip(layers.graphs, streams)
-        ]
-    )
+def walk_layers(layers: GraphLayers, *, strategy="random", duration: float | None = None, seed: int | None = None,
+                **params) -> LayeredWalk:  # fmt: skip
+    """Every part walked on its own, each with its own stream of random numbers from `seed`
+    (``flockkit.graphs.walk_parts``), for `duration` seconds (default: the source's length)."""
+    duration = layers.source.duration if duration is None else duration
+    return LayeredWalk(walks=walk_parts(layers.graphs, strategy=strategy, duration=duration, seed=seed, **params))
 
 
 def synthesize_layers(layers: GraphLayers, walk: LayeredWalk) -> Motion:
@@ -350,7 +254,7 @@ class _Play:
     @classmethod
     def of(cls, graph, walk, frames: int) -> _Play:
         if not _stays_in_place(graph, walk):
-            return cls(rows=np.arange(frames), placed=_positions(graph, walk, frames))
+            return cls(rows=np.arange(frames), placed=played_positions(graph, walk, frames))
         new, old, weight = (a[:frames] for a in blended_frames(graph, walk))
         blending = np.flatnonzero(weight < 1)
         rows = new.copy()

@@ -18,11 +18,11 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from . import _npzfile, rigid
-from ._arrays import readonly_int
-from .errors import FileFormatError, ValidationError
-from .motion import DEFAULT_UP, Alignment, Motion, heading_axes
-from .validate import integer
+from .. import _npzfile, rigid
+from .._arrays import readonly_int
+from ..errors import FileFormatError, ValidationError
+from ..motion import DEFAULT_UP, Alignment, Motion, heading_axes
+from ..validate import integer
 
 __all__ = ["MotionGraph", "Clip", "Transition", "Walk", "turns", "local_minima", "local_minima_of_cells"]
 

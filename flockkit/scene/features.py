@@ -13,12 +13,12 @@ from __future__ import annotations
 import attrs
 import numpy as np
 
-from ._arrays import check_finite, readonly_float
-from .errors import ValidationError
-from .motion import Motion
-from .validate import number
+from .._arrays import check_finite, readonly_float
+from ..errors import ValidationError
+from ..motion import Motion
+from ..validate import number
 
-__all__ = ["Features", "interpolate_arrows"]
+__all__ = ["Features", "interpolate_arrows", "arrow_keyframes"]
 
 
 def _vectors(value) -> np.ndarray:
@@ -34,7 +34,7 @@ def _vectors(value) -> np.ndarray:
     return array
 
 
-def _keyframes(keyframes, field: str, *, dims=None, duration=None) -> tuple[np.ndarray, np.ndarray]:
+def arrow_keyframes(keyframes, field: str, *, dims=None, duration=None) -> tuple[np.ndarray, np.ndarray]:
     """(times (K,), vectors (K, D)) of `keyframes`, a sequence of (time, vector) pairs, checked:
     at least one, times increasing (and within [0, duration]), vectors of one dimension and of
     length at most 1."""
@@ -150,7 +150,7 @@ class Features:
         (times in seconds, increasing, within the motion; vectors of length at most 1):
         direction along the great circle, length linearly, held outside the keyframes."""
         dt = number(dt, "Features.from_keyframes: dt", minimum=0, strict=True)
-        times, vectors = _keyframes(keyframes, "Features.from_keyframes: keyframes", duration=(n_frames - 1) * dt)
+        times, vectors = arrow_keyframes(keyframes, "Features.from_keyframes: keyframes", duration=(n_frames - 1) * dt)
         return cls(vectors=interpolate_arrows(times, vectors, np.arange(n_frames) * dt), dt=dt)
 
     @classmethod

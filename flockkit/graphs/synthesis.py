@@ -17,12 +17,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import rigid
-from .errors import ValidationError
+from .. import rigid
+from ..errors import ValidationError
+from ..motion import Motion
 from .graph import MotionGraph, Walk
-from .motion import Motion
 
-__all__ = ["synthesize", "synthesize_many", "played_frames", "blended_frames"]
+__all__ = ["synthesize", "synthesize_many", "played_positions", "played_length", "played_frames", "blended_frames"]
 
 
 def _smoothstep(u: np.ndarray) -> np.ndarray:
@@ -131,8 +131,9 @@ def _blend_rows(blends, n_frames: int):
     return _runs(out, count), _runs(first, count), np.repeat(old_segment, count), weight
 
 
-def _positions(graph: MotionGraph, walk: Walk, n_frames: int | None = None) -> np.ndarray:
-    """The first `n_frames` (default: all) frames `walk` plays."""
+def played_positions(graph: MotionGraph, walk: Walk, n_frames: int | None = None) -> np.ndarray:
+    """The positions (F, N, D) of the first `n_frames` (default: all) frames `walk` plays through
+    `graph`, blends included: what :func:`synthesize` wraps in a Motion."""
     source = graph.motion.positions
     (output_start, source_start, length), rotations, translations, mappings, blends = _plan(graph, walk)
     segment = np.repeat(np.arange(len(length)), length)[:n_frames]
@@ -177,17 +178,11 @@ def synthesize(graph: MotionGraph, walk: Walk) -> Motion:
     """The motion of `walk` through `graph`: one Motion of the graph's agents, at the source dt.
 
     Raises ValidationError if the walk does not fit the graph (an edge that does not leave the
-    node reached, or a transition taken before the previous blend has played out). On
-    ``flockkit.GraphLayers`` with a ``LayeredWalk``, the whole object from its parts' walks
-    (``flockkit.layers.synthesize_layers``: seams between parts of a mesh smoothed).
+    node reached, or a transition taken before the previous blend has played out).
     """
-    from .layers import GraphLayers, synthesize_layers
-
-    if isinstance(graph, GraphLayers):
-        return synthesize_layers(graph, walk)
     if not isinstance(graph, MotionGraph):
         raise ValidationError(f"synthesize needs a flockkit.MotionGraph; got {type(graph).__name__}")
-    return Motion._adopt(_positions(graph, walk), graph.motion.dt)
+    return Motion._adopt(played_positions(graph, walk), graph.motion.dt)
 
 
 def synthesize_many(graph: MotionGraph, walks, *, n_frames: int | None = None) -> Motion:
@@ -201,7 +196,7 @@ def synthesize_many(graph: MotionGraph, walks, *, n_frames: int | None = None) -
     walks = list(walks)
     if not walks:
         raise ValidationError("synthesize_many needs at least one walk")
-    played = [_positions(graph, walk) for walk in walks]
+    played = [played_positions(graph, walk) for walk in walks]
     shortest = min(len(p) for p in played)
     if n_frames is None:
         n_frames = shortest

@@ -1,0 +1,25 @@
+"""Data-driven groups (paper 000): motion graphs of recorded group motion, walks through them
+(one graph, or the graphs of an object's parts), and synthesis of new motion from walks."""
+
+from .graph import Clip, MotionGraph, Transition, Walk, local_minima, local_minima_of_cells, turns
+from .synthesis import blended_frames, played_frames, played_length, played_positions, synthesize, synthesize_many
+from .walking import part_seeds, walk, walk_parts
+
+__all__ = [
+    "MotionGraph",
+    "Clip",
+    "Transition",
+    "Walk",
+    "turns",
+    "local_minima",
+    "local_minima_of_cells",
+    "walk",
+    "walk_parts",
+    "part_seeds",
+    "synthesize",
+    "synthesize_many",
+    "played_positions",
+    "played_length",
+    "played_frames",
+    "blended_frames",
+]

@@ -1,0 +1,102 @@
+"""Which part of an object each point belongs to (paper 002, section 4.1): a ``Segmentation`` of
+a motion's points (a mesh's vertices, a flock's agents), what segmenters return."""
+
+from __future__ import annotations
+
+import attrs
+import numpy as np
+
+from .. import _npzfile
+from .._arrays import readonly_int
+from ..errors import FileFormatError, ValidationError
+from ..mesh import AnimatedMesh
+from ..motion import Motion
+
+__all__ = ["Segmentation", "canonical_labels", "same_partition", "motion_of"]
+
+SEGMENTATION_FORMAT_VERSION = 1
+
+
+def _labels(value) -> np.ndarray:
+    array = readonly_int(value, field="Segmentation.labels")
+    if array.ndim != 1 or len(array) == 0:
+        raise ValidationError(f"Segmentation.labels must be a non-empty 1D array; got shape {array.shape}")
+    return array
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class Segmentation:
+    """The part of each point: `labels` (N,) in 0..n_parts-1, every part non-empty."""
+
+    labels: np.ndarray = attrs.field(converter=_labels)
+    n_parts: int = attrs.field()
+
+    def __attrs_post_init__(self):
+        if isinstance(self.n_parts, bool) or not isinstance(self.n_parts, int | np.integer) or self.n_parts < 1:
+            raise ValidationError(f"Segmentation.n_parts must be a positive integer; got {self.n_parts!r}")
+        if self.n_parts > len(self.labels):
+            raise ValidationError(
+                f"Segmentation.n_parts is {self.n_parts}, more than its {len(self.labels)} points: some part is empty"
+            )
+        if self.labels.min() < 0 or self.labels.max() >= self.n_parts:
+            raise ValidationError(
+                f"Segmentation.labels must lie in 0..{self.n_parts - 1}; got {self.labels.min()}..{self.labels.max()}"
+            )
+        empty = np.flatnonzero(np.bincount(self.labels, minlength=self.n_parts) == 0)
+        if len(empty):
+            raise ValidationError(f"Segmentation: part {int(empty[0])} of {self.n_parts} has no point")
+
+    @property
+    def n_points(self) -> int:
+        return len(self.labels)
+
+    def parts(self) -> list[np.ndarray]:
+        """Each part's point indices, increasing."""
+        order = np.argsort(self.labels, kind="stable")
+        return np.split(order, np.cumsum(np.bincount(self.labels, minlength=self.n_parts))[:-1])
+
+    def check_fits(self, motion: Motion, what: str = "the motion") -> None:
+        """ValidationError unless there is one label per point of `motion`."""
+        if self.n_points != motion.n_agents:
+            raise ValidationError(f"the segmentation labels {self.n_points} points but {what} has {motion.n_agents}")
+
+    def __eq__(self, other):
+        if not isinstance(other, Segmentation):
+            return NotImplemented
+        return self.n_parts == other.n_parts and np.array_equal(self.labels, other.labels)
+
+    __hash__ = None
+
+    def save(self, path) -> None:
+        """Write to one .npz with JSON metadata (atomic)."""
+        _npzfile.write(path, kind="segmentation", version=SEGMENTATION_FORMAT_VERSION, arrays={"labels": self.labels},
+                       metadata={"n_parts": self.n_parts})  # fmt: skip
+
+    @classmethod
+    def load(cls, path) -> Segmentation:
+        arrays, header = _npzfile.read(path, kind="segmentation", versions=(SEGMENTATION_FORMAT_VERSION,))
+        try:
+            return cls(labels=arrays["labels"], n_parts=header["n_parts"])
+        except (KeyError, ValidationError) as exc:
+            raise FileFormatError(f"{path}: invalid segmentation: {type(exc).__name__}: {exc}") from None
+
+
+def motion_of(source, what: str = "source") -> Motion:
+    """The Motion of a Motion or an AnimatedMesh."""
+    if isinstance(source, AnimatedMesh):
+        return source.motion
+    if isinstance(source, Motion):
+        return source
+    raise ValidationError(f"{what} must be a flockkit.Motion or flockkit.AnimatedMesh; got {type(source).__name__}")
+
+
+def canonical_labels(labels) -> np.ndarray:
+    """Part labels renamed 0, 1, ... in order of each part's first point: equal partitions give
+    equal arrays, whatever the names a segmenter chose."""
+    _, first, inverse = np.unique(np.asarray(labels), return_index=True, return_inverse=True)
+    return np.argsort(np.argsort(first))[inverse]
+
+
+def same_partition(a, b) -> bool:
+    """Whether two labelings split the points the same way, whatever the part names."""
+    return np.array_equal(canonical_labels(a), canonical_labels(b))
