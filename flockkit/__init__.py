@@ -7,6 +7,7 @@ convenience layer (``simulate``, ``build_graph``, ``walk``, ``solve``), rigid mo
 """
 
 from . import constrained, crowd, errors, graphs, io, parallel, rigid, scene, validate
+from ._version import __version__
 from .constrained import Proposal, Solution, solve
 from .constrained.problem import ComConstraint, PointConstraint, Problem, ShapeConstraint
 from .convenience import build_graph, build_layers, segment, simulate, synthesize, walk
@@ -19,8 +20,6 @@ from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Mo
 from .regions import Ball, Box, Polygon, Region, fence
 from .registry import available, get, resolve
 from .scene import Features, GraphLayers, LayeredWalk, Scene, SceneAnimation, Segmentation
-
-__version__ = "0.1.0"
 
 __all__ = [
     "Motion",

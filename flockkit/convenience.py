@@ -7,6 +7,7 @@ import numpy as np
 
 from . import graphs
 from ._progress import progress_bar
+from ._version import __version__
 from .errors import ValidationError
 from .graphs import MotionGraph
 from .interfaces import capabilities
@@ -115,8 +116,6 @@ def build_graph(
             graph = made.build(motion, measure, rng, progress=report)
     else:
         graph = made.build(motion, measure, rng)
-    from . import __version__
-
     provenance = {
         **graph.provenance,
         "builder": label(builder),

@@ -29,10 +29,10 @@ from pathlib import Path
 
 import numpy as np
 
+from flockkit import build_graph, simulate, synthesize, walk
+
 from .constrained.problem import ComConstraint, PointConstraint, Problem
-from .convenience import build_graph, simulate, walk
 from .errors import MissingDependencyError, ValidationError
-from .graphs import synthesize
 from .regions import Box
 from .regions import fence as arena
 
@@ -264,7 +264,6 @@ FOX_FEET = [foot for _, _, foot in FOX_LEGS]
 def _foxes(tour: _Tour, folder: Path) -> dict:
     """Paper 003 driven by paper 004's model: a few thousand Foxes follow a boids flock."""
     from . import viz
-    from .convenience import simulate
     from .crowd import Crowd, Cue, Driver, State, StateMachine, Stream, StreamPool, ground_speed, plant_feet, record
     from .io import read_clips
     from .registry import get

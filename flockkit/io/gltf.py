@@ -30,6 +30,7 @@ import numpy as np
 
 from .. import _files, rigid, validate
 from .._atomic import atomic_path
+from .._version import __version__
 from ..errors import FileFormatError, ValidationError
 from ..motion import Motion
 
@@ -947,7 +948,7 @@ def write_gltf(motion: Motion, path) -> None:
             channels.append({"sampler": len(samplers) - 1, "target": {"node": agent + 1, "path": target}})
     buffer.extend(b"\0" * (-len(buffer) % 4))
     document = {
-        "asset": {"version": "2.0", "generator": f"flockkit {_version()}"},
+        "asset": {"version": "2.0", "generator": f"flockkit {__version__}"},
         "scene": 0, "scenes": [{"name": "flock", "nodes": [0]}], "nodes": nodes, "meshes": [mesh],
         "animations": [{"name": "flock", "samplers": samplers, "channels": channels}],
         "accessors": accessors, "bufferViews": views, "buffers": [{"byteLength": len(buffer)}],
@@ -959,9 +960,3 @@ def write_gltf(motion: Motion, path) -> None:
             handle.write(json.dumps(document).encode("utf-8"))
             return
         handle.write(glb_bytes(document, buffer))
-
-
-def _version() -> str:
-    from .. import __version__
-
-    return __version__
