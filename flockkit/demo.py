@@ -209,7 +209,7 @@ def _scene(tour: _Tour, graph) -> dict:
 def _crowd(tour: _Tour) -> dict:
     """Paper 003: a crowd of stick figures on shared streams; half cheer, then walk again."""
     from . import viz
-    from .crowd import Crowd, Stream, StreamPool, equation_5
+    from .crowd import Crowd, Stream, StreamPool, equation_5, record
     from .registry import get
     from .testing.inputs import walker
 
@@ -235,8 +235,8 @@ def _crowd(tour: _Tour) -> dict:
             offsets.append(crowd.offsets("body")[cheering])
 
     with tour.step("a crowd of 48 for 5 s"):
-        viz.animate_crowd(crowd, tour.path("crowd.gif"), seconds=5.0, on_frame=script, axes="yz",
-                          progress=tour.progress)  # fmt: skip
+        recording = record(crowd, 5.0, agents=range(48), on_frame=script)
+        viz.animate_recording(recording, tour.path("crowd.gif"), layout="grid", axes="yz", progress=tour.progress)
     offsets = np.array(offsets)
     viz.plot_offsets((30 + np.arange(len(offsets))) / 30.0, offsets, tour.path("crowd-offsets.png"),
                      title="offsets of the cheering half after the cheer stream starts")  # fmt: skip

@@ -148,7 +148,7 @@ def test_the_graph_picture_keys_its_colours_and_turns():
 def test_a_crowd_gif_colours_parts_by_stream_and_the_offsets_plot_shows_dilation(tmp_path):
     from PIL import Image
 
-    from flockkit.crowd import Crowd, Stream, StreamPool
+    from flockkit.crowd import Crowd, Stream, StreamPool, record
     from flockkit.testing import inputs
 
     walker = inputs.walker()
@@ -162,7 +162,8 @@ def test_a_crowd_gif_colours_parts_by_stream_and_the_offsets_plot_shows_dilation
         if frame == 0:
             crowd.transition_to_streamed([0, 1, 2], "body", 1, blend_time=0.2, time_to_dilate=2.0)
 
-    viz.animate_crowd(crowd, tmp_path / "crowd.gif", seconds=1.0, on_frame=cheer, axes="yz", size=(320, 240))
+    recording = record(crowd, 1.0, on_frame=cheer)
+    viz.animate_recording(recording, tmp_path / "crowd.gif", layout="grid", axes="yz", size=(320, 240))
     with Image.open(tmp_path / "crowd.gif") as image:
         assert image.size == (320, 240) and image.n_frames == 15  # 1 s at 30 fps, drawn at 15
         image.seek(image.n_frames - 1)
@@ -179,7 +180,7 @@ def test_a_crowd_gif_colours_parts_by_stream_and_the_offsets_plot_shows_dilation
     )
     assert (tmp_path / "o.png").read_bytes().startswith(b"\x89PNG") and len(figure.axes[0].lines) == 4
     with pytest.raises(ValidationError, match="axes"):
-        viz.animate_crowd(crowd, tmp_path / "bad.gif", axes="xw")
+        viz.animate_recording(recording, tmp_path / "bad.gif", axes="xw")
     assert not (tmp_path / "bad.gif").exists()
 
 
@@ -188,6 +189,8 @@ def test_a_gif_frame_is_the_figure_drawn_whole(tmp_path):
     matplotlib draws of the whole figure, white kept exactly white, the rest within a level."""
     import matplotlib.pyplot as plt
     from PIL import Image
+
+    from flockkit.viz._figures import save_animation
 
     figure, ax = plt.subplots(figsize=(3, 2), dpi=100)
     ax.set_xlim(0, 10)
@@ -201,7 +204,7 @@ def test_a_gif_frame_is_the_figure_drawn_whole(tmp_path):
         label.set_text(f"frame {frame}")
         return [line, label]
 
-    viz._save_animation(figure, draw, range(12), tmp_path / "wave.gif", 10.0, False)
+    save_animation(figure, draw, range(12), tmp_path / "wave.gif", 10.0, False)
     with Image.open(tmp_path / "wave.gif") as image:
         assert image.n_frames == 12 and image.info["duration"] == 100
         image.seek(7)

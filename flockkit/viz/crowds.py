@@ -1,0 +1,108 @@
+"""Pictures of crowds: a recorded crowd's stick figures, where they are or laid out on a grid,
+and the offsets of a time dilation."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import ValidationError
+from ._figures import (
+    fit_view,
+    movie_path,
+    picture_path,
+    pyplot,
+    save,
+    save_animation,
+    scene_figure,
+    timeline,
+)
+
+
+def animate_recording(recording, path, *, layout="world", axes=None, fps=None, size=None, progress=False):
+    """A recorded crowd (``flockkit.crowd.record``) as stick figures, joints joined to their
+    parents, coloured by the stream each agent's part reads (while blending, by the stream it
+    blends to, drawn thicker), seen along `axes` (horizontal, vertical). `layout` "world": where
+    they are (`axes` default "xy", from above); "grid": each agent in a cell of a grid, in place
+    (`axes` default "xz", from the front), to see the poses of many. Returns the path."""
+    path = movie_path(path)
+    if layout not in ("world", "grid"):
+        raise ValidationError(f"animate_recording: layout must be 'world' or 'grid'; got {layout!r}")
+    joints = recording.world()[..., :3, 3][..., _crowd_axes(axes or ("xy" if layout == "world" else "xz"))]
+    if layout == "world":
+        return _animate_skeletons(recording, joints, path, fps=fps, size=size, progress=progress, ticks=True)
+    agents = joints.shape[1]  # (frames, agents, J, 2)
+    extent = np.ptp(joints.reshape(-1, 2), axis=0).max() if joints.size else 1.0
+    spacing = 0.8 * max(float(np.ptp(joints[..., 0], axis=-1).max()), 1e-9) + 0.4 * extent / max(agents, 1) ** 0.5
+    height = max(float(np.ptp(joints[..., 1], axis=-1).max()), 1e-9) * 1.4
+    columns = max(1, int(np.ceil(np.sqrt(agents * height / spacing))))  # a roughly square crowd
+    grid = np.stack([np.arange(agents) % columns, -(np.arange(agents) // columns)], axis=1)
+    centers = joints.mean(axis=(0, 2))  # each agent's mean joint position: figures stay in their cells
+    placed = joints - centers[None, :, None] + (grid * [spacing, height])[None, :, None]
+    return _animate_skeletons(recording, placed, path, fps=fps, size=size, progress=progress, ticks=False)
+
+
+def _crowd_axes(axes) -> list[int]:
+    if not isinstance(axes, str) or len(axes) != 2 or any(a not in "xyz" for a in axes) or axes[0] == axes[1]:
+        raise ValidationError(f"axes must be two of 'x', 'y', 'z' (horizontal, vertical); got {axes!r}")
+    return ["xyz".index(a) for a in axes]
+
+
+def _animate_skeletons(recording, placed, path, *, fps, size, progress, ticks: bool):
+    """Draw `placed` (frames, agents, J, 2) joint positions of `recording` as stick figures."""
+    parents = recording.skeleton.parents
+    frames, rate = timeline(1.0 / recording.fps, recording.n_frames, fps, None, "animate_recording")
+    plt = pyplot()
+    from matplotlib.collections import LineCollection
+
+    low, high = placed.reshape(-1, 2).min(axis=0), placed.reshape(-1, 2).max(axis=0)
+    figure, ax = scene_figure(plt, low, high, size, keyed=False, longer=640)
+    fit_view(ax, low, high)
+    if not ticks:
+        ax.set_xticks([])
+        ax.set_yticks([])
+    bones = np.flatnonzero(parents >= 0)
+    palette = plt.get_cmap("tab10")
+    lines = LineCollection([], zorder=3)
+    ax.add_collection(lines)
+    label = ax.set_title("")
+
+    def draw(index):
+        frame = frames[index]
+        segments = np.stack([placed[frame][:, bones], placed[frame][:, parents[bones]]], axis=2).reshape(-1, 2, 2)
+        lines.set_segments(segments)
+        lines.set_color([palette(int(s) % 10) for s in recording.streams[frame] for _ in bones])
+        lines.set_linewidth([2.2 if b else 1.0 for b in recording.blending[frame] for _ in bones])
+        label.set_text(f"{recording.n_agents} agents coloured by stream, t = {(frame + 1) / recording.fps:.1f} s")
+        return [lines, label]
+
+    try:
+        save_animation(figure, draw, range(len(frames)), path, rate, progress)
+    finally:
+        plt.close(figure)
+    return path
+
+
+def plot_offsets(times, offsets, path=None, *, targets=None, title="offsets during time dilation"):
+    """Agent parts' offsets (frames behind their stream's head) over `times` (F,) seconds:
+    `offsets` (F, n), one line each, with their dilation `targets` (n,) dotted. Returns the
+    Figure; writes it to `path` if given."""
+    if path is not None:
+        path = picture_path(path)
+    times, offsets = np.asarray(times, dtype=float), np.asarray(offsets, dtype=float)
+    if offsets.ndim != 2 or offsets.shape[0] != len(times):
+        raise ValidationError(f"plot_offsets: offsets must be (len(times), parts); got {offsets.shape}")
+    plt = pyplot()
+    figure, ax = plt.subplots(figsize=(7, 3.6))
+    palette = plt.get_cmap("viridis")
+    order = np.argsort(offsets[-1])
+    for rank, k in enumerate(order):
+        colour = palette(rank / max(len(order) - 1, 1))
+        ax.plot(times, offsets[:, k], color=colour, lw=1)
+        if targets is not None:
+            ax.axhline(float(np.asarray(targets)[k]), color=colour, lw=0.6, ls=":")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("offset (frames behind the head)")
+    ax.set_title(title)
+    if path is not None:
+        save(figure, path)
+    return figure
