@@ -25,9 +25,9 @@ from pathlib import Path
 import numpy as np
 
 import flockkit
+from flockkit.cli.demo import FOX_FEET as FEET
+from flockkit.cli.demo import FOX_LEGS
 from flockkit.crowd import driven_sliding, ground_speed, plant_feet
-from flockkit.demo import FOX_FEET as FEET
-from flockkit.demo import FOX_LEGS
 
 
 def floor(clip) -> float:

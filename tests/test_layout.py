@@ -29,7 +29,7 @@ LAYERS = [
     ("viz", ["viz"]),
     ("convenience", ["convenience"]),
     ("api", ["flockkit"]),
-    ("cli", ["cli", "demo"]),
+    ("cli", ["cli"]),
 ]  # fmt: skip
 # The imports that run back up, each with the reason it must.
 UPWARD = {}

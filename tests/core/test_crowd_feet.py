@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 import flockkit
+from flockkit.cli.demo import FOX, FOX_FEET, FOX_LEGS
 from flockkit.crowd import Crowd, Stream, StreamPool, driven_sliding, ground_speed, plant_feet
-from flockkit.demo import FOX, FOX_FEET, FOX_LEGS
 from flockkit.errors import ValidationError
 from flockkit.testing import inputs
 

@@ -1,4 +1,4 @@
-"""``flockkit demo``: the tour of both papers, writing pictures, animations and a summary.
+"""``flockkit demo``: the tour of the four parts, writing pictures, animations and a summary.
 
 1. simulate a 20-agent flock turning inside an arena (a fence of round obstacles), 60 s;
 2. build its motion graph, and draw the difference matrix with the chosen transitions marked,
@@ -31,10 +31,11 @@ import numpy as np
 
 from flockkit import build_graph, simulate, synthesize, walk
 
-from .constrained.problem import ComConstraint, PointConstraint, Problem
-from .errors import MissingDependencyError, ValidationError
-from .regions import Box
-from .regions import fence as arena
+from ..constrained.problem import ComConstraint, PointConstraint, Problem
+from ..errors import MissingDependencyError, ValidationError
+from ..regions import Box
+from ..regions import fence as arena
+from ._options import add_quiet, shows_progress
 
 STICKLEBACKS = Path("sticklebacks-5") / "ground_truth.csv"
 
@@ -59,8 +60,8 @@ def difference_matrix(motion, *, interval: float, metric="icp-hungarian"):
     name or an instance (its declared `pairwise` is used where it has one)."""
     from scipy.spatial.distance import squareform
 
-    from .interfaces import capabilities
-    from .registry import resolve
+    from ..interfaces import capabilities
+    from ..registry import resolve
 
     measure = resolve("metric", metric)
     stride = max(1, round(interval / motion.dt))
@@ -135,7 +136,7 @@ def run_demo(out, *, data=None, progress=False, report=print) -> dict:
 def _data_driven(tour: _Tour) -> tuple[dict, object]:
     """Paper 000: a recording in an arena, its graph, and 2 minutes synthesized inside a box;
     the summary and the graph."""
-    from . import viz
+    from .. import viz
 
     fence = arena(15.0, posts=24)
     with tour.step("simulate 60 s of 20 boids"):
@@ -173,9 +174,9 @@ def _data_driven(tour: _Tour) -> tuple[dict, object]:
 
 def _scene(tour: _Tour, graph) -> dict:
     """Paper 002: a scene of flocks following arrows that turn halfway."""
-    from . import viz
-    from .regions import Polygon
-    from .scene import Arrow, FlowField, Scene
+    from .. import viz
+    from ..regions import Polygon
+    from ..scene import Arrow, FlowField, Scene
 
     wind = FlowField(arrows=[Arrow(position=[0.0, 0.0], keyframes=[(0.0, [0.7, 0.0]), (19.0, [0.7, 0.0]),
                                                                   (21.0, [0.0, 0.7])])])  # fmt: skip
@@ -208,10 +209,10 @@ def _scene(tour: _Tour, graph) -> dict:
 
 def _crowd(tour: _Tour) -> dict:
     """Paper 003: a crowd of stick figures on shared streams; half cheer, then walk again."""
-    from . import viz
-    from .crowd import Crowd, Stream, StreamPool, equation_5, record
-    from .registry import get
-    from .testing.inputs import walker
+    from .. import viz
+    from ..crowd import Crowd, Stream, StreamPool, equation_5, record
+    from ..registry import get
+    from ..testing.inputs import walker
 
     clip = walker()
     cheer = get("controller", "blend", a=get("controller", "clip", clip=clip, rate=2.6),
@@ -263,10 +264,10 @@ FOX_FEET = [foot for _, _, foot in FOX_LEGS]
 
 def _foxes(tour: _Tour, folder: Path) -> dict:
     """Paper 003 driven by paper 004's model: a few thousand Foxes follow a boids flock."""
-    from . import viz
-    from .crowd import Crowd, Cue, Driver, State, StateMachine, Stream, StreamPool, ground_speed, plant_feet, record
-    from .io import read_clips
-    from .registry import get
+    from .. import viz
+    from ..crowd import Crowd, Cue, Driver, State, StateMachine, Stream, StreamPool, ground_speed, plant_feet, record
+    from ..io import read_clips
+    from ..registry import get
 
     fps, seconds, n = 24.0, 10.0, 2000
     clips = read_clips(folder / FOX)
@@ -316,8 +317,8 @@ def _foxes(tour: _Tour, folder: Path) -> dict:
 
 def _constrained(tour: _Tour) -> dict:
     """Paper 004: the come-from-behind scenario and its sampler trace."""
-    from . import viz
-    from .constrained import solve
+    from .. import viz
+    from ..constrained import solve
 
     problem = come_from_behind()
     with tour.step("solve come-from-behind"):
@@ -331,8 +332,8 @@ def _constrained(tour: _Tour) -> dict:
 
 def _sticklebacks(tour: _Tour, folder: Path) -> dict:
     """Real fish: a graph of five sticklebacks and a minute walked from it."""
-    from . import viz
-    from .io import read_wide
+    from .. import viz
+    from ..io import read_wide
 
     fish = read_wide(folder / STICKLEBACKS, fps=15, image_height=720)  # pixels, y down in the video
     com = fish.center_of_mass()
@@ -351,3 +352,32 @@ def _sticklebacks(tour: _Tour, folder: Path) -> dict:
         **fish_graph.stats(),
         "center kept in the video frame": bool(inner.contains(fish_walk.center_of_mass()).all()),
     }
+
+
+def _cmd_demo(args) -> int:
+    begin = time.perf_counter()
+    summary = run_demo(args.output, data=args.data, progress=shows_progress(args))
+    graph = summary["graph"]
+    print(
+        f"graph: {graph['nodes']} nodes, {graph['transitions']} transitions; come-from-behind: largest residual "
+        f"{max(summary['come-from-behind']['residuals']):.3g}; sticklebacks: "
+        f"{'built' if isinstance(summary['sticklebacks'], dict) else summary['sticklebacks']}"
+    )
+    print(f"done in {time.perf_counter() - begin:.0f} s; everything is in {Path(args.output).resolve()}")
+    return 0
+
+
+def _demo_arguments(parser) -> None:
+    parser.add_argument("-o", "--output", default="flockkit-demo", help="folder to write into (./flockkit-demo)")
+    parser.add_argument("--data", help="folder of the shared captures (default: ../shared/data when present)")
+    add_quiet(parser)
+
+
+# command -> (help, arguments, run)
+COMMANDS = {
+    "demo": (
+        "the tour: graph, synthesis, constrained flock, real fish; pictures and a summary",
+        _demo_arguments,
+        _cmd_demo,
+    ),
+}

@@ -1,0 +1,176 @@
+"""What the commands share: --param parsing, output checks, common options, the joblib backend."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import sys
+from pathlib import Path
+
+import flockkit
+
+from .._atomic import check_writable
+from ..errors import MissingDependencyError, ValidationError
+
+# per command, the keyword arguments its options set (and the option that sets each): a --param
+# of one of these names would clash with them
+RESERVED = {
+    "simulate": {"dt": "--dt", "n_agents": "--agents", "steps": "--steps", "seed": "--seed", "dims": "--dims",
+                 "behavior": "--behavior", "progress": "--quiet", "initial": None,
+                 "obstacles": "--obstacle or --arena"},
+    "build": {"metric": "--metric", "builder": "--builder", "threshold": "--threshold", "n_jobs": "--jobs",
+              "seed": "--seed", "progress": "--quiet", "metric_params": None, "motion": None,
+              "segmentation": "--parts", "segmenter": None, "segmenter_params": None, "source": None},
+    "segmenter": {"n_parts": "--parts"},
+    "walk": {"duration": "--duration", "seed": "--seed", "strategy": "--strategy", "region": "--region",
+             "graph": None},
+}  # fmt: skip
+
+
+def parse_params(pairs, command: str | None = None) -> dict:
+    """``key=value`` strings to keyword arguments; values are read as JSON when they parse."""
+    params = {}
+    reserved = RESERVED.get(command, {})
+    for pair in pairs or ():
+        key, sep, raw = pair.partition("=")
+        if not sep or not key.isidentifier():
+            raise ValidationError(f"--param expects key=value with key a Python identifier; got {pair!r}")
+        if key in reserved:
+            option = reserved[key]
+            raise ValidationError(f"--param {key}: {f'set it with {option}' if option else 'not a parameter here'}")
+        try:
+            params[key] = json.loads(raw)
+        except json.JSONDecodeError:
+            params[key] = raw
+    return params
+
+
+def require_suffix(path: str, suffixes: tuple[str, ...], option: str) -> Path:
+    """The output `path`, checked before any work: a known suffix, and a file can be made there."""
+    path = Path(path)
+    if path.suffix.lower() not in suffixes:
+        raise ValidationError(f"{option} {path}: unknown extension {path.suffix!r}; expected {' or '.join(suffixes)}")
+    if not path.parent.is_dir():
+        raise ValidationError(f"{option} {path}: folder {path.parent} does not exist")
+    return check_writable(path)
+
+
+def shows_progress(args) -> bool:
+    return not args.quiet and sys.stderr.isatty()
+
+
+def parse_region(text: str, option: str = "--region"):
+    """box:x0,y0,x1,y1 (or 3D: 6 numbers), ball:cx,cy[,cz],r, polygon:x0,y0,x1,y1,..."""
+    kind, sep, numbers = text.partition(":")
+    try:
+        values = [float(v) for v in numbers.split(",")] if sep else []
+    except ValueError:
+        values = []
+    if kind == "box" and len(values) in (4, 6):
+        half = len(values) // 2
+        return flockkit.Box(lower=values[:half], upper=values[half:])
+    if kind == "ball" and len(values) in (3, 4):
+        return flockkit.Ball(center=values[:-1], radius=values[-1])
+    if kind == "polygon" and len(values) >= 6 and len(values) % 2 == 0:
+        return flockkit.Polygon(vertices=[values[i : i + 2] for i in range(0, len(values), 2)])
+    raise ValidationError(
+        f"{option} {text!r}: expected box:x0,y0,x1,y1 (or 6 numbers in 3D), ball:cx,cy[,cz],r or "
+        "polygon:x0,y0,x1,y1,x2,y2,..."
+    )
+
+
+MESH_SUFFIXES = (".glb", ".gltf", ".usda", ".usdc", ".usdz", ".usd", ".obj")
+
+
+def read_source(path: str, clip=None, fps=None, allow_outside=False):
+    """A Motion or an AnimatedMesh: a flockkit .npz of either, or an animated-mesh file (glTF,
+    USD, an OBJ folder or glob) read at `fps` (default 30) for `clip`."""
+    from .._npzfile import kind_of
+
+    glob = not Path(path).exists() and any(c in path for c in "*?[")
+    if Path(path).suffix.lower() in MESH_SUFFIXES or Path(path).is_dir() or glob:
+        return flockkit.io.read_mesh_animation(path, clip=clip, fps=30.0 if fps is None else fps,
+                                               allow_outside=allow_outside)  # fmt: skip
+    if kind_of(path) == "mesh":
+        return flockkit.AnimatedMesh.load(path)
+    return flockkit.Motion.load(path)
+
+
+@contextlib.contextmanager
+def joblib_backend(args):
+    """Run the command's parallel work on the joblib backend `--backend` names (with `--jobs`
+    workers, default all): dask (a LocalCluster, or the scheduler at `--scheduler`), ray (a local
+    Ray, or the cluster at `--scheduler`), loky, threading. Without it, joblib's default."""
+    import joblib
+
+    if args.backend is None:
+        yield
+        return
+    workers = -1 if args.jobs is None else args.jobs
+    if args.backend == "dask":
+        try:
+            from distributed import Client
+        except ImportError:
+            raise MissingDependencyError(
+                "--backend dask needs dask.distributed: pip install 'flockkit[scale]'"
+            ) from None
+        with Client(args.scheduler) if args.scheduler else Client(), joblib.parallel_config("dask", n_jobs=workers):
+            yield
+    elif args.backend == "ray":
+        try:
+            import ray
+            from ray.util.joblib import register_ray
+        except ImportError:
+            raise MissingDependencyError("--backend ray needs ray: pip install 'flockkit[scale]'") from None
+        register_ray()
+        ray.init(address=args.scheduler, include_dashboard=False, log_to_driver=False)
+        try:
+            with joblib.parallel_config("ray", n_jobs=workers):
+                yield
+        finally:
+            ray.shutdown()
+    else:
+        with joblib.parallel_config(args.backend, n_jobs=workers):
+            yield
+
+
+def pixel_size(text: str) -> tuple[int, int]:
+    """--size WIDTHxHEIGHT in pixels."""
+    width, sep, height = text.lower().partition("x")
+    if not (sep and width.isdigit() and height.isdigit()):
+        raise ValidationError(f"--size {text!r}: expected WIDTHxHEIGHT in pixels, e.g. 800x600")
+    return int(width), int(height)
+
+
+def add_output(parser, help: str) -> None:
+    parser.add_argument("-o", "--output", required=True, help=help)
+
+
+def add_quiet(parser) -> None:
+    parser.add_argument("--quiet", action="store_true", help="no progress bar")
+
+
+def add_param(parser, what: str) -> None:
+    parser.add_argument("--param", action="append", metavar="KEY=VALUE", help=f"{what} parameter, repeatable")
+
+
+def add_scale_out(parser) -> None:
+    parser.add_argument("--jobs", type=int, help="parallel workers (-1: all; default 1, or all with --backend)")
+    parser.add_argument(
+        "--backend", choices=("loky", "threading", "dask", "ray"), help="joblib backend (dask, ray: flockkit[scale])"
+    )
+    parser.add_argument("--scheduler", metavar="ADDRESS", help="with --backend dask or ray: the cluster to use")
+
+
+def add_mesh_options(parser) -> None:
+    parser.add_argument("--clip", help="the clip of an animated-mesh file (default: its first)")
+    parser.add_argument("--fps", type=float, help="frames per second to sample an animated-mesh file at (default 30)")
+    add_allow_outside(parser)
+
+
+def add_allow_outside(parser) -> None:
+    parser.add_argument(
+        "--allow-outside",
+        action="store_true",
+        help="let the input refer to files outside its folder (absolute paths, ..; see docs/security.md)",
+    )
