@@ -9,7 +9,8 @@ A plugin module implements any of them with ``@flockkit.hookimpl`` and calls
     def flockkit_register_behaviors(registry):
         registry.add("vicsek", Vicsek, description="Vicsek alignment with angular noise")
 
-It is found through an entry point in the ``flockkit`` group of its distribution.
+It is found through an entry point in the ``flockkit`` group of its distribution. Which hook
+registers which kind is ``flockkit.kinds.KINDS[kind].hook``.
 """
 
 from __future__ import annotations
@@ -60,16 +61,3 @@ def flockkit_register_segmenters(registry):
 @hookspec
 def flockkit_register_controllers(registry):
     """Register animation controllers (protocol ``flockkit.interfaces.Controller``)."""
-
-
-# kind -> hook name; one row per extension kind.
-HOOKS = {
-    "behavior": "flockkit_register_behaviors",
-    "metric": "flockkit_register_metrics",
-    "builder": "flockkit_register_builders",
-    "walk": "flockkit_register_walks",
-    "proposal": "flockkit_register_proposals",
-    "objective": "flockkit_register_objectives",
-    "segmenter": "flockkit_register_segmenters",
-    "controller": "flockkit_register_controllers",
-}

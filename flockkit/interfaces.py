@@ -1,7 +1,8 @@
 """The extension kinds of flockkit: one ``typing.Protocol`` per kind, its contract in the docstring.
 
 A plugin registers a *factory* for a component (usually its class); ``flockkit.get(kind, name,
-**params)`` calls ``factory(**params)`` and checks the result against the protocol of that kind.
+**params)`` calls ``factory(**params)`` and checks the result against the protocol of that kind
+(``flockkit.kinds.KINDS`` says which protocol, hook and capabilities each kind has).
 Registration checks that each method below exists and accepts the parameters named here.
 ``flockkit.testing.check_plugin(kind, component)`` checks the behavior behind the contract.
 """
@@ -29,6 +30,15 @@ __all__ = [
     "Objective",
     "Segmenter",
     "Controller",
+    "Guided",
+    "GroupGuided",
+    "Residuals",
+    "Coupling",
+    "SimulationProgress",
+    "BuildProgress",
+    "LowerBound",
+    "PairsWithin",
+    "Pairwise",
 ]
 
 
@@ -67,7 +77,7 @@ class Capabilities:
     and the conformance kit read only this declaration: they never look at signatures or
     attributes to find out what a component can do. Registration checks that every operation a
     component declares is there with the documented parameters, and that it declares only fields
-    its kind reads (`KIND_FIELDS`).
+    its kind reads (``flockkit.kinds.KINDS[kind].fields``).
 
     Attributes
     ----------
@@ -117,6 +127,14 @@ class Capabilities:
         Metric: it offers that method (see ``ConfigurationMetric``). Builders use ``pairs_within``
         or else ``lower_bound`` to prune, and ``pairwise`` to compute many distances at once; the
         kit checks each declared one.
+    targets : bool
+        Walk: the factory takes ``target`` (a ``flockkit.Features`` of one arrow per output frame,
+        or (time, vector) keyframes, that the walk's motion should follow), ``features`` (the
+        graph's source arrows, one per source frame) and ``avoid`` (source frames, per output
+        frame, to fall out of step with): what a ``flockkit.Scene`` walks its objects with.
+    clip_player : bool
+        Controller: the factory takes ``clip`` (a ``flockkit.SkeletalClip``) and ``rate`` (its
+        playback speed): what crowd files and ``flockkit.crowd.ground_speed`` make per stream.
     """
 
     dims: tuple = attrs.field(default=(2, 3), converter=_dims)
@@ -130,6 +148,8 @@ class Capabilities:
     lower_bound: bool = attrs.field(default=False, validator=_flag("lower_bound"))
     pairs_within: bool = attrs.field(default=False, validator=_flag("pairs_within"))
     pairwise: bool = attrs.field(default=False, validator=_flag("pairwise"))
+    targets: bool = attrs.field(default=False, validator=_flag("targets"))
+    clip_player: bool = attrs.field(default=False, validator=_flag("clip_player"))
 
     def __attrs_post_init__(self):
         if self.coupling and not self.residuals:
@@ -143,21 +163,6 @@ class Capabilities:
             for f in attrs.fields(Capabilities)
             if getattr(self, f.name) != getattr(default, f.name)
         }
-
-
-# kind -> the Capabilities fields (besides dims) that something reads for that kind
-KIND_FIELDS: dict[str, frozenset] = {
-    "behavior": frozenset(
-        {"guide", "group_guide", "obstacles", "plausibility_reach", "residuals", "coupling", "progress"}
-    ),
-    "metric": frozenset({"lower_bound", "pairs_within", "pairwise"}),
-    "builder": frozenset({"progress"}),
-    "walk": frozenset(),
-    "proposal": frozenset(),
-    "objective": frozenset(),
-    "segmenter": frozenset(),
-    "controller": frozenset(),
-}
 
 
 def capabilities(component) -> Capabilities:
@@ -341,66 +346,59 @@ class Controller(Protocol):
     def events(self, start: float, stop: float): ...
 
 
-class _Guided(Protocol):
+class Guided(Protocol):
+    """The operations a behavior declaring ``Capabilities(guide=True)`` offers."""
+
     def forward(self, initial, steps, rng, *, guide=None): ...
 
     def backward(self, final, steps, rng, *, guide=None): ...
 
 
-class _GroupGuided(Protocol):
+class GroupGuided(Protocol):
+    """The operation a behavior declaring ``Capabilities(group_guide=True)`` offers."""
+
     def forward(self, initial, steps, rng, *, group_guide=None): ...
 
 
-class _Residuals(Protocol):
+class Residuals(Protocol):
+    """The operation a behavior declaring ``Capabilities(residuals=True)`` offers."""
+
     def plausibility_residuals(self, motion, start=0, stop=None): ...
 
 
-class _Coupling(Protocol):
+class Coupling(Protocol):
+    """The operation a behavior declaring ``Capabilities(coupling=True)`` offers."""
+
     def plausibility_coupling(self, motion): ...
 
 
-class _SimulationProgress(Protocol):
+class SimulationProgress(Protocol):
+    """The operations a behavior declaring ``Capabilities(progress=True)`` offers."""
+
     def forward(self, initial, steps, rng, *, progress=None): ...
 
     def backward(self, final, steps, rng, *, progress=None): ...
 
 
-class _BuildProgress(Protocol):
+class BuildProgress(Protocol):
+    """The operation a builder declaring ``Capabilities(progress=True)`` offers."""
+
     def build(self, motion, metric, rng, *, progress=None): ...
 
 
-class _LowerBound(Protocol):
+class LowerBound(Protocol):
+    """The operation a metric declaring ``Capabilities(lower_bound=True)`` offers."""
+
     def lower_bound(self, a, b): ...
 
 
-class _PairsWithin(Protocol):
+class PairsWithin(Protocol):
+    """The operation a metric declaring ``Capabilities(pairs_within=True)`` offers."""
+
     def pairs_within(self, configurations, threshold, *, rows=None): ...
 
 
-class _Pairwise(Protocol):
+class Pairwise(Protocol):
+    """The operation a metric declaring ``Capabilities(pairwise=True)`` offers."""
+
     def pairwise(self, configurations, pairs=None): ...
-
-
-# Capabilities field -> kind -> the methods (and parameters) a component declaring it must offer
-OPTIONAL_PROTOCOLS: dict[str, dict[str, type]] = {
-    "guide": {"behavior": _Guided},
-    "group_guide": {"behavior": _GroupGuided},
-    "residuals": {"behavior": _Residuals},
-    "coupling": {"behavior": _Coupling},
-    "progress": {"behavior": _SimulationProgress, "builder": _BuildProgress},
-    "lower_bound": {"metric": _LowerBound},
-    "pairs_within": {"metric": _PairsWithin},
-    "pairwise": {"metric": _Pairwise},
-}
-
-# kind name -> protocol; the single table the registry and the conformance kit read.
-PROTOCOLS: dict[str, type] = {
-    "behavior": BehaviorModel,
-    "metric": ConfigurationMetric,
-    "builder": GraphBuilder,
-    "walk": WalkStrategy,
-    "proposal": ProposalMove,
-    "objective": Objective,
-    "segmenter": Segmenter,
-    "controller": Controller,
-}

@@ -26,7 +26,8 @@ import pluggy
 
 from . import hookspecs
 from .errors import FlockkitWarning, PluginError, UnknownPluginError, ValidationError
-from .interfaces import KIND_FIELDS, OPTIONAL_PROTOCOLS, PROTOCOLS, capabilities
+from .interfaces import capabilities
+from .kinds import KINDS as _KINDS
 
 __all__ = [
     "Component",
@@ -35,6 +36,8 @@ __all__ = [
     "resolve",
     "label",
     "require_dims",
+    "require",
+    "capabilities_of",
     "available",
     "describe",
     "register",
@@ -45,7 +48,7 @@ __all__ = [
 
 ENTRY_POINT_GROUP = "flockkit"
 BLOCK_VARIABLE = "FLOCKKIT_BLOCK_PLUGINS"
-KINDS = tuple(PROTOCOLS)
+KINDS = tuple(_KINDS)  # the kinds' names, in the order of flockkit.kinds.KINDS
 _NAME = re.compile(r"^[a-z][a-z0-9]*(?:[-_][a-z0-9]+)*$")
 
 
@@ -145,7 +148,9 @@ def _shown(parameter: inspect.Parameter) -> str:
 def interface_problems(component, kind: str) -> list[str]:
     """What `component` (a class or an instance) lacks to honour the protocol of `kind`, and the
     operations its ``Capabilities`` declare; [] if nothing."""
-    problems = _method_problems(component, PROTOCOLS[kind])
+    declaration = _KINDS[kind]
+    problems = _method_problems(component, declaration.protocol)
+    problems += [f"{name}: missing (an attribute)" for name in declaration.attributes if not hasattr(component, name)]
     try:
         declared = capabilities(component).declared()
     except ValidationError as exc:
@@ -153,18 +158,18 @@ def interface_problems(component, kind: str) -> list[str]:
     for field in declared:
         if field == "dims":
             continue
-        if field not in KIND_FIELDS[kind]:
-            users = sorted(k for k, fields in KIND_FIELDS.items() if field in fields)
+        if field not in declaration.fields:
+            users = sorted(k.name for k in _KINDS.values() if field in k.fields)
             problems.append(f"capabilities.{field} is declared, but only {' and '.join(users)} components use it")
             continue
-        protocol = OPTIONAL_PROTOCOLS.get(field, {}).get(kind)
+        protocol = declaration.optional.get(field)
         if protocol is not None:
             problems.extend(f"{p} (capabilities.{field} is declared)" for p in _method_problems(component, protocol))
     return problems
 
 
 def _interface_error(component: Component, problems: list[str]) -> PluginError:
-    protocol = PROTOCOLS[component.kind].__name__
+    protocol = _KINDS[component.kind].protocol.__name__
     lines = "\n".join(f"  - {p}" for p in problems)
     return PluginError(
         f"{component.origin} registers {component.kind} {component.name!r}, which does not honour the "
@@ -220,24 +225,27 @@ class Registry:
                 f"{component.origin} registers {self.kind} {name!r} with a factory that is not callable: {factory!r}"
             )
         if isinstance(factory, type):
-            problems = interface_problems(factory, self.kind) + _factory_problems(factory)
+            problems = interface_problems(factory, self.kind) + _factory_problems(factory, self.kind)
             if problems:
                 raise _interface_error(component, problems)
         self._table[name] = component
 
 
-def _factory_problems(factory) -> list[str]:
-    """What the factory lacks for the parameters its declared capabilities promise."""
-    if not capabilities(factory).obstacles:
+def _factory_problems(factory, kind: str) -> list[str]:
+    """What the factory lacks of the parameters its declared capabilities promise."""
+    declared = capabilities(factory)
+    wanted = [(field, name) for field, names in _KINDS[kind].factory_parameters.items() if getattr(declared, field)
+              for name in names]  # fmt: skip
+    if not wanted:
         return []
     try:
         parameters = inspect.signature(factory).parameters
     except (TypeError, ValueError):
         return []
-    takes_any = any(p.kind == p.VAR_KEYWORD for p in parameters.values())
-    if "obstacles" in parameters or takes_any:
+    if any(p.kind == p.VAR_KEYWORD for p in parameters.values()):
         return []
-    return ["the factory has no parameter 'obstacles' (capabilities.obstacles is declared)"]
+    return [f"the factory has no parameter {name!r} (capabilities.{field} is declared)"
+            for field, name in wanted if name not in parameters]  # fmt: skip
 
 
 def _hook_owners(hook) -> dict:
@@ -326,7 +334,7 @@ def _build_manager() -> pluggy.PluginManager:
     except pluggy.PluginValidationError as exc:
         raise PluginError(
             f"plugin {manager.get_name(exc.plugin)!r} implements a hook flockkit does not define:\n  {exc}\n"
-            f"Known hooks: {', '.join(hookspecs.HOOKS.values())}."
+            f"Known hooks: {', '.join(k.hook for k in _KINDS.values())}."
         ) from None
     return manager
 
@@ -342,7 +350,8 @@ def _register_with(manager, plugin, name: str, where: str) -> None:
 
 def _collect(manager: pluggy.PluginManager) -> dict[str, dict[str, Component]]:
     components: dict[str, dict[str, Component]] = {}
-    for kind, hook_name in hookspecs.HOOKS.items():
+    for kind, declaration in _KINDS.items():
+        hook_name = declaration.hook
         table = components[kind] = {}
         hook = getattr(manager.hook, hook_name)
         owners = _hook_owners(hook)
@@ -498,7 +507,9 @@ def resolve(kind: str, spec, **params):
     problems = interface_problems(spec, kind)
     if problems:
         lines = "\n".join(f"  - {p}" for p in problems)
-        raise ValidationError(f"{kind} {shown} does not honour the {PROTOCOLS[kind].__name__} interface:\n{lines}")
+        raise ValidationError(
+            f"{kind} {shown} does not honour the {_KINDS[kind].protocol.__name__} interface:\n{lines}"
+        )
     return spec
 
 
@@ -506,6 +517,22 @@ def label(spec) -> str:
     """How a component given as `spec` (a name or an instance) is named in reports: the name, or
     the instance's class name."""
     return spec if isinstance(spec, str) else type(spec).__name__
+
+
+def capabilities_of(kind: str, spec):
+    """The ``Capabilities`` of a component given as `spec`: for a registered name, its factory's
+    (read before anything is made), for an instance, its own."""
+    return capabilities(_lookup(kind, spec).factory if isinstance(spec, str) else spec)
+
+
+def require(kind: str, spec, field: str, what: str) -> None:
+    """Raise ValidationError unless the component `spec` (a name or an instance) declares the
+    capability `field` that `what` (the caller, "a Scene's walks") needs, saying how to declare it."""
+    if not getattr(capabilities_of(kind, spec), field):
+        raise ValidationError(
+            f"{what} need a {kind} declaring Capabilities({field}=True); {kind} {label(spec)} does not declare it "
+            f"(see docs/kinds/{kind}.md)"
+        )
 
 
 def require_dims(kind: str, component, dims: int, what: str, *, spec=None) -> None:

@@ -5,8 +5,8 @@ from pathlib import Path
 
 import pytest
 
-from flockkit import hookspecs, registry
-from flockkit.interfaces import PROTOCOLS
+from flockkit import registry
+from flockkit.kinds import KINDS
 from flockkit.registry import _protocol_methods
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -36,13 +36,13 @@ def test_examples_run(page, tmp_path, monkeypatch):
         registry.reset()
 
 
-@pytest.mark.parametrize("kind", list(PROTOCOLS))
+@pytest.mark.parametrize("kind", list(KINDS))
 def test_every_kind_has_a_page_stating_its_hook_and_methods(kind):
     page = (ROOT / "docs" / "kinds" / f"{kind}.md").read_text()
-    assert hookspecs.HOOKS[kind] in page and PROTOCOLS[kind].__name__ in page
-    for method in _protocol_methods(PROTOCOLS[kind]):
+    assert KINDS[kind].hook in page and KINDS[kind].protocol.__name__ in page
+    for method in _protocol_methods(KINDS[kind].protocol):
         assert f"`{method}(" in page, f"docs/kinds/{kind}.md does not state {method}"
-    assert hookspecs.HOOKS[kind] in (ROOT / "docs" / "plugins.md").read_text()
+    assert KINDS[kind].hook in (ROOT / "docs" / "plugins.md").read_text()
 
 
 def test_every_doc_page_is_linked_from_the_index():
@@ -95,7 +95,6 @@ def test_every_builtin_parameter_and_capability_is_documented_on_its_kind_page()
     import attrs
 
     import flockkit
-    from flockkit.interfaces import KIND_FIELDS
 
     missing = []
     for component in registry.describe():
@@ -107,7 +106,7 @@ def test_every_builtin_parameter_and_capability_is_documented_on_its_kind_page()
             for p in inspect.signature(component.factory).parameters
             if f"`{p}`" not in page
         ]
-    for kind, fields in KIND_FIELDS.items():
+    for kind, fields in ((k, d.fields) for k, d in KINDS.items()):
         page = (ROOT / "docs" / "kinds" / f"{kind}.md").read_text()
         missing += [
             f"docs/kinds/{kind}.md: Capabilities.{f}" for f in sorted(fields | {"dims"}) if f"`{f}`" not in page

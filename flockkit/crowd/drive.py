@@ -27,7 +27,7 @@ AXES = {"x": 0, "y": 1, "z": 2}
 
 # The controller that plays one clip: a convenience default, as flockkit.build_graph's builder is;
 # a crowd scene's [[streams]] entry, or driven_sliding's `controller`, names another (any
-# controller taking clip= and rate=).
+# controller declaring Capabilities(clip_player=True): it takes clip= and rate=).
 CLIP_CONTROLLER = "clip"
 
 

@@ -59,13 +59,14 @@ def driven_sliding(motion, walk: SkeletalClip, idle: SkeletalClip, feet, rates, 
     fixed-rate playback). A measure of how well a clip and its rates fit a group's speeds; at
     `fps` (default the motion's). `controller` plays a clip (a name or factory taking clip= and
     rate=)."""
-    from ..registry import resolve
+    from ..registry import require, resolve
     from .drive import Driver, State, StateMachine
     from .pool import Stream, StreamPool
     from .runtime import Crowd
 
     fps = 1.0 / motion.dt if fps is None else fps
     natural = ground_speed(walk, feet, up=up, forward=forward, scale=scale)
+    require("controller", controller, "clip_player", "driven_sliding's streams")
     streams = [Stream(controller=resolve("controller", controller, clip=clip, rate=r), history=40)
                for clip, r in [(idle, 1.0), *((walk, r) for r in rates)]]  # fmt: skip
     crowd = Crowd(StreamPool(streams, fps=fps), n_agents=motion.n_agents, clusters={"body": 1}, seed=0)

@@ -52,7 +52,7 @@ from .. import _files, _tomlfile, validate
 from ..errors import FlockkitError, ValidationError
 from ..io import read_clips
 from ..motion import Motion, random_flock
-from ..registry import get, require_dims, resolve
+from ..registry import get, require, require_dims, resolve
 from ..validate import allocation
 from .drive import CLIP_CONTROLLER, Cue, Driver, State, StateMachine
 from .feet import ground_speed, plant_feet
@@ -174,6 +174,7 @@ def read_crowd_scene(path, *, allow_outside: bool = False) -> CrowdScene:
             if spec["name"] in names:
                 raise ValidationError(f"{where}: the name {spec['name']!r} is taken")
             controller_rate = float(spec.get("rate", 1.0))
+            require("controller", spec.get("controller", CLIP_CONTROLLER), "clip_player", f"{where}: streams")
             controller = resolve("controller", spec.get("controller", CLIP_CONTROLLER), clip=clips[spec["clip"]],
                                  rate=controller_rate)  # fmt: skip
             names[spec["name"]] = len(streams)

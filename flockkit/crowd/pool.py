@@ -24,7 +24,8 @@ import attrs
 import numpy as np
 
 from .. import validate
-from ..errors import ValidationError
+from ..errors import PluginError, UnknownPluginError, ValidationError
+from ..registry import resolve
 from ..skeleton import Pose, Skeleton
 
 __all__ = ["Stream", "StreamPool", "UniquePool", "ENTRY_FLOATS", "PREFETCH_FRAMES", "equation_5", "equation_4"]
@@ -38,10 +39,16 @@ STATES = ("Running", "Stopped")
 MAX_FPS = 1000.0
 
 
-def _controller(value):
-    if not callable(getattr(value, "pose", None)) or not isinstance(getattr(value, "skeleton", None), Skeleton):
-        raise ValidationError(f"Stream.controller must be a controller (with skeleton and pose); got {value!r}")
-    return value
+def _controller(value, field: str):
+    """`value` as a controller: an instance that honours the Controller protocol (its skeleton a
+    flockkit.Skeleton), or ValidationError naming `field`."""
+    try:
+        controller = resolve("controller", value)
+    except ValidationError as exc:
+        raise ValidationError(f"{field}: {exc}") from None
+    if not isinstance(controller.skeleton, Skeleton):
+        raise ValidationError(f"{field}: its skeleton must be a flockkit.Skeleton; got {controller.skeleton!r}")
+    return controller
 
 
 def _state(value):
@@ -52,14 +59,27 @@ def _state(value):
 
 @attrs.frozen(kw_only=True, eq=False)
 class Stream:
-    """An animation stream (section 4.1): a controller, the number of past poses kept (`history`,
-    M_A frames: agents read offsets 0 .. history - 1), and its default state: Running from the
-    start, or Stopped until an agent part needs it."""
+    """An animation stream (section 4.1): a controller (an instance, or a registered name made with
+    `controller_params`), the number of past poses kept (`history`, M_A frames: agents read
+    offsets 0 .. history - 1), and its default state: Running from the start, or Stopped until an
+    agent part needs it."""
 
-    controller: object = attrs.field(converter=_controller)
+    controller: object = attrs.field()
     history: int = attrs.field(validator=lambda i, a, v: validate.integer(v, "Stream.history", minimum=1))
     default: str = attrs.field(default="Running", converter=_state)
     name: str = attrs.field(default="")
+    controller_params: dict = attrs.field(factory=dict, converter=dict, repr=False)
+
+    def __attrs_post_init__(self):
+        made = self.controller
+        if isinstance(made, str):
+            try:
+                made = resolve("controller", made, **self.controller_params)
+            except (ValidationError, PluginError, UnknownPluginError) as exc:
+                raise type(exc)(f"Stream.controller: {exc}") from None
+        elif self.controller_params:
+            raise ValidationError("Stream.controller_params are for a controller made by name; got an instance")
+        object.__setattr__(self, "controller", _controller(made, "Stream.controller"))
 
     @property
     def skeleton(self) -> Skeleton:
@@ -349,7 +369,7 @@ class UniquePool:
         slot = validate.integer(slot, "slot", minimum=0)
         if slot >= self.size:
             raise ValidationError(f"slot {slot} is beyond the unique pool's {self.size} slots")
-        controller = _controller(controller)
+        controller = _controller(controller, "UniquePool.set: controller")
         if controller.skeleton.n_joints > self.max_bones:
             raise ValidationError(
                 f"the controller's skeleton has {controller.skeleton.n_joints} joints; "

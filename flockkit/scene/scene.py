@@ -27,6 +27,7 @@ from ..graphs import MotionGraph, Walk, played_frames, synthesize, walk_parts
 from ..io import USD_FPS
 from ..motion import DEFAULT_UP, Motion
 from ..regions import Polygon
+from ..registry import require
 from ..validate import integer, number
 from .features import Features
 from .flow import Arrow, FlowField, SelfMovement
@@ -149,7 +150,8 @@ class Scene:
     (FlowField, SelfMovement; none: one arrow at the region's center, the first template's
     first feature arrow, held). `scale` is a (low, high) range of uniform scales. `walk` names the
     walk strategy (a registered name or an instance factory's name) and `walk_params` its
-    parameters beyond target, features and avoid. `n_jobs` walks objects in parallel through
+    parameters beyond target, features and avoid (it must declare ``Capabilities(targets=True)``:
+    it takes those three). `n_jobs` walks objects in parallel through
     joblib; the result is the same whatever it is.
 
     `headings` "random" turns each object uniformly about +z; "aligned" turns it so that its
@@ -174,6 +176,7 @@ class Scene:
     def __attrs_post_init__(self):
         if self.headings not in ("random", "aligned"):
             raise ValidationError(f"Scene.headings must be 'random' or 'aligned'; got {self.headings!r}")
+        require("walk", self.walk, "targets", "a Scene's walks")
         if not isinstance(self.region, Polygon):
             raise ValidationError(f"Scene.region must be a flockkit.Polygon; got {type(self.region).__name__}")
         if not self.templates:

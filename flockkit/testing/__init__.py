@@ -29,14 +29,16 @@ Hypothesis strategies for flockkit values are in ``flockkit.testing.strategies``
 from __future__ import annotations
 
 import functools
+import importlib
 from collections.abc import Callable, Mapping
 
 import attrs
 
 from ..errors import ValidationError
-from ..interfaces import PROTOCOLS, capabilities
+from ..interfaces import capabilities
+from ..kinds import KINDS
 from ..registry import interface_problems
-from . import behavior, builder, controller, inputs, metric, objective, proposal, segmenter, strategies, walk
+from . import inputs, strategies
 from ._expect import PARTNER_KINDS, default_partner, skip_reason
 
 __all__ = [
@@ -55,29 +57,17 @@ def check_interface(name, component, *, kind):
     """The component has every method of its kind's protocol, with compatible signatures, and every
     operation its capabilities declare."""
     problems = interface_problems(component, kind)
-    assert not problems, f"{name} does not honour the {PROTOCOLS[kind].__name__} interface:\n" + "\n".join(
+    assert not problems, f"{name} does not honour the {KINDS[kind].protocol.__name__} interface:\n" + "\n".join(
         f"  - {p}" for p in problems
     )
 
 
-_KIND_CHECKS = {
-    "behavior": behavior.CHECKS,
-    "metric": metric.CHECKS,
-    "builder": builder.CHECKS,
-    "walk": walk.CHECKS,
-    "objective": objective.CHECKS,
-    "proposal": proposal.CHECKS,
-    "segmenter": segmenter.CHECKS,
-    "controller": controller.CHECKS,
-}
-
-
 def _all_checks(kind: str) -> tuple:
-    if kind not in PROTOCOLS:
-        raise ValidationError(f"unknown plugin kind {kind!r}; the kinds are {', '.join(PROTOCOLS)}")
+    if kind not in KINDS:
+        raise ValidationError(f"unknown plugin kind {kind!r}; the kinds are {', '.join(KINDS)}")
     interface = functools.partial(check_interface, kind=kind)
     functools.update_wrapper(interface, check_interface)
-    return (interface, *_KIND_CHECKS.get(kind, ()))
+    return (interface, *importlib.import_module(KINDS[kind].kit).CHECKS)
 
 
 def _bound(check, partners: Mapping) -> Callable:

@@ -25,13 +25,11 @@ def _clip(value):
 
 
 def _controller(value, field: str):
-    if not callable(getattr(value, "pose", None)) or not isinstance(
-        getattr(value, "skeleton", None), flockkit.Skeleton
-    ):
-        raise ValidationError(
-            f"controller parameter {field} must be a controller (with skeleton and pose); got {value!r}"
-        )
-    return value
+    """`value` as a child controller: an instance honouring the Controller protocol."""
+    try:
+        return flockkit.resolve("controller", value)
+    except ValidationError as exc:
+        raise ValidationError(f"controller parameter {field}: {exc}") from None
 
 
 def _same_skeleton(children, owner: str):
@@ -49,7 +47,7 @@ class ClipPlayer:
     """Plays `clip` from `start` seconds into it, at `rate` times its speed, looping (`loop`) or
     holding its last pose."""
 
-    capabilities = SKELETAL
+    capabilities = flockkit.Capabilities(dims=(3,), clip_player=True)  # takes clip and rate
 
     clip: SkeletalClip = attrs.field(converter=_clip)
     loop: bool = validate.parameter("clip", default=True, kind="flag")

@@ -136,6 +136,9 @@ class AnnotatedWalk:
         The error of a frame in step with an avoided walk (default 1).
     """
 
+    # takes target, features and avoid: the walks a flockkit.Scene makes
+    capabilities = flockkit.Capabilities(targets=True)
+
     target: object = attrs.field(converter=_target)
     features: Features | None = attrs.field(default=None, converter=_features)
     alpha: float = validate.parameter("annotated", default=10.0, minimum=0)
