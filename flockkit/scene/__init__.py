@@ -10,11 +10,13 @@ target feature arrow (``flockkit.Features``' form: length in [0, 1], direction).
 the duplicates and walks each after its targets; ``SceneAnimation`` is the result.
 """
 
+from .animation import SceneAnimation
 from .features import Features, arrow_keyframes, interpolate_arrows
 from .file import read_scene
 from .flow import Arrow, FlowField, SelfMovement
 from .layers import GraphLayers, LayeredWalk, seam_stretch, synthesize_layers, walk_layers
-from .scene import Placement, Scene, SceneAnimation
+from .placement import Placement
+from .scene import Scene
 from .segmentation import Segmentation, canonical_labels, same_partition
 
 __all__ = [

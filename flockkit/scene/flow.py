@@ -106,3 +106,14 @@ class SelfMovement:
     def targets(self, times) -> np.ndarray:
         """(F, D): the object's target arrow at each time of `times`."""
         return interpolate_arrows(*self.keyframes, times)
+
+
+def flow_constraints(value) -> tuple:
+    """`value` as a scene's constraints: a sequence of FlowField and SelfMovement, each checked."""
+    items = tuple(value or ())
+    for k, item in enumerate(items):
+        if not isinstance(item, FlowField | SelfMovement):
+            raise ValidationError(
+                f"Scene.constraints[{k}] must be flockkit.scene.FlowField or SelfMovement; got {type(item).__name__}"
+            )
+    return items

@@ -68,11 +68,10 @@ def reader_calls(reader: str, path: Path):
         return [lambda: io.read_mesh_animation(path)]
     if reader == "npz":
         from flockkit import _npzfile
-        from flockkit.scene.scene import _load as load_scene
 
         loaders = {"motion": flockkit.Motion.load, "graph": flockkit.MotionGraph.load,
                    "mesh": flockkit.AnimatedMesh.load, "segmentation": flockkit.Segmentation.load,
-                   "layers": flockkit.GraphLayers.load, "scene": load_scene}  # fmt: skip
+                   "layers": flockkit.GraphLayers.load, "scene": flockkit.SceneAnimation.load}  # fmt: skip
 
         def load():
             loaders.get(_npzfile.kind_of(path), flockkit.Motion.load)(path)

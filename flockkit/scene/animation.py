@@ -1,0 +1,255 @@
+"""A synthesized scene: the objects' motions in the world (synthesized when asked for), their
+source frames and neighbours, saved to one .npz and exported to USD."""
+
+from __future__ import annotations
+
+import attrs
+import numpy as np
+
+from .. import _npzfile
+from ..errors import FileFormatError, ValidationError
+from ..graphs import MotionGraph, Walk, played_frames
+from ..io import USD_FPS
+from ..motion import Motion
+from ..regions import Polygon
+from .desync import NEIGHBOUR_DIAGONALS, largest_in_step, stacked
+from .flow import FlowField, SelfMovement, flow_constraints
+from .layers import GraphLayers
+from .placement import Placement, heading_turn, turned_half
+from .templates import footprint, template_view
+
+SCENE_FORMAT_VERSION = 1
+
+
+class _Motions:
+    """The objects' world-space motions, synthesized when asked for (a scene of a thousand
+    meshes does not fit in memory at once)."""
+
+    def __init__(self, animation):
+        self.animation = animation
+
+    def __len__(self):
+        return self.animation.placement.n_objects
+
+    def __getitem__(self, i):
+        if not -len(self) <= i < len(self):
+            raise IndexError(f"object {i} of {len(self)}")
+        return self.animation.motion(i % len(self))
+
+    def __iter__(self):
+        return (self.animation.motion(i) for i in range(len(self)))
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class SceneAnimation:
+    """A synthesized scene: the templates, where each object stands (`placement`), each object's
+    walk (a Walk, or a LayeredWalk for layered templates), `n_frames` output frames `dt` apart,
+    and the constraints it followed. `report` holds the neighbours' in-step share before and
+    after de-synchronisation when it comes from Scene.synthesize."""
+
+    templates: tuple = attrs.field(converter=tuple)
+    placement: Placement
+    walks: tuple = attrs.field(converter=tuple)
+    dt: float
+    n_frames: int
+    constraints: tuple = attrs.field(default=(), converter=flow_constraints)
+    region: Polygon | None = attrs.field(default=None)
+    report: dict = attrs.field(factory=dict)
+    _footprints: list = attrs.field(init=False, repr=False, eq=False)  # (center, half extents) per template
+
+    def __attrs_post_init__(self):
+        object.__setattr__(self, "_footprints", [footprint(t) for t in self.templates])
+
+    @property
+    def motions(self) -> _Motions:
+        """One world-space Motion per object, each synthesized when indexed."""
+        return _Motions(self)
+
+    def motion(self, i: int) -> Motion:
+        """Object i's motion in the world: its walk played, cut to n_frames, scaled, turned by its
+        heading about +z and moved to its position."""
+        played = template_view(self.templates[self.placement.templates[i]]).synthesize(self.walks[i])
+        center, _ = self._footprints[self.placement.templates[i]]
+        dims = played.dims
+        scale, turn = self.placement.scales[i], heading_turn(self.placement.headings[i], dims)
+        where = np.zeros(dims)
+        where[:2] = self.placement.positions[i]
+        positions = (played.positions[: self.n_frames] - center) @ (scale * turn).T + where
+        return Motion._adopt(positions, self.dt)
+
+    @staticmethod
+    def _frames_of(template, walk, n_frames: int) -> np.ndarray:
+        view = template_view(template)
+        return np.stack([played_frames(g, w)[0][:n_frames] for g, w in zip(view.graphs, view.part_walks(walk))])
+
+    def source_frames(self) -> np.ndarray:
+        """(objects, parts, frames): the source frame each object's part plays at each output
+        frame (-1 for parts an object's template does not have)."""
+        return stacked(
+            [
+                self._frames_of(self.templates[kind], walk, self.n_frames)
+                for kind, walk in zip(self.placement.templates, self.walks)
+            ],
+            self.n_frames,
+        )
+
+    def bounding_boxes(self) -> np.ndarray:
+        """(objects, 2, 2): the (low, high) corners in x, y of each object's placed footprint."""
+        boxes = np.empty((self.placement.n_objects, 2, 2))
+        for i in range(self.placement.n_objects):
+            half = self._footprints[self.placement.templates[i]][1] * self.placement.scales[i]
+            half = turned_half(half, self.placement.headings[i])
+            boxes[i] = [self.placement.positions[i] - half, self.placement.positions[i] + half]
+        return boxes
+
+    def neighbours(self) -> list[np.ndarray]:
+        """For each object, the other objects of its template within NEIGHBOUR_DIAGONALS
+        footprint diagonals."""
+        from scipy.spatial import cKDTree
+
+        result = [np.zeros(0, dtype=np.int64)] * self.placement.n_objects
+        for kind, (_, half) in enumerate(self._footprints):
+            members = np.flatnonzero(self.placement.templates == kind)
+            if len(members) < 2:
+                continue
+            reach = NEIGHBOUR_DIAGONALS * 2 * np.linalg.norm(half) * self.placement.scales[members].max()
+            tree = cKDTree(self.placement.positions[members])
+            for row, near in zip(members, tree.query_ball_point(self.placement.positions[members], reach)):
+                result[row] = members[[j for j in near if members[j] != row]]
+        return result
+
+    def save(self, path) -> None:
+        """Write the templates, placement, walks and constraints to one .npz with JSON metadata
+        (atomic; the motions are synthesized again on load, not stored)."""
+        _save(self, path)
+
+    @classmethod
+    def load(cls, path) -> SceneAnimation:
+        """Read a file written by :meth:`save`; FileFormatError naming the file if it is not one."""
+        return _load(path)
+
+    def export(self, path, *, fps: float | None = USD_FPS, meters_per_unit: float = 1.0) -> None:
+        """A USD stage (.usda/.usdc): each object under /Scene an animated UsdGeom.Mesh (a template
+        with faces) or UsdGeom.Points, its points time-sampled every frame on a time line at `fps`
+        (None: 1 / dt), up axis z, metersPerUnit `meters_per_unit`, as flockkit.io.write_usd
+        writes motions. Needs usd-core."""
+        from pathlib import Path
+
+        if Path(path).suffix.lower() not in (".usda", ".usdc", ".usd"):
+            raise ValidationError(f"SceneAnimation.export writes .usda, .usdc or .usd; got {path}")
+        _export_usd(self, path, fps=fps, meters_per_unit=meters_per_unit)
+
+    def __eq__(self, other):
+        if not isinstance(other, SceneAnimation):
+            return NotImplemented
+        return (self.templates == other.templates and self.placement == other.placement and self.walks == other.walks
+                and self.dt == other.dt and self.n_frames == other.n_frames)  # fmt: skip
+
+    __hash__ = None
+
+    def in_step_share(self) -> float:
+        """The largest share of frames on which two neighbours play the same source frame at the
+        same time (in some part)."""
+        return largest_in_step(self.source_frames(), self.neighbours())
+
+
+def _constraint_json(constraint) -> dict:
+    def keyframes(pair):
+        times, vectors = pair
+        return [[float(t), [float(x) for x in v]] for t, v in zip(times, vectors)]
+
+    if isinstance(constraint, FlowField):
+        return {
+            "flow": [{"position": a.position.tolist(), "keyframes": keyframes(a.keyframes)} for a in constraint.arrows]
+        }
+    return {"object": constraint.object, "keyframes": keyframes(constraint.keyframes)}
+
+
+def _constraint_from_json(value):
+    if "flow" in value:
+        return FlowField(arrows=value["flow"])
+    return SelfMovement(object=value["object"], keyframes=value["keyframes"])
+
+
+def _save(animation: SceneAnimation, path) -> None:
+    arrays = {
+        "positions": animation.placement.positions,
+        "headings": animation.placement.headings,
+        "scales": animation.placement.scales,
+        "templates": animation.placement.templates,
+    }
+    views = [template_view(t) for t in animation.templates]
+    walks = [w for kind, walk in zip(animation.placement.templates, animation.walks)
+             for w in views[kind].part_walks(walk)]  # fmt: skip
+    arrays["walk_start"] = np.array([w.start for w in walks], dtype=np.int64)
+    arrays["walk_edges"] = np.array([len(w.edges) for w in walks], dtype=np.int64)
+    edges = [e for w in walks for e in w.edges]
+    arrays["edge_transition"] = np.array([kind == "transition" for kind, _ in edges], dtype=bool)
+    arrays["edge_index"] = np.array([index for _, index in edges], dtype=np.int64)
+    kinds, headers = [], []
+    for k, template in enumerate(animation.templates):
+        own, header = template._payload()
+        arrays.update({f"template{k}.{name}": array for name, array in own.items()})
+        kinds.append("layers" if views[k].layered else "graph")
+        headers.append(header)
+    metadata = {
+        "dt": animation.dt,
+        "n_frames": animation.n_frames,
+        "template_kinds": kinds,
+        "template_headers": headers,
+        "constraints": [_constraint_json(c) for c in animation.constraints],
+        "report": animation.report,
+        "region": None if animation.region is None else animation.region.vertices.tolist(),
+    }
+    _npzfile.write(path, kind="scene", version=SCENE_FORMAT_VERSION, arrays=arrays, metadata=metadata)
+
+
+def _load(path) -> SceneAnimation:
+    arrays, header = _npzfile.read(path, kind="scene", versions=(SCENE_FORMAT_VERSION,))
+    try:
+        templates = []
+        for k, (kind, own) in enumerate(zip(header["template_kinds"], header["template_headers"])):
+            prefix = f"template{k}."
+            payload = {name[len(prefix) :]: a for name, a in arrays.items() if name.startswith(prefix)}
+            templates.append((GraphLayers if kind == "layers" else MotionGraph)._from_payload(payload, own, path))
+        placement = Placement(positions=arrays["positions"], headings=arrays["headings"], scales=arrays["scales"],
+                              templates=arrays["templates"])  # fmt: skip
+        ends = np.cumsum(arrays["walk_edges"])
+        kinds = np.where(arrays["edge_transition"], "transition", "clip")
+        flat = [
+            Walk(
+                start=int(start),
+                edges=list(zip(kinds[end - n : end].tolist(), arrays["edge_index"][end - n : end].tolist())),
+            )
+            for start, n, end in zip(arrays["walk_start"], arrays["walk_edges"], ends)
+        ]
+        walks, at = [], 0
+        views = [template_view(t) for t in templates]
+        for kind in placement.templates:
+            parts = len(views[kind].graphs)
+            walks.append(views[kind].walk_of(flat[at : at + parts]))
+            at += parts
+        if at != len(flat):
+            raise ValidationError(f"{len(flat)} walks for {at} object parts")
+        return SceneAnimation(templates=templates, placement=placement, walks=walks, dt=header["dt"],
+                              n_frames=header["n_frames"], report=header.get("report", {}),
+                              region=None if header.get("region") is None else Polygon(vertices=header["region"]),
+                              constraints=[_constraint_from_json(c) for c in header["constraints"]])  # fmt: skip
+    except (KeyError, IndexError, TypeError, ValueError, ValidationError) as exc:
+        raise FileFormatError(f"{path}: invalid scene animation: {type(exc).__name__}: {exc}") from None
+
+
+def _export_usd(animation: SceneAnimation, path, *, fps, meters_per_unit) -> None:
+    """Each object an animated UsdGeom.Mesh (a template with faces) or UsdGeom.Points under
+    /Scene, on the stage flockkit.io writes motions on."""
+    from ..io.usd import write_meshes
+
+    width = len(str(animation.placement.n_objects))
+    objects = []
+    for i, motion in enumerate(animation.motions):
+        template = animation.templates[animation.placement.templates[i]]
+        faces = template_view(template).faces
+        objects.append((f"/Scene/Object{i:0{width}d}", motion.positions, faces,
+                        {"flockkit:template": int(animation.placement.templates[i])}))  # fmt: skip
+    write_meshes(path, objects, dt=animation.dt, n_frames=animation.n_frames, fps=fps,
+                 meters_per_unit=meters_per_unit)  # fmt: skip
