@@ -116,8 +116,8 @@ class Capabilities:
         (frame, agent, dimension)), for the pairs that matter (boids: every seen neighbor). Refine
         measures each agent's own derivatives by finite differences with every agent moved at once,
         which credits an agent with its neighbors' pull; with the coupling, its steps see how
-        neighbors push and pull each other (on obstacle-squeeze a refined start went from -45 to
-        about -20 log g_w per agent-step).
+        neighbors push and pull each other, and refined starts come much closer to the model's
+        own motion (bench/README.md).
     progress : bool
         Behavior (``forward`` and ``backward``) and builder (``build``): the operation takes
         ``progress``, a callable ``progress(done, total, stage)`` it calls as work completes

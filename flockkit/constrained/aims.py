@@ -1,4 +1,4 @@
-"""Where a solve meets each center-of-mass constraint: its aim (issue 18).
+"""Where a solve meets each center-of-mass constraint: its aim.
 
 A COM constraint is a Gaussian term of the objective (standard deviation ``Problem.sigma_com``,
 paper 004 section 3.4.1), and a solution meets it when its group's center lies within 3

@@ -6,9 +6,8 @@ points) and ``group_guide`` (for COMs), they are simulated again forward from th
 simulation's first frame: the point-constrained agents kept on their backward paths, each COM
 group steered along its backward path and then translated onto its center (one translation for
 the whole lead-in, which leaves the group's own motion as simulated). A backward simulation is
-not forward-plausible: on come-from-behind's COM constraints alone (seed 1), the initial
-trajectories' residuals |r|^2 / 2 averaged 31 per agent-frame over the first 16 frames, and 0.6
-forward (a free flock: 0.5). Then, window by window (see ``windows``):
+not forward-plausible (its residuals are tens of times a free flock's; a forward lead-in's are a
+free flock's, bench/README.md). Then, window by window (see ``windows``):
 
 1. simulate forward from the window's start state (Operation 1). A model that declares
    ``Capabilities(guide=True)`` simulates with the agents of spanning point sequences already on their B-spline paths,
@@ -59,8 +58,8 @@ _WARM_UP = 30
 # choice) take the closest pairs to about 0.7 of the mean spacing.
 _RELAXATION_STEPS = 5
 # Agents pushed out of obstacles: pushes spread over a Gaussian of this many seconds, _PUSHES times
-# (on obstacle-squeeze, seeds 1-6, the default solve's mean log g_w was -105.8 at 0.3 s, -102.3 at
-# 0.5 s, -99.1 at 0.8 s, within the seeds' spread; -181.6 without pushes).
+# (our choice: spreads from 0.3 to 0.8 s gave solves within one another's spread, and far better
+# than none; bench/README.md).
 _SPREAD = 0.5
 _PUSHES = 4
 
@@ -308,8 +307,7 @@ class _Initial:
         stop-1; the other frames, and the agents of point and shape constraints at theirs, are
         held. The simulations avoid obstacles, but blending them and moving groups onto their
         paths can carry agents into one, where the model's avoidance is at its strongest and each
-        agent-frame costs thousands in log g (obstacle-squeeze's initial trajectories, seed 1:
-        -3 488 per agent-step before, -486 with this)."""
+        agent-frame costs thousands in log g."""
         if not self.problem.obstacles or self.problem.clearance <= 0:
             return motion
         # only frames start..stop take part: the frames beyond are held, and their zero pushes
@@ -430,8 +428,7 @@ class _Initial:
         placed = rigid.apply(rotation, translation, snapshot[free])
         slots, slot_velocities = placed, rigid.rotate(rotation, velocities[free])
         # the mean velocity too, not only its direction: a flock placed at the snapshot's speed
-        # where its path asks 1.3 m/s spent the next window catching up (on a straight COM path at
-        # 1.3 m/s, 20 agents: log g_w -45.8 -> -30.5)
+        # where its path asks for another spends the next window catching up
         slot_velocities = slot_velocities - slot_velocities.mean(axis=0) + constraint.velocity
         if isinstance(constraint, ShapeConstraint):
             slots = _fill(constraint.shape, len(free), self.rng)

@@ -1,4 +1,4 @@
-"""Model-like solutions: least squares on the behavior model's residuals (issue 18).
+"""Model-like solutions: least squares on the behavior model's residuals.
 
 Paper 004's sampler starts from initial trajectories that meet the constraints but whose inferred
 random choices (for boids, wander impulses) are hundreds of times too large, and its local moves
@@ -21,9 +21,8 @@ neighbors' positions (cohesion, alignment, separation). A model declaring
 ``Capabilities(coupling=True)`` gives those derivatives (``plausibility_coupling``); they are then
 put where they belong and taken off the agent's own block, so the Jacobian is exact, where the
 normal equations, which then join every agent of a frame to its neighbors, are affordable to
-solve (COUPLING_BUDGET; a banded Cholesky factor, see ``_step``). On
-obstacle-squeeze (seeds 1-10, 40 steps) that took refined starts from a mean log g_w per
-agent-step of -57.4 to -50.1, on looping-3d (seeds 1-3) from -115.7 to -109.6.
+solve (COUPLING_BUDGET; a banded Cholesky factor, see ``_step``). bench/README.md records what
+each refinement gains on the example scenarios.
 """
 
 from __future__ import annotations
@@ -45,10 +44,9 @@ LIKELY = 3.0  # residual lengths (in standard deviations) kept as their own targ
 BOUNDARY = 0.05  # agents this close to their shape's boundary move along it, not across
 # The model's coupling (Capabilities.coupling) joins every agent of a frame to its neighbors, so
 # each step factors a band of about 4 N D (four frames of agents) over all T N D positions: about
-# T N D (4 N D)^2 operations. Above this many, steps go without it. Measured (40 steps, 2 cores):
-# obstacle-squeeze (20 agents, 2D, 51 frames, 5e7) 0.5 -> 3.8 s for a refined log g_w of -33.0 ->
-# -19.7 per agent-step (seeds 1-3); arrows (50 agents, 121 frames, 1.9e9) 3.9 -> 36 s for -387 ->
-# -376.
+# T N D (4 N D)^2 operations. Above this many, steps go without it: the scenarios measured in
+# bench/README.md gain much from it at 5e7 (obstacle-squeeze) and little at 1.9e9 (arrows), for
+# nine times the time.
 COUPLING_BUDGET = 3e8
 _STEP = 1e-6  # finite-difference step, in the motion's length units
 

@@ -193,14 +193,10 @@ def track_path(times, positions):
     bends least): the path the initial trajectories follow, and whose derivative gives a track's
     missing velocities.
 
-    Natural, not scipy's default not-a-knot ends: those bent one-agent's S hardest at its ends, so
-    its agent met its first keyframe at 1.46 m/s heading 47 degrees (natural: 1.17 m/s, 31
-    degrees) and paid for it in every frame before. Alone on the S, as regular as least squares
-    make it, the agent paid 22.05 a frame, 11.89 on the natural path; default solves (seeds 1-3,
-    log g_w per agent-step, nothing else changed) went -7.25, -5.05, -5.96 -> -1.22, -1.21, -0.42
-    on one-agent and -107.0, -107.2, -108.6 -> -100.4, -102.1, -108.3 on looping-3d. Through
-    three, the natural cubic did no better than the quadratic (obstacle-squeeze -4.12, -13.66,
-    -4.00 against -3.13, -12.63, -4.37)."""
+    Natural, not scipy's default not-a-knot ends: those bend a path hardest at its ends, so an
+    agent meets its first keyframe faster and more turned than it need, and pays for it in every
+    frame before (bench/README.md compares the two on the example scenarios). Through three
+    positions, the natural cubic does no better than the quadratic."""
     from scipy.interpolate import make_interp_spline
 
     k = min(3, len(times) - 1)

@@ -1,4 +1,4 @@
-"""What the model's agents do unconstrained, and the constraints that ask for more (issue 18).
+"""What the model's agents do unconstrained, and the constraints that ask for more.
 
 ``solve`` simulates a random flock of the problem's size with the behavior model, unconstrained and
 out of reach of the problem's obstacles, and reads two things from it:
@@ -35,10 +35,9 @@ from ..motion import Motion, State, random_flock
 from .problem import ComConstraint, Problem, ShapeConstraint
 
 # A constraint asking for more than this many times the model's 99th percentile of speed, or of a
-# track's turn, is one no model-like motion meets. Turns are told apart less sharply (seeds 1-10):
-# one-agent's S at half its height (0.1 length units per second squared over 4 s, 1.5-1.7 times
-# the 99th percentile of boids) is met at log g_w +0.14 to +0.39 per agent-step, and the S itself
-# (0.2, 2.9-3.5 times) costs its agent 12 a frame even alone, against -0.66 unconstrained.
+# track's turn, is one no model-like motion meets. Turns are told apart less sharply: one-agent's
+# S at half its height (about 1.6 times the 99th percentile) is met as the model moves, the S
+# itself (about 3 times) costs its agent dearly even alone (bench/README.md).
 IMPLAUSIBLE = 1.5
 IMPLAUSIBLE_TURN = 2.5
 # Steps a random flock takes to gather (3 s at 10 Hz) before it is measured, and the steps whose
@@ -72,10 +71,8 @@ def unconstrained(problem: Problem, model, seed) -> Motion:
 
 def _open_space(problem: Problem, flock: State, steps: int) -> State:
     """`flock` moved beyond the problem's obstacles by more than it can travel in `steps`: the model
-    (made with the problem's obstacles) avoids them, and a flock started among them measured the
-    speeds of its avoidance (obstacle-squeeze, seed 6: a 90th percentile of 1.25 where boids cruise
-    at 1.0-1.1, so that its COM track was aimed at 1.25 m/s and its refined start ended at -32.8 log
-    g_w per agent-step; aimed from open space, at 1.16 m/s, -13.6)."""
+    (made with the problem's obstacles) avoids them, and a flock started among them would measure
+    the speeds of its avoidance, faster than the model's cruise, and aim the COM tracks too fast."""
     if not problem.obstacles:
         return flock
     corner = np.max([obstacle.bounds()[1] for obstacle in problem.obstacles], axis=0)

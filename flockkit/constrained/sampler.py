@@ -38,10 +38,8 @@ from .reach import shapes_apart, speeds, unconstrained, warn_beyond
 from .windows import windows
 
 # Paper 004 draws velocity (re-timing) moves with weight 0.3. Accepted most often (a quarter of
-# tries), they leave the free agents' impulses a little larger than a forward simulation's: on
-# one-agent (seeds 1-10) the KS test of them rejected at 1% on 2 seeds at 0.3 and on none at 0.1
-# (log g_w per agent-step, mean -1.43 -> -1.15; obstacle-squeeze seeds 1-3 -3.2, -12.7, -4.4 ->
-# -4.1, -12.8, -4.8; the other shipped scenarios within 1.5 either way).
+# tries), they leave the free agents' impulses a little larger than a forward simulation's; at 0.1
+# they do not, and the shipped scenarios' log g stays within their spread (bench/README.md).
 DEFAULT_PROPOSALS = {"bump": 0.6, "velocity": 0.1, "regenerate": 0.1}
 DEFAULT_OBJECTIVES = ("com", "shape", "flocks")
 
@@ -305,15 +303,11 @@ def solve(
         Initial trajectories drawn per chain; the chain refines and samples the one whose
         uncoupled (cheap) refine steps reach the highest log g among those meeting the
         constraints: SCREEN_STEPS of them, or with more than SURVIVORS draws FIRST_STEPS for each
-        and SCREEN_STEPS for the SURVIVORS best (none without `refine`). Draws differ much: on
-        obstacle-squeeze, seeds 1-10, one refined start's log g_w per agent-step ranged from -187
-        to -13, and the best of 5 averaged -19 against -50. But the best start is often one
-        where agents no constraint holds take on part of the constrained agents' cost: on
-        one-agent (seeds 1-5; before track paths were natural cubics and refine held those
-        agents) the best of 5 raised log g_w per agent-step from -5.0..-7.3 to -2.6..-6.1, and
-        the free agents' impulses were then larger than a free flock's (median 0.11 against
-        0.086; KS p < 0.005 on every seed). So the default is 1; obstacle-squeeze and arrows,
-        whose every agent is in a constrained group, ask for 120 and 5 (bench/README.md).
+        and SCREEN_STEPS for the SURVIVORS best (none without `refine`). Draws differ much, but
+        the best start is often one where agents no constraint holds take on part of the
+        constrained agents' cost, which leaves their motion unlike a free flock's. So the default
+        is 1; obstacle-squeeze and arrows, whose every agent is in a constrained group, ask for
+        120 and 5 (bench/README.md has the figures).
     stable : float, optional
         Stop a chain early once its running mean of log g stabilizes: the mean over the last 100
         iterations within this fraction of the mean over the 100 before.
@@ -466,10 +460,8 @@ def _chain(problem, aims, behavior, moves, terms, iterations, refine, starts, st
 # Ranking a chain's starts by uncoupled refine steps (cheap): with more draws than SURVIVORS,
 # every draw is scored after FIRST_STEPS (towards the most regular motion, sample=False) and the
 # SURVIVORS best of them again after SCREEN_STEPS; with fewer, every draw after SCREEN_STEPS.
-# The draws differ more than steps tell them apart: on obstacle-squeeze (seeds 1-24, default
-# solves, log g_w per agent-step) 20 draws ranked after 10 steps gave a mean of -12.0, 120 after
-# 1 step -8.3, and 120 after 1 step whose best 10 were ranked again after 10 steps -6.8
-# (bench/README.md).
+# The draws differ more than steps tell them apart, so many draws ranked cheaply, then the best
+# few ranked again, beat few draws ranked carefully (bench/README.md, obstacle-squeeze).
 FIRST_STEPS = 1
 SCREEN_STEPS = 10
 SURVIVORS = 10
@@ -483,8 +475,7 @@ def _start(problem, aims, behavior, terms, refine, starts, rng) -> Motion:
     refines = bool(refine) and capabilities(behavior).residuals
     pinned, scorer = pinned_frames(aims), Scorer(problem, behavior, terms)
     # refine leaves the agents of no constraint as simulated: least squares on the total let them
-    # carry part of the constrained agents' cost (one-agent, seed 8: log g_w -3.79 and a KS p of
-    # 1e-35 for their impulses; held: -1.08 and 0.64)
+    # carry part of the constrained agents' cost, and their impulses stop looking like a free flock's
     constrained = set().union(*(problem.agents_of(c) for c in problem.constraints))
     pinned[:, [a for a in range(problem.n_agents) if a not in constrained]] = True
 

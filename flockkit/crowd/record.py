@@ -1,6 +1,6 @@
-"""A crowd run kept frame by frame, and its export for animation tools (issue 17, part 1): per
-agent, its root transform and its cluster's local joint poses, written to USD as one UsdSkel
-skeleton and animation per agent (for small crowds; instancing shared streams is still to come).
+"""A crowd run kept frame by frame, and its export for animation tools: per agent, its root
+transform and its cluster's local joint poses, written to USD as one UsdSkel skeleton and
+animation per agent (for small crowds: shared streams are not instanced).
 """
 
 from __future__ import annotations
