@@ -1,5 +1,6 @@
-"""The documentation: every Python example runs, and every hook and kind is documented."""
+"""The documentation: every code block runs as written, and every hook, kind and public name is documented."""
 
+import os
 import re
 from pathlib import Path
 
@@ -13,14 +14,32 @@ ROOT = Path(__file__).resolve().parents[1]
 PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
 
 
+def blocks(path) -> list[tuple[str, str]]:
+    """(language, text) of every fenced code block of a page, in order."""
+    return re.findall(r"^```(\w*)\n(.*?)^```", path.read_text(), flags=re.S | re.M)
+
+
 def python_blocks(path):
-    return re.findall(r"```python\n(.*?)```", path.read_text(), flags=re.S)
+    return [text for language, text in blocks(path) if language == "python"]
 
 
-@pytest.mark.parametrize("page", [p for p in PAGES if python_blocks(p)], ids=lambda p: str(p.relative_to(ROOT)))
-def test_examples_run(page, tmp_path, monkeypatch):
-    """Each page's examples, run in a fresh folder that has the shared data beside it, as a
+# How each kind of block is run, exactly as written: Python in one namespace per page; shell lines
+# in the page's folder after the Python before them (`flockkit demo` runs in tests/cli, the install
+# commands in CI, which .ci/run must run verbatim); TOML parsed. Text blocks are usage synopses,
+# outputs, and commands for another machine (a cluster, Blender's console): never run.
+RUN = {"python", "bash", "toml"}
+INSTALL = re.compile(r"^(python3 -m )?pip install ")
+
+
+@pytest.mark.parametrize("page", [p for p in PAGES if any(lang in RUN for lang, _ in blocks(p))],
+                         ids=lambda p: str(p.relative_to(ROOT)))  # fmt: skip
+def test_every_code_block_runs_as_written(page, tmp_path, monkeypatch):
+    """Each page's blocks, in order, in a fresh folder that has the shared data beside it, as a
     checkout does (examples that read ../shared/data need it)."""
+    import subprocess
+    import sys
+    import tomllib
+
     from .conftest import SHARED_DATA, require_folder
 
     work = tmp_path / "work"
@@ -29,11 +48,40 @@ def test_examples_run(page, tmp_path, monkeypatch):
         (tmp_path / "shared").symlink_to(require_folder(SHARED_DATA).parent, target_is_directory=True)
     monkeypatch.chdir(work)
     namespace = {"__name__": "docs_example"}
+    ci = (ROOT / ".ci" / "run").read_text()
+    scripts = Path(sys.executable).parent  # the flockkit command of this environment
     try:
-        for block in python_blocks(page):  # blocks of one page share a namespace, as a reader's session would
-            exec(compile(block, str(page), "exec"), namespace)
+        for language, text in blocks(page):
+            if language == "python":
+                exec(compile(text, str(page), "exec"), namespace)
+            elif language == "toml":
+                tomllib.loads(text)
+            elif language == "bash":
+                for line in (line.strip() for line in text.splitlines()):
+                    if not line or line.startswith("#") or line.startswith("flockkit demo"):
+                        continue
+                    if INSTALL.match(line):
+                        command = line.split(" && ")
+                        tested = command[-1] == "python3 -m pytest" and " && ".join(command) in ci
+                        assert tested or command[-1] in ("flockkit demo", "") or len(command) == 1, line
+                        continue
+                    done = subprocess.run(line, shell=True, cwd=work, capture_output=True, text=True,
+                                          env={**os.environ, "PATH": f"{scripts}:{os.environ['PATH']}"})  # fmt: skip
+                    assert done.returncode == 0, f"{page.name}: {line}: {done.stderr[-500:]}"
     finally:
         registry.reset()
+
+
+def test_text_blocks_hold_no_code_to_run():
+    """A block marked text is a synopsis, an output, or a command for another machine; code for
+    this one is marked python or bash, and runs."""
+    for page in PAGES:
+        for language, text in blocks(page):
+            if language in ("text", ""):
+                first = text.strip().splitlines()[0] if text.strip() else ""
+                assert (
+                    not first.startswith(("import ", "from ", "python3 ", "pip ")) or "bpy" in text
+                ), f"{page.name}: a text block that is code: {first}"
 
 
 @pytest.mark.parametrize("kind", list(KINDS))

@@ -359,7 +359,8 @@ def _cmd_demo(args) -> int:
     summary = run_demo(args.output, data=args.data, progress=shows_progress(args))
     graph = summary["graph"]
     print(
-        f"graph: {graph['nodes']} nodes, {graph['transitions']} transitions; come-from-behind: largest residual "
+        f"graph: {graph['nodes']} nodes, {graph['transitions']} transitions ({graph['turns']} of them turns); "
+        f"come-from-behind: largest residual "
         f"{max(summary['come-from-behind']['residuals']):.3g}; sticklebacks: "
         f"{'built' if isinstance(summary['sticklebacks'], dict) else summary['sticklebacks']}"
     )

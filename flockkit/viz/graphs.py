@@ -87,7 +87,12 @@ def plot_graph(graph, path=None):
     entries = [
         Line2D([], [], linestyle="", marker="o", markersize=4, color="black", label=f"node ({stats['nodes']})"),
         Line2D([], [], color="0.5", label=f"clip: plays the recording ({stats['clips']})"),
-        Line2D([], [], color=cmap(0.5), label=f"transition, coloured by cost ({len(matched)})"),
+        Line2D(
+            [],
+            [],
+            color=cmap(0.5),
+            label=f"matched transition, coloured by cost ({len(matched)} of {stats['transitions']} transitions)",
+        ),  # fmt: skip
     ]
     if turning:
         about = f" of \u00b1{angle:g}\u00b0" if isinstance(angle, (int, float)) else ""

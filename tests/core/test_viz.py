@@ -140,7 +140,9 @@ def test_the_graph_picture_keys_its_colours_and_turns():
     graph = flockkit.build_graph(flockkit.simulate(n_agents=6, steps=200, seed=2))
     figure = viz.plot_graph(graph)
     labels = _legend_labels(figure)
-    assert any(label.startswith("transition, coloured by cost") for label in labels)
+    stats = graph.stats()
+    matched = stats["transitions"] - stats["turns"]
+    assert f"matched transition, coloured by cost ({matched} of {stats['transitions']} transitions)" in labels
     assert any("node with turns of \u00b115\u00b0" in label for label in labels)
     assert any(ax.get_ylabel() == "transition cost E" for ax in figure.axes)  # the colour bar
 
