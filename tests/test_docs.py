@@ -79,9 +79,9 @@ def test_text_blocks_hold_no_code_to_run():
         for language, text in blocks(page):
             if language in ("text", ""):
                 first = text.strip().splitlines()[0] if text.strip() else ""
-                assert (
-                    not first.startswith(("import ", "from ", "python3 ", "pip ")) or "bpy" in text
-                ), f"{page.name}: a text block that is code: {first}"
+                assert not first.startswith(("import ", "from ", "python3 ", "pip ")) or "bpy" in text, (
+                    f"{page.name}: a text block that is code: {first}"
+                )
 
 
 @pytest.mark.parametrize("kind", list(KINDS))
