@@ -20,7 +20,7 @@ import time
 import numpy as np
 
 import flockkit
-from flockkit.crowd import Crowd, Cue, Driver, State, StateMachine, Stream, StreamPool, ground_speed
+from flockkit.crowd import Crowd, Cue, Driver, Gait, StateMachine, Stream, StreamPool, ground_speed
 from flockkit.testing import inputs
 
 
@@ -43,8 +43,8 @@ def main():
     streams = [Stream(controller=play(rate=0.1), history=60, name="idle")]
     streams += [Stream(controller=play(rate=r), history=60, name=f"walk x{r}") for r in rates]
     streams.append(Stream(controller=play(rate=2.5), history=90, default="Stopped", name="cheer"))
-    walking = State(name="walk", streams=[1, 2, 3], speeds=[natural * r for r in rates], low=0.2)
-    machine = StateMachine([State(name="idle", streams=0, high=0.2), walking])
+    walking = Gait(name="walk", streams=[1, 2, 3], speeds=[natural * r for r in rates], low=0.2)
+    machine = StateMachine([Gait(name="idle", streams=0, high=0.2), walking])
     cue = Cue(time=args.seconds / 2, agents=np.arange(0, n, 2), stream=4, duration=4.0, time_to_dilate=2.0, name="goal")
 
     begin = time.perf_counter()

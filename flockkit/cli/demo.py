@@ -265,7 +265,7 @@ FOX_FEET = [foot for _, _, foot in FOX_LEGS]
 def _foxes(tour: _Tour, folder: Path) -> dict:
     """Paper 003 driven by paper 004's model: a few thousand Foxes follow a boids flock."""
     from .. import viz
-    from ..crowd import Crowd, Cue, Driver, State, StateMachine, Stream, StreamPool, ground_speed, plant_feet, record
+    from ..crowd import Crowd, Cue, Driver, Gait, StateMachine, Stream, StreamPool, ground_speed, plant_feet, record
     from ..io import read_clips
     from ..registry import get
 
@@ -280,8 +280,8 @@ def _foxes(tour: _Tour, folder: Path) -> dict:
                 for r in rates]  # fmt: skip
     streams.append(Stream(controller=get("controller", "clip", clip=clips["Run"]), history=48, default="Stopped",
                           name="run"))  # fmt: skip
-    walking = State(name="walk", streams=[1, 2, 3], speeds=[natural * r for r in rates], low=0.2)
-    machine = StateMachine([State(name="idle", streams=0, high=0.2), walking])
+    walking = Gait(name="walk", streams=[1, 2, 3], speeds=[natural * r for r in rates], low=0.2)
+    machine = StateMachine([Gait(name="idle", streams=0, high=0.2), walking])
     runners = np.arange(0, n, 2)
     cue = Cue(time=4.0, agents=runners, stream=4, duration=3.0, time_to_dilate=2.0, name="run")
     with tour.step("2 000 Foxes driven by a boids flock for 10 s"):

@@ -1,7 +1,7 @@
 """Massive crowds (paper 003): skeletons and clips, shared streams of poses, the crowd runtime."""
 
 from ..skeleton import Event, Pose, SkeletalClip, Skeleton, stream_times
-from .drive import Cue, Driver, State, StateMachine
+from .drive import Cue, Driver, Gait, StateMachine
 from .feet import driven_sliding, foot_sliding, ground_speed, plant_feet
 from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
 from .record import CrowdRecording, record, write_engine_buffers
@@ -21,7 +21,7 @@ __all__ = [
     "Crowd",
     "CrowdEvent",
     "INSTANCE",
-    "State",
+    "Gait",
     "StateMachine",
     "Cue",
     "CrowdRecording",

@@ -21,7 +21,7 @@ from ..errors import ValidationError
 from ..motion import Motion
 from .runtime import Crowd
 
-__all__ = ["State", "StateMachine", "Cue", "Driver", "character_frame", "AXES"]
+__all__ = ["Gait", "StateMachine", "Cue", "Driver", "character_frame", "AXES"]
 
 AXES = {"x": 0, "y": 1, "z": 2}
 
@@ -34,13 +34,14 @@ CLIP_CONTROLLER = "clip"
 def _streams(value) -> tuple:
     streams = tuple(int(v) for v in np.atleast_1d(np.asarray(value)))
     if not streams:
-        raise ValidationError("State.streams must name at least one stream")
+        raise ValidationError("Gait.streams must name at least one stream")
     return streams
 
 
 @attrs.frozen(kw_only=True)
-class State:
-    """A state of the speed machine: the agent speeds it covers, [low, high), and its streams.
+class Gait:
+    """A gait: a state of the speed machine (idle, walk, run), the agent speeds it covers, [low, high),
+    and its streams.
 
     Parameters
     ----------
@@ -63,7 +64,7 @@ class State:
 
     def __attrs_post_init__(self):
         if not isinstance(self.name, str) or not self.name:
-            raise ValidationError(f"State.name must be a non-empty string; got {self.name!r}")
+            raise ValidationError(f"Gait.name must be a non-empty string; got {self.name!r}")
         if not self.low < self.high:
             raise ValidationError(f"state {self.name!r}: needs low < high; got low {self.low}, high {self.high}")
         if self.speeds is not None and len(self.speeds) != len(self.streams):
@@ -83,8 +84,8 @@ class StateMachine:
             raise ValidationError(f"StateMachine on must be 'speed' or 'climb'; got {on!r}")
         self.on = on
         self.states = tuple(sorted(states, key=lambda s: s.low))
-        if not self.states or not all(isinstance(s, State) for s in self.states):
-            raise ValidationError("StateMachine needs a non-empty sequence of flockkit.crowd.State")
+        if not self.states or not all(isinstance(s, Gait) for s in self.states):
+            raise ValidationError("StateMachine needs a non-empty sequence of flockkit.crowd.Gait")
         names = [s.name for s in self.states]
         if len(set(names)) != len(names):
             raise ValidationError(f"StateMachine: state names repeat: {names}")

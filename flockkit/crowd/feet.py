@@ -60,7 +60,7 @@ def driven_sliding(motion, walk: SkeletalClip, idle: SkeletalClip, feet, rates, 
     `fps` (default the motion's). `controller` plays a clip (a name or factory taking clip= and
     rate=)."""
     from ..registry import require, resolve
-    from .drive import Driver, State, StateMachine
+    from .drive import Driver, Gait, StateMachine
     from .pool import Stream, StreamPool
     from .runtime import Crowd
 
@@ -70,9 +70,9 @@ def driven_sliding(motion, walk: SkeletalClip, idle: SkeletalClip, feet, rates, 
     streams = [Stream(controller=resolve("controller", controller, clip=clip, rate=r), history=40)
                for clip, r in [(idle, 1.0), *((walk, r) for r in rates)]]  # fmt: skip
     crowd = Crowd(StreamPool(streams, fps=fps), n_agents=motion.n_agents, clusters={"body": 1}, seed=0)
-    walking = State(name="walk", streams=list(range(1, len(rates) + 1)), speeds=[natural * r for r in rates],
+    walking = Gait(name="walk", streams=list(range(1, len(rates) + 1)), speeds=[natural * r for r in rates],
                     low=idle_below)  # fmt: skip
-    machine = StateMachine([State(name="idle", streams=0, high=idle_below), walking])
+    machine = StateMachine([Gait(name="idle", streams=0, high=idle_below), walking])
     driver = Driver(crowd, motion, machine, up=up, forward=forward, scale=scale)
     joints = []
     for _ in range(int(round(motion.duration * fps))):

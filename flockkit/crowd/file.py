@@ -54,7 +54,7 @@ from ..io import read_clips
 from ..motion import Motion, random_flock
 from ..registry import get, require, require_dims, resolve
 from ..validate import allocation
-from .drive import CLIP_CONTROLLER, Cue, Driver, State, StateMachine
+from .drive import CLIP_CONTROLLER, Cue, Driver, Gait, StateMachine
 from .feet import ground_speed, plant_feet
 from .pool import Stream, StreamPool
 from .runtime import Crowd
@@ -203,9 +203,7 @@ def read_crowd_scene(path, *, allow_outside: bool = False) -> CrowdScene:
                 speeds = [ground_speed(clips[rates[i][0]], character["feet"], up=up, forward=forward, scale=scale)
                           * rates[i][1] for i in ids]  # fmt: skip
             low = spec.get("low", bottom)
-            states.append(
-                State(name=spec["name"], streams=ids, speeds=speeds, low=low, high=spec.get("high", math.inf))
-            )
+            states.append(Gait(name=spec["name"], streams=ids, speeds=speeds, low=low, high=spec.get("high", math.inf)))
         machine = StateMachine(
             states, **_table(data, "machine", {"on", "hysteresis", "blend_time"}, set(), "[machine]")
         )

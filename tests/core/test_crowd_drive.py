@@ -10,7 +10,7 @@ import pytest
 
 import flockkit
 from flockkit.crowd import Crowd, Stream, StreamPool
-from flockkit.crowd.drive import Driver, State, StateMachine, character_frame
+from flockkit.crowd.drive import Driver, Gait, StateMachine, character_frame
 from flockkit.errors import ValidationError
 from flockkit.testing import inputs
 
@@ -19,7 +19,7 @@ WALKER = inputs.walker()
 
 def machine(**params):
     return StateMachine(
-        [State(name="idle", streams=0, high=0.3), State(name="walk", streams=[1, 2], speeds=[0.8, 1.4], low=0.3)],
+        [Gait(name="idle", streams=0, high=0.3), Gait(name="walk", streams=[1, 2], speeds=[0.8, 1.4], low=0.3)],
         **params,
     )
 
@@ -37,16 +37,16 @@ def test_the_state_machine_tiles_speeds_and_holds_near_thresholds():
     # near the threshold an agent keeps its state until it is 0.05 past it
     np.testing.assert_array_equal(m.choose(np.array([0.33, 0.33, 0.27, 0.24]), np.array([0, 0, 1, 1])), [0, 0, 1, 0])
     for states, message in [
-        ([State(name="a", streams=0, low=0.1)], "below 0.1"),
-        ([State(name="a", streams=0, high=1.0), State(name="b", streams=1, low=0.5)], "overlap"),
-        ([State(name="a", streams=0, high=1.0), State(name="b", streams=1, low=2.0)], "1.0..2.0"),
-        ([State(name="a", streams=0, high=1.0)], "above 1.0"),
-        ([State(name="a", streams=0, high=1.0), State(name="a", streams=1, low=1.0)], "repeat"),
+        ([Gait(name="a", streams=0, low=0.1)], "below 0.1"),
+        ([Gait(name="a", streams=0, high=1.0), Gait(name="b", streams=1, low=0.5)], "overlap"),
+        ([Gait(name="a", streams=0, high=1.0), Gait(name="b", streams=1, low=2.0)], "1.0..2.0"),
+        ([Gait(name="a", streams=0, high=1.0)], "above 1.0"),
+        ([Gait(name="a", streams=0, high=1.0), Gait(name="a", streams=1, low=1.0)], "repeat"),
     ]:
         with pytest.raises(ValidationError, match=message):
             StateMachine(states)
     with pytest.raises(ValidationError, match="2 speeds for 1 streams"):
-        State(name="walk", streams=1, speeds=[1.0, 2.0])
+        Gait(name="walk", streams=1, speeds=[1.0, 2.0])
 
 
 def test_roots_follow_the_trajectories_and_face_their_velocity():
@@ -94,9 +94,7 @@ def test_driving_refuses_what_does_not_fit():
         Driver(crowd, short, machine())
     motion = flockkit.Motion(positions=np.zeros((5, 4, 2)), dt=0.1)
     with pytest.raises(ValidationError, match="state 'walk' names stream 7"):
-        Driver(
-            crowd, motion, StateMachine([State(name="idle", streams=0, high=1), State(name="walk", streams=7, low=1)])
-        )
+        Driver(crowd, motion, StateMachine([Gait(name="idle", streams=0, high=1), Gait(name="walk", streams=7, low=1)]))
     with pytest.raises(ValidationError, match="different axes"):
         character_frame("y", "y")
 
@@ -279,7 +277,7 @@ def test_a_sky_of_flocks_flaps_on_the_climbs_and_glides_on_the_descents():
     )
     crowd = Crowd(pool, n_agents=sky.n_agents, clusters={"body": 0}, seed=2)
     wings = StateMachine(
-        [State(name="glide", streams=1, low=-math.inf, high=0.02), State(name="flap", streams=0, low=0.02)],
+        [Gait(name="glide", streams=1, low=-math.inf, high=0.02), Gait(name="flap", streams=0, low=0.02)],
         on="climb",
         hysteresis=0.01,
     )
@@ -292,4 +290,4 @@ def test_a_sky_of_flocks_flaps_on_the_climbs_and_glides_on_the_descents():
     assert len(pool.streams) == 2 and {0, 1} <= set(driver.stream.tolist())
     assert crowd.synchrony("body") < 0.2  # birds on one stream differ by their offsets
     with pytest.raises(ValidationError, match="on must be 'speed' or 'climb'"):
-        StateMachine([State(name="all", streams=0)], on="height")
+        StateMachine([Gait(name="all", streams=0)], on="height")
