@@ -142,21 +142,21 @@ def _plain(params: dict) -> dict:
 def walk(graph, *, strategy="random", duration: float | None = None, seed: int | None = None, **params):
     """A walk through `graph` with a walk strategy (an installed name with `params`: ``random``,
     ``region`` with ``region=``; or an instance) covering `duration` seconds (default: the length
-    of the graph's source motion): ``flockkit.graphs.walk``. On ``flockkit.GraphLayers`` every part
+    of the graph's source motion): ``flockkit.graphs.walk_graph``. On ``flockkit.GraphLayers`` every part
     is walked on its own, each with its own stream of random numbers from `seed`, giving a
     ``flockkit.LayeredWalk`` (``flockkit.scene.walk_layers``)."""
     if isinstance(graph, GraphLayers):
         return walk_layers(graph, strategy=strategy, duration=duration, seed=seed, **params)
-    return graphs.walk(graph, strategy=strategy, duration=duration, seed=seed, **params)
+    return graphs.walk_graph(graph, strategy=strategy, duration=duration, seed=seed, **params)
 
 
 def synthesize(graph, walk) -> Motion:
-    """The motion of `walk` through `graph` (``flockkit.graphs.synthesize``); on
+    """The motion of `walk` through `graph` (``flockkit.graphs.synthesize_graph``); on
     ``flockkit.GraphLayers`` with a ``LayeredWalk``, the whole object from its parts' walks, the
     seams between parts of a mesh smoothed (``flockkit.scene.synthesize_layers``)."""
     if isinstance(graph, GraphLayers):
         return synthesize_layers(graph, walk)
-    return graphs.synthesize(graph, walk)
+    return graphs.synthesize_graph(graph, walk)
 
 
 def segment(source, *, segmenter="ica-kmeans", seed: int | None = None, **params) -> Segmentation:

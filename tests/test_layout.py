@@ -137,3 +137,23 @@ def test_plugins_use_public_names_only():
 def test_the_top_level_lists_the_four_systems_over_one_core():
     folders = sorted(p.name for p in LIBRARY.iterdir() if p.is_dir() and (p / "__init__.py").exists())
     assert {"graphs", "constrained", "scene", "crowd", "io"} <= set(folders)
+
+
+def test_one_public_name_one_thing():
+    """A name exported by two public modules is the same object in both, and no name of the
+    package shadows a subpackage."""
+    import importlib
+
+    modules = [m for m in _modules() if not any(part.startswith("_") for part in m.split("."))]
+    seen: dict[str, dict] = {}
+    for name in modules:
+        module = importlib.import_module(name)
+        for exported in getattr(module, "__all__", []):
+            seen.setdefault(exported, {})[name] = getattr(module, exported)
+    clashes = {n: sorted(where) for n, where in seen.items() if len({id(o) for o in where.values()}) > 1}
+    assert clashes == {}
+    import flockkit
+
+    for exported in flockkit.__all__:
+        if f"flockkit.{exported}" in _modules():
+            assert getattr(flockkit, exported) is importlib.import_module(f"flockkit.{exported}")

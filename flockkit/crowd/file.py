@@ -107,7 +107,7 @@ def _table(data, key: str, keys: set, required: set, where: str) -> dict:
 
 
 def _trajectories(path: Path, entry: dict, fps: float, seconds: float, inside) -> Motion:
-    from ..graphs import MotionGraph, synthesize_many, walk
+    from ..graphs import MotionGraph, synthesize_many, walk_graph
 
     sources = [k for k in ("simulate", "motion", "walk") if k in entry]
     if len(sources) != 1:
@@ -128,7 +128,7 @@ def _trajectories(path: Path, entry: dict, fps: float, seconds: float, inside) -
     spec = _table(entry, "walk", {"graph", "flocks", "seed"}, {"graph", "flocks"}, "[trajectories] walk")
     graph = MotionGraph.load(inside(spec["graph"], "trajectories.walk.graph"))
     seed = spec.get("seed", 0)
-    return synthesize_many(graph, [walk(graph, duration=seconds, seed=seed + k) for k in range(spec["flocks"])])
+    return synthesize_many(graph, [walk_graph(graph, duration=seconds, seed=seed + k) for k in range(spec["flocks"])])
 
 
 def read_crowd_scene(path, *, allow_outside: bool = False) -> CrowdScene:

@@ -2,8 +2,8 @@
 (one graph, or the graphs of an object's parts), and synthesis of new motion from walks."""
 
 from .graph import Clip, MotionGraph, Transition, Walk, local_minima, local_minima_of_cells, turns
-from .synthesis import blended_frames, played_frames, played_length, played_positions, synthesize, synthesize_many
-from .walking import part_seeds, walk, walk_parts
+from .synthesis import blended_frames, played_frames, played_length, played_positions, synthesize_graph, synthesize_many
+from .walking import part_seeds, walk_graph, walk_parts
 
 __all__ = [
     "MotionGraph",
@@ -13,10 +13,10 @@ __all__ = [
     "turns",
     "local_minima",
     "local_minima_of_cells",
-    "walk",
+    "walk_graph",
     "walk_parts",
     "part_seeds",
-    "synthesize",
+    "synthesize_graph",
     "synthesize_many",
     "played_positions",
     "played_length",

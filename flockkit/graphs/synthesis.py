@@ -22,7 +22,14 @@ from ..errors import ValidationError
 from ..motion import Motion
 from .graph import MotionGraph, Walk
 
-__all__ = ["synthesize", "synthesize_many", "played_positions", "played_length", "played_frames", "blended_frames"]
+__all__ = [
+    "synthesize_graph",
+    "synthesize_many",
+    "played_positions",
+    "played_length",
+    "played_frames",
+    "blended_frames",
+]
 
 
 def _smoothstep(u: np.ndarray) -> np.ndarray:
@@ -133,7 +140,7 @@ def _blend_rows(blends, n_frames: int):
 
 def played_positions(graph: MotionGraph, walk: Walk, n_frames: int | None = None) -> np.ndarray:
     """The positions (F, N, D) of the first `n_frames` (default: all) frames `walk` plays through
-    `graph`, blends included: what :func:`synthesize` wraps in a Motion."""
+    `graph`, blends included: what :func:`synthesize_graph` wraps in a Motion."""
     source = graph.motion.positions
     (output_start, source_start, length), rotations, translations, mappings, blends = _plan(graph, walk)
     segment = np.repeat(np.arange(len(length)), length)[:n_frames]
@@ -174,7 +181,7 @@ def played_frames(graph: MotionGraph, walk: Walk) -> tuple[np.ndarray, np.ndarra
     return _runs(source_start, length), rotations[segment]
 
 
-def synthesize(graph: MotionGraph, walk: Walk) -> Motion:
+def synthesize_graph(graph: MotionGraph, walk: Walk) -> Motion:
     """The motion of `walk` through `graph`: one Motion of the graph's agents, at the source dt.
 
     Raises ValidationError if the walk does not fit the graph (an edge that does not leave the

@@ -12,10 +12,10 @@ from ..validate import allocation, number
 from ..validate import seed as validate_seed
 from .graph import MotionGraph, Walk
 
-__all__ = ["walk", "walk_parts", "part_seeds"]
+__all__ = ["walk_graph", "walk_parts", "part_seeds"]
 
 
-def walk(graph: MotionGraph, *, strategy="random", duration: float | None = None, seed: int | None = None,
+def walk_graph(graph: MotionGraph, *, strategy="random", duration: float | None = None, seed: int | None = None,
          **params) -> Walk:  # fmt: skip
     """A walk through `graph` with a walk strategy (an installed name with `params`: ``random``,
     ``region`` with ``region=``; or an instance) covering `duration` seconds (default: the length
@@ -47,6 +47,6 @@ def walk_parts(graphs, *, strategy="random", duration: float, seed: int | None =
     graphs = list(graphs)
     part_params = [{}] * len(graphs) if part_params is None else list(part_params)
     return [
-        walk(graph, strategy=strategy, duration=duration, seed=part_seed, **params, **own)
+        walk_graph(graph, strategy=strategy, duration=duration, seed=part_seed, **params, **own)
         for graph, part_seed, own in zip(graphs, part_seeds(seed, len(graphs)), part_params)
     ]

@@ -7,7 +7,7 @@ import attrs
 import numpy as np
 
 from ..errors import ValidationError
-from ..graphs import MotionGraph, synthesize
+from ..graphs import MotionGraph, synthesize_graph
 from ..motion import Motion
 from .features import Features
 from .layers import GraphLayers, LayeredWalk, synthesize_layers
@@ -50,7 +50,7 @@ class TemplateView:
         return walk.walks if self.layered else (walk,)
 
     def synthesize(self, walk) -> Motion:
-        return synthesize_layers(self.template, walk) if self.layered else synthesize(self.template, walk)
+        return synthesize_layers(self.template, walk) if self.layered else synthesize_graph(self.template, walk)
 
 
 def template_view(template) -> TemplateView:

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..graphs import Walk, synthesize
+from ..graphs import Walk, synthesize_graph
 from ._expect import dims_of, expect_validation_error, needs
 
 
@@ -28,7 +28,7 @@ def check_walk_covers_duration(name, strategy, *, graph=None):
     for duration in (5.0, 30.0):
         walk = strategy.walk(graph, np.random.default_rng(1), duration)
         assert isinstance(walk, Walk), f"{name}.walk returned {type(walk).__name__}, not a flockkit.Walk"
-        motion = synthesize(graph, walk)
+        motion = synthesize_graph(graph, walk)
         assert motion.duration >= duration - 1e-9, f"{name}.walk(duration={duration}) plays only {motion.duration} s"
 
 
