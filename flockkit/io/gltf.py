@@ -153,7 +153,11 @@ class Document:
 
     def _numbers(self, value, where: str, count: int | None = None) -> list[float]:
         ok = isinstance(value, list) and (count is None or len(value) == count)
-        ok = ok and all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+        # abs() < 1e308 before isfinite: JSON integers have no bound, and float() of a huge one overflows
+        ok = ok and all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) and abs(v) < 1e308 and math.isfinite(v)
+            for v in value
+        )
         if not ok:
             size = "" if count is None else f"{count} "
             self.fail(where, f"must be an array of {size}finite numbers; got {value!r:.80}")

@@ -226,6 +226,8 @@ JSON_DAMAGE = [
     ("node translation of 2", _set("nodes[1].translation", [1, 2])),
     ("node translation 'a'", _set("nodes[1].translation", ["a", 0, 0])),
     ("node scale NaN", _set("nodes[1].scale", [float("nan"), 1, 1])),
+    ("node translation a 400-digit integer", _set("nodes[1].translation", [10**400, 0, 0])),
+    ("mesh weights a 400-digit integer", _set("meshes[0].weights", [10**400])),
     ("node name 5", _set("nodes[1].name", 5)),
     ("scene -1", _set("scene", -1)),
     ("scene 5", _set("scene", 5)),
