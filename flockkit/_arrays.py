@@ -17,7 +17,7 @@ def readonly_float(value, *, field: str) -> np.ndarray:
         with warnings.catch_warnings():
             warnings.simplefilter("error", np.exceptions.ComplexWarning)  # complex values are refused
             array = np.array(value, dtype=np.float64, copy=True, order="C")  # C order: fast slices of frames
-    except (TypeError, ValueError, np.exceptions.ComplexWarning) as exc:
+    except (TypeError, ValueError, OverflowError, np.exceptions.ComplexWarning) as exc:  # Overflow: a huge int
         raise ValidationError(f"{field} must be an array of numbers; got {type(value).__name__}: {exc}") from None
     array.setflags(write=False)
     return array

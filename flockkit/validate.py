@@ -46,13 +46,22 @@ def number(
         return None
     ok = isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, (bool, np.bool_))
     if ok:
-        value = float(value)
-        ok = math.isfinite(value) and (minimum is None or (value > minimum if strict else value >= minimum))
-        ok = ok and (maximum is None or value <= maximum)
+        converted = _float(value)
+        ok = math.isfinite(converted) and (minimum is None or (converted > minimum if strict else converted >= minimum))
+        ok = ok and (maximum is None or converted <= maximum)
+        value = converted if ok else value
     if not ok:
         expected = f"a finite number{_bound(minimum, strict, maximum)}"
         raise ValidationError(f"{field} must be {'None or ' if optional else ''}{expected}; got {value!r}")
     return value
+
+
+def _float(value) -> float:
+    """`value` as a float; an integer too large for one (Python's are unbounded) as infinity."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf if value > 0 else -math.inf
 
 
 def integer(value, field: str, *, minimum=None, optional: bool = False) -> int | None:
@@ -115,7 +124,7 @@ def allocation(n_values, what: str, *, itemsize: int = 8) -> None:
     """Refuse, before any work, a request of `n_values` numbers (`itemsize` bytes each) above the
     memory budget (:func:`memory_limit`): ValidationError stating the memory `what` would need,
     the budget, and how to raise it."""
-    needed = float(n_values) * itemsize
+    needed = _float(n_values) * itemsize
     limit = memory_limit()
     if not needed <= limit:
         raise ValidationError(

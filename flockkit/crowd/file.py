@@ -233,7 +233,7 @@ def read_crowd_scene(path, *, allow_outside: bool = False) -> CrowdScene:
                           scale=scale)  # fmt: skip
     except FileNotFoundError as exc:
         raise FileNotFoundError(f"{path}: {exc}") from None
-    except (TypeError, KeyError) as exc:
-        raise ValidationError(f"{path}: {exc}") from None
     except FlockkitError as exc:
         raise type(exc)(str(exc) if str(exc).startswith(str(path)) else f"{path}: {exc}") from None
+    except (TypeError, KeyError, ValueError, OverflowError) as exc:  # a value of the wrong type or size
+        raise ValidationError(f"{path}: {type(exc).__name__}: {exc}") from None

@@ -87,7 +87,7 @@ def read_scene(path, *, n_jobs: int | None = None, allow_outside: bool = False) 
         )
     except FileNotFoundError as exc:
         raise FileNotFoundError(f"{path}: {exc}") from None
-    except TypeError as exc:
-        raise ValidationError(f"{path}: {exc}") from None
     except FlockkitError as exc:
         raise type(exc)(str(exc) if str(exc).startswith(str(path)) else f"{path}: {exc}") from None
+    except (TypeError, ValueError, OverflowError) as exc:  # a value of the wrong type or size
+        raise ValidationError(f"{path}: {type(exc).__name__}: {exc}") from None

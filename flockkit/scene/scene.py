@@ -51,7 +51,10 @@ def _counts(value) -> tuple:
 
 
 def _scale(value) -> tuple:
-    low, high = (value, value) if isinstance(value, int | float) else tuple(value)
+    try:
+        low, high = (value, value) if isinstance(value, int | float) else tuple(value)
+    except (TypeError, ValueError):
+        raise ValidationError(f"Scene.scale must be a number or (low, high); got {value!r}") from None
     low, high = (
         number(low, "Scene.scale (low)", minimum=0, strict=True),
         number(high, "Scene.scale (high)", minimum=0, strict=True),

@@ -90,6 +90,20 @@ def suffix(reader: str, data: bytes) -> str:
     return {"bvh": ".bvh", "obj": ".obj", "npz": ".npz", "scenario": ".toml"}[reader]
 
 
+def fixtures(reader: str, folder: Path) -> None:
+    """The files inputs of `reader` name, beside them in `folder`: for crowd and scene files, a
+    tiny skinned glTF (tiny.glb) and a small motion graph (graph.npz)."""
+    if reader != "scenario" or (folder / "graph.npz").exists():
+        return
+    import flockkit
+
+    from . import assets
+
+    document, buffer = assets.tiny()
+    assets.write(folder / "tiny.glb", document, buffer)
+    flockkit.build_graph(flockkit.simulate(n_agents=3, steps=150, seed=0), seed=0).save(folder / "graph.npz")
+
+
 def outcome(reader: str, data: bytes, folder: Path) -> tuple[str, str]:
     """("ok", "") when every call that reads `data` as `reader` returns or raises a documented
     error within the time limit; else ("crash", the failure's signature: the exception type and
@@ -98,6 +112,7 @@ def outcome(reader: str, data: bytes, folder: Path) -> tuple[str, str]:
 
     from .harness import _Hang, _time_limit
 
+    fixtures(reader, folder)
     path = folder / f"input{suffix(reader, data)}"
     path.write_bytes(data)
     for call in reader_calls(reader, path):
@@ -166,8 +181,58 @@ def seeds(reader: str, folder: Path) -> list[bytes]:
             value.save(folder / f"{name}.npz")
             found.append((folder / f"{name}.npz").read_bytes())
         return found
+    fixtures(reader, folder)
     examples = Path(__file__).resolve().parents[2] / "examples" / "scenarios"
-    return [p.read_bytes() for p in sorted(examples.glob("*.toml"))]
+    return [p.read_bytes() for p in sorted(examples.glob("*.toml"))] + [CROWD_SEED, SCENE_SEED]
+
+
+CROWD_SEED = b"""seconds = 0.5
+fps = 10
+record = 2
+[trajectories]
+simulate = { agents = 3, seed = 1 }
+[character]
+clips = "tiny.glb"
+up = "y"
+forward = "x"
+[[streams]]
+name = "idle"
+clip = "wave"
+history = 4
+[[streams]]
+name = "fast"
+clip = "wave"
+rate = 2.0
+default = "Stopped"
+[[states]]
+name = "idle"
+streams = ["idle"]
+high = 0.5
+[[states]]
+name = "move"
+streams = ["fast"]
+low = 0.5
+[[cues]]
+name = "go"
+time = 0.2
+stream = "fast"
+agents = "half"
+duration = 0.2
+"""
+SCENE_SEED = b"""duration = 2
+seed = 1
+region = [[0, 0], [40, 0], [40, 30], [0, 30]]
+scale = [0.8, 1.2]
+headings = "aligned"
+[[templates]]
+graph = "graph.npz"
+count = 2
+[[arrows]]
+position = [20, 15]
+keyframes = [[0, [0.8, 0]], [1, [0, 0.8]]]
+[walk]
+budget = 5
+"""
 
 
 def _npz_mutator(data: bytes, max_size: int, seed: int) -> bytes:
