@@ -13,7 +13,7 @@ import numpy as np
 from .._arrays import check_finite, readonly_float
 from ..errors import ValidationError
 from ..regions import EXTENT, Region
-from ..validate import integer, number
+from ..validate import allocation, integer, number
 
 __all__ = ["PointConstraint", "ComConstraint", "ShapeConstraint", "Constraint", "Problem", "track_path"]
 
@@ -25,7 +25,7 @@ MAX_FRAMES = 1_000_000
 def _time(value, *, field: str) -> float:
     try:
         number = float(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ValidationError(f"{field} must be a number of seconds >= 0; got {value!r}") from None
     if not np.isfinite(number) or number < 0:
         raise ValidationError(f"{field} must be a finite number of seconds >= 0; got {value!r}")
@@ -282,6 +282,8 @@ class Problem:
                 "frames; at most "
                 f"{MAX_FRAMES} are supported (the sampler holds and simulates every frame)"
             )
+        frames = self.duration / self.dt + 1
+        allocation(self.n_agents * frames * self.dims, f"Problem: {self.n_agents} agents over {frames:.0f} frames")
         if not isinstance(self.follow, str) or self.follow not in ("nearest", "random"):
             raise ValidationError(f"Problem.follow must be 'nearest' or 'random'; got {self.follow!r}")
         for index, constraint in enumerate(self.constraints):
