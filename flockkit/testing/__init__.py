@@ -39,7 +39,7 @@ from ..interfaces import capabilities
 from ..kinds import KINDS
 from ..registry import interface_problems
 from . import inputs, strategies
-from ._expect import PARTNER_KINDS, default_partner, skip_reason
+from ._expect import PARTNER_KINDS, advice, default_partner, skip_reason
 
 __all__ = [
     "check_plugin",
@@ -47,6 +47,7 @@ __all__ = [
     "checks_for",
     "skipped_checks",
     "check_interface",
+    "component_id",
     "CheckReport",
     "inputs",
     "strategies",
@@ -132,8 +133,44 @@ class CheckReport:
         return ", ".join(parts)
 
 
-def _name_of(component) -> str:
-    return getattr(component, "__name__", None) or type(component).__name__
+def component_id(kind: str, component) -> str:
+    """A name that tells configurations apart: the name `component`'s class is registered under
+    for `kind` (else the class's name) and, for an attrs class, the parameters that differ from
+    their defaults, as in ``icp-hungarian(velocity_weight=0)``."""
+    from ..registry import describe
+
+    if getattr(component, "__name__", None):
+        return component.__name__
+    kind_of = type(component)
+    names = [c.name for c in describe(kind) if c.factory is kind_of] if kind in KINDS else []
+    label = names[0] if names else kind_of.__name__
+    if not attrs.has(kind_of):
+        return label
+    changed = []
+    for field in attrs.fields(kind_of):
+        value = getattr(component, field.name, None)
+        default = field.default.factory() if isinstance(field.default, attrs.Factory) else field.default
+        if field.init and field.default is not attrs.NOTHING and not _same(value, default):
+            changed.append(f"{field.name}={value!r}")
+    return f"{label}({', '.join(changed)})" if changed else label
+
+
+def _same(value, default) -> bool:
+    try:
+        return bool(value == default)
+    except Exception:  # noqa: BLE001 - arrays and other values without a truthy ==
+        return value is default
+
+
+def _run(check, kind: str, name: str, component) -> None:
+    """Run one check; any failure becomes an AssertionError naming the check and the component,
+    ending with a "to fix:" line."""
+    try:
+        check(name, component)
+    except Exception as exc:  # noqa: BLE001 - every failure is reported the same way
+        raise AssertionError(
+            f"{check.__name__} failed for {kind} {name!r}: {type(exc).__name__}: {exc}\n  to fix: {advice(check, kind)}"
+        ) from exc
 
 
 def _expected(expected_failed_checks, component) -> dict:
@@ -159,7 +196,7 @@ def check_plugin(
     `expected_failed_checks` (check name -> reason, or a callable taking the component and
     returning that) that passed. Returns a CheckReport. `progress` shows a bar over the checks.
     """
-    name = name or _name_of(component)
+    name = name or component_id(kind, component)
     expected = _expected(expected_failed_checks, component)
     checks = checks_for(kind, component, partners=partners)
     if progress:
@@ -169,12 +206,12 @@ def check_plugin(
     passed, failed_as_expected = [], {}
     for check in checks:
         try:
-            check(name, component)
-        except Exception as exc:  # noqa: BLE001 - every failure is reported the same way
+            _run(check, kind, name, component)
+        except AssertionError:
             if check.__name__ in expected:
                 failed_as_expected[check.__name__] = expected[check.__name__]
                 continue
-            raise AssertionError(f"{check.__name__} failed for {kind} {name!r}: {type(exc).__name__}: {exc}") from exc
+            raise
         if check.__name__ in expected:
             raise AssertionError(
                 f"{check.__name__} passed for {kind} {name!r} although it is listed in expected_failed_checks "
@@ -186,20 +223,27 @@ def check_plugin(
     )
 
 
-def parametrize_with_checks(components, *, partners: Mapping | None = None, expected_failed_checks=None):
+def parametrize_with_checks(components, *, partners: Mapping | None = None, expected_failed_checks=None, ids=None):
     """A pytest parametrize mark over (component, check) for every check of each component.
 
     `components` holds ``(kind, component)`` pairs. The decorated test receives `component` and a
-    `check` to call as ``check(component)``; test ids read ``<kind>:<name>-<check>``. Checks that
+    `check` to call as ``check(component)``; test ids read ``<kind>:<name>-<check>``, the name
+    from `ids` (one per component) or else :func:`component_id` (the registered name and the
+    parameters set), so that two configurations of one class are told apart. A failure names the
+    check and the component and ends with a "to fix:" line. Checks that
     do not apply to a component's declared capabilities are marked skipped with the reason;
     `expected_failed_checks` (check name -> reason, or a callable taking the component and
     returning that) marks known failures as strict xfail. `partners` as for :func:`check_plugin`.
     """
     import pytest
 
+    components = list(components)
+    ids = None if ids is None else [str(i) for i in ids]
+    if ids is not None and len(ids) != len(components):
+        raise ValidationError(f"ids: expected one name per component ({len(components)}); got {len(ids)}")
     params = []
-    for kind, component in components:
-        name = _name_of(component)
+    for index, (kind, component) in enumerate(components):
+        name = component_id(kind, component) if ids is None else ids[index]
         expected = _expected(expected_failed_checks, component)
         applicable = {c.__name__: c for c in checks_for(kind, component, partners=partners)}
         skipped = skipped_checks(kind, component)
@@ -214,6 +258,8 @@ def parametrize_with_checks(components, *, partners: Mapping | None = None, expe
             if check_name in expected:
                 marks.append(pytest.mark.xfail(reason=expected[check_name], strict=True))
             params.append(
-                pytest.param(component, functools.partial(run, name), marks=marks, id=f"{kind}:{name}-{check_name}")
+                pytest.param(
+                    component, functools.partial(_run, run, kind, name), marks=marks, id=f"{kind}:{name}-{check_name}"
+                )
             )
     return pytest.mark.parametrize("component, check", params)

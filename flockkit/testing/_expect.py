@@ -45,10 +45,31 @@ def needs(*partners: str):
     return mark
 
 
+def fixed_by(advice: str):
+    """Mark a check with the advice its failure message ends with, a "to fix:" line."""
+
+    def mark(check):
+        check.fix = advice
+        return check
+
+    return mark
+
+
+def advice(check, kind: str) -> str:
+    """How to fix a failure of `check`: its own advice, else the property its docstring states."""
+    own = getattr(check, "fix", None)
+    if own:
+        return own
+    promise = " ".join((check.__doc__ or "").split()) or check.__name__
+    return f"make the {kind} meet this ({check.__name__}): {promise} The contract: docs/kinds/{kind}.md"
+
+
 def skip_reason(check, declared) -> str | None:
-    """Why `check` does not apply to a component declaring `declared`, or None if it does."""
+    """Why `check` does not apply to a component declaring `declared`, or None if it does. A
+    declared value of 0 (a plausibility reach of zero frames) is a declaration, checked as such."""
     field = getattr(check, "requires", None)
-    if field is None or getattr(declared, field) not in (False, None):
+    value = None if field is None else getattr(declared, field)
+    if field is None or (value is not None and value is not False):
         return None
     return f"the component does not declare Capabilities.{field} (this check is of that optional operation)"
 

@@ -1,9 +1,10 @@
 """Conformance checks for behavior models (``flockkit.interfaces.BehaviorModel``).
 
 Each check is ``check_<property>(name, model)`` and raises AssertionError saying what is wrong.
-They run on a few fixed flocks (one agent to a hundred) in the dimensions the model declares, so
-results are reproducible; the checks of ``guide``, ``group_guide``, ``progress``,
-``plausibility_reach``, ``residuals`` and ``coupling`` run only for models that declare them.
+They run on a few fixed flocks (one agent to a hundred) in the dimensions the model declares, and
+on tied and symmetric ones (``inputs.degenerate_configurations``), so results are reproducible;
+the checks of ``guide``, ``group_guide``, ``progress``, ``plausibility_reach``, ``residuals`` and
+``coupling`` run only for models that declare them.
 """
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..motion import Motion, State, random_flock
-from ._expect import applies_when, dims_of, expect_validation_error, on_input
+from ._expect import applies_when, dims_of, expect_validation_error, fixed_by, on_input
 
 STEPS = 12
 SEED = 20031
@@ -163,6 +164,30 @@ def check_log_plausibility_finite(name, model):
             )
             assert values.dtype == np.float64, f"{name}.log_plausibility returned dtype {values.dtype}"
             assert np.all(np.isfinite(values)), f"{name}.log_plausibility is not finite on a forward motion: {values}"
+
+
+@fixed_by(
+    "guard every division by a distance, a speed or a count of neighbours (agents on one spot, a lone "
+    "agent, agents at rest) and break ties between equally near neighbours the same way every time"
+)
+def check_degenerate_flocks(name, model):
+    """Tied and symmetric flocks (a square, a hexagon, a grid, agents on one spot, pairs of
+    coincident agents, a lone agent, agents on a line; at rest, heading one way, turning) go
+    forward and backward to finite motions of the right shape, which log_plausibility scores
+    with finite values."""
+    from .inputs import degenerate_configurations
+
+    for d in dims_of(model):
+        for label, config in degenerate_configurations(d):
+            state = State(positions=config.positions, velocities=config.velocities)
+            with on_input(name, model, d, label):
+                for operation, run in (("forward", _forward), ("backward", _backward)):
+                    motion = run(model, state, steps=6)
+                    _check_motion(name, motion, state, 6, operation)
+                    values = np.asarray(model.log_plausibility(motion))
+                    assert values.shape == (motion.n_frames,) and np.all(np.isfinite(values)), (
+                        f"{name}.log_plausibility of its {operation} motion from {label} is not finite: {values}"
+                    )
 
 
 def check_log_plausibility_prefers_forward(name, model):
@@ -376,6 +401,7 @@ CHECKS = (
     check_inputs_unchanged,
     check_rejects_negative_steps,
     check_log_plausibility_finite,
+    check_degenerate_flocks,
     check_log_plausibility_prefers_forward,
     check_log_plausibility_window,
     check_rejects_bad_window,

@@ -13,6 +13,7 @@ from ..skeleton import Event, Pose, Skeleton
 from ._expect import expect_validation_error
 
 TIMES = np.linspace(0.0, 7.3, 74)  # seconds on the stream's clock: past several loops of a short clip
+TIMES.setflags(write=False)  # each check hands a component a copy: one that sorts in place harms no other check
 
 
 def check_poses_fit_the_skeleton(name, controller):
@@ -20,7 +21,7 @@ def check_poses_fit_the_skeleton(name, controller):
     rotations and finite translations."""
     skeleton = getattr(controller, "skeleton", None)
     assert isinstance(skeleton, Skeleton), f"{name}.skeleton is {type(skeleton).__name__}, not a flockkit.Skeleton"
-    pose = controller.pose(TIMES)
+    pose = controller.pose(TIMES.copy())
     assert isinstance(pose, Pose), f"{name}.pose returned {type(pose).__name__}, not a flockkit.Pose"
     assert pose.shape == (len(TIMES),), f"{name}.pose gave poses of shape {pose.shape} for {len(TIMES)} times"
     assert pose.n_joints == skeleton.n_joints, (
@@ -35,10 +36,10 @@ def check_poses_fit_the_skeleton(name, controller):
 
 def check_pose_is_a_function_of_time(name, controller):
     """The pose at a time is the same asked in one batch, one at a time, or in reverse order."""
-    batch = controller.pose(TIMES)
-    backwards = controller.pose(TIMES[::-1])
+    batch = controller.pose(TIMES.copy())
+    backwards = controller.pose(TIMES[::-1].copy())
     for k in (0, 17, 45, len(TIMES) - 1):
-        alone = controller.pose(TIMES[k : k + 1])
+        alone = controller.pose(TIMES[k : k + 1].copy())
         for other, what in ((alone, "alone"), (backwards[len(TIMES) - 1 - k : len(TIMES) - k], "in reverse order")):
             same = np.allclose(batch.rotations[k], other.rotations[0], atol=1e-9) and np.allclose(
                 batch.translations[k], other.translations[0], atol=1e-9

@@ -13,9 +13,19 @@ import numpy as np
 
 from .. import rigid
 from ..graphs import MotionGraph
-from ..motion import Alignment, Motion
+from ..motion import Alignment, Configuration, Motion
 
-__all__ = ["recording", "graph", "parts", "plants", "walker", "bird", "random_clip", "WOBBLE_PERIOD"]
+__all__ = [
+    "recording",
+    "graph",
+    "parts",
+    "plants",
+    "walker",
+    "bird",
+    "random_clip",
+    "degenerate_configurations",
+    "WOBBLE_PERIOD",
+]
 
 # The group circles the origin once every LAP seconds while its members wobble about their places
 # every WOBBLE_PERIOD seconds. The two periods are incommensurate, so a configuration recurs up
@@ -215,3 +225,45 @@ def random_clip(joints: int, *, frames: int = 60, fps: float = 30.0, seed: int =
     rotations /= np.linalg.norm(rotations, axis=-1, keepdims=True)
     root = np.stack([np.sin(t[:, 0, 0]), np.cos(t[:, 0, 0]), 0.1 * t[:, 0, 0]], axis=1)
     return SkeletalClip(skeleton=skeleton, fps=fps, rotations=rotations, translations=root, name=f"random{joints}")
+
+
+def degenerate_configurations(dims: int = 2) -> list[tuple[str, Configuration]]:
+    """Configurations with ties and symmetries, as scikit-learn's checks feed estimators
+    degenerate data: (label, configuration) for a square, a regular hexagon, a grid (3 x 3, or
+    3 x 3 x 3 in 3D), five agents on one spot, three pairs of coincident agents, one agent, and
+    seven agents evenly spaced on a line; each at rest, all heading one way, and (where there is
+    a centre to turn about) turning about the centre. Distances to the centre, pairwise distances
+    and principal spreads tie exactly, so a component that breaks ties by index or trusts
+    principal axes meets inputs where that fails."""
+    rng = np.random.default_rng(7)
+
+    def flat(points):
+        points = np.asarray(points, dtype=float)
+        return np.column_stack([points, np.zeros((len(points), dims - 2))]) if dims == 3 else points
+
+    def polygon(n):
+        angle = np.arange(n) * 2 * math.pi / n
+        return flat(np.column_stack([np.cos(angle), np.sin(angle)]))
+
+    side = np.arange(3.0) - 1.0
+    shapes = {
+        "a square": polygon(4),
+        "a regular hexagon": polygon(6),
+        "a grid": np.stack(np.meshgrid(*[side] * dims, indexing="ij"), axis=-1).reshape(-1, dims),
+        "five agents on one spot": np.tile(rng.normal(0, 1, dims), (5, 1)),
+        "three pairs of coincident agents": np.repeat(rng.normal(0, 1, (3, dims)), 2, axis=0),
+        "one agent": rng.normal(0, 1, (1, dims)),
+        "seven agents on a line": np.outer(np.arange(7.0) - 3.0, np.eye(dims)[0]),
+    }
+    found = []
+    for label, positions in shapes.items():
+        centered = positions - positions.mean(axis=0)
+        turning = np.zeros_like(positions)
+        turning[:, 0], turning[:, 1] = -centered[:, 1], centered[:, 0]
+        heading = np.tile(np.eye(dims)[0], (len(positions), 1))
+        motions = {"at rest": np.zeros_like(positions), "heading one way": heading}
+        if np.any(turning):
+            motions["turning"] = turning
+        for moving, velocities in motions.items():
+            found.append((f"{label}, {moving}", Configuration(positions=positions, velocities=velocities)))
+    return found

@@ -3,6 +3,7 @@
 Each check is ``check_<property>(name, metric)`` and raises AssertionError saying what is wrong.
 They compare configurations of random flocks (one agent to fifteen, in the dimensions the metric
 declares), so results are reproducible; rigid copies are made with rotations in general position.
+Tied and symmetric configurations (``inputs.degenerate_configurations``) are compared too.
 The checks of ``lower_bound``, ``pairs_within`` and ``pairwise`` run only where declared.
 """
 
@@ -11,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..motion import Alignment, Configuration, random_flock
-from ._expect import applies_when, dims_of, expect_validation_error, on_input
+from ._expect import applies_when, dims_of, expect_validation_error, fixed_by, on_input
 
 SEED = 4205
 _SIZES = {2: (1, 6, 15), 3: (5, 12)}  # agents per configuration, per dimension
@@ -108,6 +109,81 @@ def check_distance_covers_alignment(name, metric):
             f"{name}.compare reports distance {found.distance} but its alignment leaves a mean squared residual of "
             f"{residual}"
         )
+
+
+@fixed_by(
+    "compute the distance from a and b in a way that does not depend on their order: search the same "
+    "rotations and assignments both ways (an alignment of b onto a, inverted, aligns a onto b)"
+)
+def check_symmetric(name, metric):
+    """compare(a, b) and compare(b, a) give the same distance: a distance between group
+    configurations does not depend on which is named first."""
+    for (a, b), context in _each(name, metric, _pairs(metric)):
+        with context:
+            forth, back = metric.compare(a, b).distance, metric.compare(b, a).distance
+            assert np.isclose(forth, back, rtol=1e-6, atol=1e-9 * _scale(a)), (
+                f"{name}.compare(a, b).distance = {forth:.6g} but compare(b, a).distance = {back:.6g}"
+            )
+
+
+def _chains(metric):
+    """Triples (a, b, c) of configurations, b a small step from a and c a step further on, with
+    b and c rigidly moved and reordered (so distances come from the search, not the labels)."""
+    rng = np.random.default_rng(SEED + 6)
+    for a in _configurations(metric):
+        step = rng.normal(0, 0.3, a.positions.shape), rng.normal(0, 0.3, a.velocities.shape)
+        b = Configuration(positions=a.positions + step[0], velocities=a.velocities + step[1])
+        c = Configuration(positions=b.positions + step[0], velocities=b.velocities + step[1])
+        yield a, _rigid_copy(b, rng), _rigid_copy(c, rng)
+
+
+@fixed_by(
+    "return a mean squared distance after the best alignment (its root is then a true distance, so "
+    "d(a, c) <= 2 (d(a, b) + d(b, c))); a distance that grows faster than squared residuals (squared "
+    "again, exponentiated) breaks the graph builders' pruning and thresholds"
+)
+def check_relaxed_triangle(name, metric):
+    """The distance behaves as a squared distance: d(a, c) <= 2 (d(a, b) + d(b, c)), which holds
+    whenever the square root of the distance is a distance (as for a mean squared residual
+    minimised over rigid motions and assignments). Builders rely on it to rule out blocks of
+    neighbouring frames together."""
+    for (a, b, c), context in _each(name, metric, _chains(metric)):
+        with context:
+            ab, bc, ac = (metric.compare(x, y).distance for x, y in ((a, b), (b, c), (a, c)))
+            assert ac <= 2 * (ab + bc) + 1e-9 * _scale(a), (
+                f"{name}: d(a, c) = {ac:.6g} exceeds 2 (d(a, b) + d(b, c)) = {2 * (ab + bc):.6g} for configurations "
+                "b a step from a and c a step further on"
+            )
+
+
+@fixed_by(
+    "do not break ties by agent index or trust principal axes: where distances to the centre or "
+    "principal spreads are equal (a square, a grid), try every agent the tie allows as the anchor "
+    "of the alignment, and handle every agent on one spot, a lone agent and agents on one line"
+)
+def check_degenerate_configurations(name, metric):
+    """Tied and symmetric configurations (a square, a hexagon, a grid, agents on one spot, pairs
+    of coincident agents, a lone agent, agents on a line; at rest, heading one way, turning) are
+    at distance zero from their rigid, reordered copies, both ways, and the alignment maps each
+    copy back."""
+    from .inputs import degenerate_configurations
+
+    rng = np.random.default_rng(SEED + 7)
+    for d in dims_of(metric):
+        for label, config in degenerate_configurations(d):
+            with on_input(name, metric, d, label):
+                copy = _rigid_copy(config, rng)
+                tolerance = 1e-8 * _scale(config)
+                for found, first, second in ((metric.compare(config, copy), config, copy),
+                                             (metric.compare(copy, config), copy, config)):  # fmt: skip
+                    assert found.distance <= tolerance, (
+                        f"{name}: a rigid, reordered copy of {label} is at distance {found.distance:.6g}; expected 0"
+                    )
+                    residual = found.residual(first, second)
+                    assert residual <= tolerance, (
+                        f"{name}: the alignment of {label} with its copy leaves {residual:.6g} (mean squared); "
+                        "expected 0"
+                    )
 
 
 @applies_when("lower_bound")
@@ -216,6 +292,9 @@ CHECKS = (
     check_identical_is_zero,
     check_rigid_and_permutation_invariant,
     check_distance_covers_alignment,
+    check_symmetric,
+    check_relaxed_triangle,
+    check_degenerate_configurations,
     check_lower_bound,
     check_pairs_within,
     check_pairwise,

@@ -56,6 +56,10 @@ from .assignment import assign, solve, workspace
 # chunks were not faster on 2 cores.
 _CHUNK = 256
 _BOUND_CHUNK = 2048  # pairs bounded together, for the same reason
+# Principal spreads within this fraction of the largest count as equal (a symmetric
+# configuration); agents' distances within 1e-6 of the group's size count as equal.
+_TIED = 1e-6
+_ANCHORS = 64  # anchor starts of a symmetric pair, at most
 # Small groups start from many rotations (assignments are cheap there and local minima many); in
 # groups of PRUNE_FROM agents or more, only the KEEP starts closest after the first assignment go
 # on descending (at 20 agents the best start was once 5th after it; at 50 and 100 never below 2nd).
@@ -276,6 +280,12 @@ class IcpHungarian:
             mine = static == kind
             starts = prepared.starts(ia[mine], ib[mine], static=bool(kind))
             distance[mine], assignment[mine], rotation[mine] = self._search_from(prepared, ia[mine], ib[mine], starts)
+        for p in np.flatnonzero(prepared.symmetric[ia] | prepared.symmetric[ib]):
+            starts = prepared.anchor_starts(ia[p], ib[p])
+            if len(starts):
+                found = self._search_from(prepared, ia[p : p + 1], ib[p : p + 1], starts[None])
+                if found[0][0] < distance[p]:
+                    distance[p], assignment[p], rotation[p] = (value[0] for value in found)
         return distance, assignment, rotation
 
     def _search_from(self, prepared, ia, ib, starts):
@@ -414,6 +424,11 @@ class _Prepared:
         self.scale = (self.centered**2).sum(axis=(1, 2)) / self.n_agents  # mean squared radius
         self.speed_scale = (self.velocities**2).sum(axis=(1, 2)) / self.n_agents
         self.static = ~self.velocities.any(axis=(1, 2))  # no heading: its frame is the world's axes
+        self.radii = radii
+        spreads = np.linalg.eigvalsh(np.transpose(self.centered, (0, 2, 1)) @ self.centered)  # ascending
+        gaps = np.diff(spreads, axis=1).min(axis=1)
+        # two equal spreads: the principal axes are any pair in a plane, not a start to trust
+        self.symmetric = gaps <= _TIED * spreads[:, -1]
 
     @functools.cached_property
     def turned_together(self) -> tuple[np.ndarray, np.ndarray]:
@@ -441,6 +456,57 @@ class _Prepared:
             starts.append(rigid.kabsch(_gather(self.centered[ia], self.radius_order[ia]),
                                        _gather(self.centered[ib], self.radius_order[ib])))  # fmt: skip
         return np.stack(starts, axis=1)
+
+    def anchor_starts(self, i, j) -> np.ndarray:
+        """Start rotations (S, D, D) for a pair with a symmetric configuration (equal principal
+        spreads: a square, a regular polygon, a grid), whose principal axes say nothing. In `i`,
+        a frame is fixed by the agent farthest from the centre of mass and, in 3D, the one farthest
+        from that agent's axis; every pair of agents of `j` at the same distances (to within 1e-6
+        of the group's size) gives the frame a rigid copy would have, so one of these starts (at
+        most _ANCHORS) is the copy's rotation, and descending from it finds distance zero."""
+        a, b = self.centered[i], self.centered[j]
+        close = lambda x, y: np.abs(x - y) <= 1e-6 * math.sqrt(max(self.scale[i], self.scale[j]))  # noqa: E731
+        first = int(np.argmax(self.radii[i]))
+        if close(self.radii[i][first], 0.0):  # every agent on the centre of mass: any rotation is exact
+            return np.empty((0, self.dims, self.dims))
+        candidates = np.flatnonzero(close(self.radii[j], self.radii[i][first]))
+        if self.dims == 2:
+            pairs = [(c, None) for c in candidates]
+            second = None
+        else:
+            height_a, off_a = _about_axis(a, a[first])
+            second = int(np.argmax(off_a))
+            if close(off_a[second], 0.0):  # collinear: the turn about the line is free
+                pairs, second = [(c, None) for c in candidates], None
+            else:
+                pairs = []
+                for c in candidates:
+                    height_b, off_b = _about_axis(b, b[c])
+                    match = close(off_b, off_a[second]) & close(height_b, height_a[second])
+                    pairs += [(c, other) for other in np.flatnonzero(match)]
+        frame_a = _anchor_frame(a[first], None if second is None else a[second])
+        frames_b = [_anchor_frame(b[c], None if other is None else b[other]) for c, other in pairs[:_ANCHORS]]
+        return np.transpose(frame_a) @ np.stack(frames_b) if frames_b else np.empty((0, self.dims, self.dims))
+
+
+def _about_axis(points, toward) -> tuple[np.ndarray, np.ndarray]:
+    """Each point's height along the axis from the origin toward `toward`, and distance from it."""
+    axis = toward / np.linalg.norm(toward)
+    height = points @ axis
+    return height, np.linalg.norm(points - np.outer(height, axis), axis=1)
+
+
+def _anchor_frame(first, second=None) -> np.ndarray:
+    """Rows: a proper orthonormal frame whose first axis points at `first` and, in 3D, whose
+    second lies towards `second` (any direction across `first` without it)."""
+    x = first / np.linalg.norm(first)
+    if len(x) == 2:
+        return np.array([x, [-x[1], x[0]]])
+    if second is None:
+        second = np.eye(3)[int(np.argmin(np.abs(x)))]
+    y = second - (second @ x) * x
+    y /= np.linalg.norm(y)
+    return np.array([x, y, np.cross(x, y)])
 
 
 def exact_distance(a: np.ndarray, b: np.ndarray) -> float:

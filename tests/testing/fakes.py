@@ -8,6 +8,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 
 import flockkit
+from flockkit import rigid
 from flockkit.errors import ValidationError
 from flockkit.testing.inputs import recording
 
@@ -225,6 +226,26 @@ class CouplingInvented(Declaring):
         return coo_matrix((np.ones(d), (rows, columns)), shape=(size, size))
 
 
+class CrowdingByDistance(RandomVelocity):
+    """Pushes each agent away from its nearest neighbour by the inverse of their distance: fine on
+    random flocks, NaN where two agents share a spot."""
+
+    def forward(self, initial, steps, rng):
+        motion = super().forward(initial, steps, rng)
+        if initial.n_agents < 2:
+            return motion
+        positions = np.array(motion.positions)
+        gaps = positions[:, :, None, :] - positions[:, None, :, :]
+        distance = np.linalg.norm(gaps, axis=-1)
+        distance[:, range(initial.n_agents), range(initial.n_agents)] = np.inf
+        nearest = np.argmin(distance, axis=2)
+        away = np.take_along_axis(gaps, nearest[..., None, None], axis=2)[:, :, 0]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            push = away / np.min(distance, axis=2)[..., None] ** 2
+        positions[1:] += 1e-3 * push[1:]
+        return flockkit.Motion(positions=positions, dt=self.dt)
+
+
 # check name -> a fake that breaks exactly that check
 BROKEN = {
     "check_interface": MissingMethod,
@@ -236,6 +257,7 @@ BROKEN = {
     "check_inputs_unchanged": MutatesInput,
     "check_rejects_negative_steps": AcceptsNegativeSteps,
     "check_log_plausibility_finite": NonFinitePlausibility,
+    "check_degenerate_flocks": CrowdingByDistance,
     "check_log_plausibility_prefers_forward": PrefersNoise,
     "check_log_plausibility_window": WindowIgnored,
     "check_rejects_bad_window": WindowUnchecked,
@@ -365,12 +387,57 @@ class Truncates(_Wrapped):
         return super().compare(*cut)
 
 
+class Asymmetric(_Wrapped):
+    """Counts the distance three times over when `a` lies left of `b`."""
+
+    def compare(self, a, b):
+        found = super().compare(a, b)
+        heavier = a.center_of_mass()[0] < b.center_of_mass()[0]
+        return self._with(found, distance=found.distance * (3.0 if heavier else 1.0))
+
+
+class SquaredAgain(_Wrapped):
+    """The residual plus ten times its square: invariant, symmetric, above the residual, but it
+    grows faster than a squared distance."""
+
+    def compare(self, a, b):
+        found = super().compare(a, b)
+        return self._with(found, distance=found.distance + 10 * found.distance**2)
+
+
+class TieBreaking:
+    """Matches agents in the order of their distance to the centre of mass (ties by index), then
+    rotates by Kabsch: exact for rigid copies of configurations without ties, wrong for a square."""
+
+    capabilities = flockkit.Capabilities()
+
+    def compare(self, a, b):
+        if (a.n_agents, a.dims) != (b.n_agents, b.dims):
+            raise ValidationError("configurations of different sizes")
+        pa, pb = a.positions - a.center_of_mass(), b.positions - b.center_of_mass()
+        order_a = np.argsort(np.linalg.norm(pa, axis=1), kind="stable")
+        order_b = np.argsort(np.linalg.norm(pb, axis=1), kind="stable")
+        assignment = np.empty(a.n_agents, dtype=int)
+        assignment[order_a] = order_b
+        rotation = rigid.kabsch(pa, pb[assignment])
+        placed = pb[assignment] @ rotation.T
+        return flockkit.Alignment(
+            distance=float(np.mean(np.sum((pa - placed) ** 2, axis=1))),
+            assignment=assignment,
+            rotation=rotation,
+            translation=a.center_of_mass() - rotation @ b.center_of_mass(),
+        )
+
+
 BROKEN_METRICS = {
     "check_interface": NoCompare,
     "check_compare_returns_alignment": ReturnsTuple,
     "check_identical_is_zero": OffsetDistance,
     "check_rigid_and_permutation_invariant": IgnoresRotation,
     "check_distance_covers_alignment": UnderReports,
+    "check_symmetric": Asymmetric,
+    "check_relaxed_triangle": SquaredAgain,
+    "check_degenerate_configurations": TieBreaking,
     "check_lower_bound": LooseBound,
     "check_pairs_within": PrunesTooMuch,
     "check_pairwise": WrongPairwise,

@@ -6,7 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.errors import InvalidArgument
 
-from flockkit.testing import check_plugin, checks_for, parametrize_with_checks
+import flockkit
+from flockkit.testing import check_plugin, checks_for, parametrize_with_checks, skipped_checks
 from flockkit.testing import strategies as fst
 
 from .fakes import (
@@ -113,3 +114,58 @@ def test_strategies_respect_their_bounds(data):
     times = np.array([c.time for c in track])
     assert 3 <= len(track) <= 4 and times[0] == 0 and np.all(np.diff(times) >= 0.5 - 1e-12)
     assert np.all(np.diff(times) <= 1.0 + 1e-12) and all(abs(c.position).max() <= 2.0 for c in track)
+
+
+class ClaimsReachZero(RandomVelocity):
+    """Declares a plausibility reach of 0 frames; its plausibility reads a frame's neighbours."""
+
+    capabilities = flockkit.Capabilities(plausibility_reach=0)
+
+
+class ReachZero(RandomVelocity):
+    """Scores each frame by its own position only: its reach is really 0."""
+
+    capabilities = flockkit.Capabilities(plausibility_reach=0)
+
+    def log_plausibility(self, motion, start=0, stop=None):
+        stop = motion.n_frames if stop is None else stop
+        if not 0 <= start <= stop <= motion.n_frames:
+            raise flockkit.errors.ValidationError(f"window {start}:{stop} outside 0..{motion.n_frames}")
+        return -0.5 * np.sum(motion.positions[start:stop] ** 2, axis=(1, 2)) * 1e-3
+
+
+def test_a_declared_reach_of_zero_is_checked_not_skipped():
+    assert "check_plausibility_reach" not in skipped_checks("behavior", ClaimsReachZero())
+    with pytest.raises(AssertionError, match="check_plausibility_reach failed.*plausibility_reach=0"):
+        check_plugin("behavior", ClaimsReachZero(), name="reach-zero")
+    assert "check_plausibility_reach" in check_plugin("behavior", ReachZero()).passed
+
+
+@pytest.mark.parametrize("kind, check_name", CASES)
+def test_every_failure_ends_with_what_to_fix(kind, check_name):
+    with pytest.raises(AssertionError) as info:
+        check_plugin(kind, BROKEN_BY_KIND[kind][check_name](), name="broken-component")
+    last = str(info.value).splitlines()[-1]
+    assert last.startswith("  to fix: ") and len(last) > 40
+
+
+def test_ids_tell_configurations_apart():
+    import flockkit_icp
+
+    mark = parametrize_with_checks(
+        [("metric", flockkit_icp.IcpHungarian()), ("metric", flockkit_icp.IcpHungarian(velocity_weight=0.0))]
+    )
+    ids = {param.id.split("-check_")[0] for param in mark.args[1]}
+    assert ids == {"metric:icp-hungarian", "metric:icp-hungarian(velocity_weight=0.0)"}
+    named = parametrize_with_checks([("behavior", RandomVelocity())], ids=["mine"])
+    assert named.args[1][0].id == "behavior:mine-check_interface"
+    with pytest.raises(flockkit.errors.ValidationError, match="ids"):
+        parametrize_with_checks([("behavior", RandomVelocity())], ids=["a", "b"])
+
+
+def test_a_failure_through_pytest_names_check_component_and_fix():
+    mark = parametrize_with_checks([("metric", BROKEN_BY_KIND["metric"]["check_symmetric"]())], ids=["lopsided"])
+    run = {param.id: param.values[1] for param in mark.args[1]}["metric:lopsided-check_symmetric"]
+    with pytest.raises(AssertionError) as info:
+        run(BROKEN_BY_KIND["metric"]["check_symmetric"]())
+    assert "check_symmetric failed for metric 'lopsided'" in str(info.value) and "to fix:" in str(info.value)
