@@ -11,6 +11,7 @@ column of ``flockkit plugins``).
 
 from __future__ import annotations
 
+import contextlib
 import difflib
 import importlib.metadata
 import inspect
@@ -41,6 +42,7 @@ __all__ = [
     "available",
     "describe",
     "register",
+    "registered",
     "reset",
     "plugin_manager",
     "interface_problems",
@@ -403,6 +405,22 @@ def register(plugin: object, name: str | None = None) -> None:
         _state.runtime_plugins.append((plugin, name or getattr(plugin, "__name__", None) or repr(plugin)))
         _state.manager = None
         _state.components = None
+
+
+@contextlib.contextmanager
+def registered(plugin: object, name: str | None = None):
+    """:func:`register` `plugin` for the ``with`` block only: on leaving it, the run-time plugins
+    are those of before (the pytest fixture ``flockkit_register`` uses this)."""
+    with _state.lock:
+        before = list(_state.runtime_plugins)
+    register(plugin, name)
+    try:
+        yield plugin
+    finally:
+        with _state.lock:
+            _state.runtime_plugins[:] = before
+            _state.manager = None
+            _state.components = None
 
 
 def reset() -> None:

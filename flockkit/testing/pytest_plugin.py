@@ -1,0 +1,183 @@
+"""flockkit's pytest plugin, loaded wherever flockkit is installed (a ``pytest11`` entry point).
+
+Fixtures:
+
+- ``flockkit_register``: ``flockkit_register(kind, name, factory)`` registers a component for one
+  test; the registry is as before once the test ends.
+- the kit's inputs: ``flockkit_recording`` (a 2D group motion with known recurrences),
+  ``flockkit_graph`` (a motion graph over it), ``flockkit_parts`` (a motion of three rigid parts
+  and the part of each point), ``flockkit_walker`` (a looping skeletal clip) and
+  ``flockkit_degenerate_configurations`` (tied and symmetric configurations, 2D and 3D).
+
+Option ``--flockkit-kit`` adds one test per check of the conformance kit for every installed
+component (each made with its default parameters; a clip player plays the kit's walker clip),
+with ids ``kit:<kind>:<name>-<check>``; ``--flockkit-kit=KIND[,KIND]`` limits it to those kinds.
+A check that does not apply to what the component declares is reported skipped, with the reason.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+
+def pytest_addoption(parser):
+    group = parser.getgroup("flockkit")
+    group.addoption(
+        "--flockkit-kit",
+        nargs="?",
+        const="all",
+        default=None,
+        metavar="KIND[,KIND]",
+        help="run flockkit's conformance kit on every installed component (or those of the kinds given)",
+    )
+
+
+@pytest.fixture
+def flockkit_register():
+    """``register(kind, name, factory, description="")``: `factory` is ``flockkit.get(kind,
+    name)``'s for this test only."""
+    import contextlib
+
+    from ..kinds import KINDS
+    from ..registry import registered
+
+    with contextlib.ExitStack() as stack:
+
+        def register(kind: str, name: str, factory, description: str = ""):
+            if kind not in KINDS:
+                from ..errors import ValidationError
+
+                raise ValidationError(f"flockkit_register: unknown kind {kind!r}; the kinds are {', '.join(KINDS)}")
+            stack.enter_context(registered(_one_component(kind, name, factory, description), f"test-{kind}-{name}"))
+            return factory
+
+        yield register
+
+
+def _one_component(kind, name, factory, description):
+    """A plugin object registering `factory` as `kind` `name`."""
+    from ..hookspecs import hookimpl
+    from ..kinds import KINDS
+
+    def add(registry):
+        registry.add(name, factory, description=description)
+
+    return type(f"Test{kind.title()}Plugin", (), {KINDS[kind].hook: staticmethod(hookimpl(add))})
+
+
+@pytest.fixture
+def flockkit_recording():
+    """``flockkit.testing.inputs.recording()``: six agents circling, a configuration recurring
+    (turned) every 2.3 s."""
+    from . import inputs
+
+    return inputs.recording()
+
+
+@pytest.fixture
+def flockkit_graph():
+    """``flockkit.testing.inputs.graph()``: a motion graph over the recording, made without any
+    metric or builder."""
+    from . import inputs
+
+    return inputs.graph()
+
+
+@pytest.fixture
+def flockkit_parts():
+    """``flockkit.testing.inputs.parts()``: (a motion of 44 points in three rigid parts, the part
+    of each point)."""
+    from . import inputs
+
+    return inputs.parts()
+
+
+@pytest.fixture
+def flockkit_walker():
+    """``flockkit.testing.inputs.walker()``: a looping skeletal clip of eleven joints."""
+    from . import inputs
+
+    return inputs.walker()
+
+
+@pytest.fixture(params=[2, 3], ids=["2d", "3d"])
+def flockkit_degenerate_configurations(request):
+    """``flockkit.testing.inputs.degenerate_configurations(dims)``, in 2D and in 3D: (label,
+    Configuration) pairs of squares, grids, coincident, lone and collinear agents."""
+    from . import inputs
+
+    return inputs.degenerate_configurations(request.param)
+
+
+def _made(kind: str, name: str):
+    """The installed component `name` with its default parameters; a clip player (a controller
+    declaring ``clip_player``) plays the kit's walker clip."""
+    from ..registry import capabilities_of, get
+    from . import inputs
+
+    if kind == "controller" and capabilities_of(kind, name).clip_player:
+        return get(kind, name, clip=inputs.walker())
+    return get(kind, name)
+
+
+class KitItem(pytest.Item):
+    """One check of the kit on one installed component."""
+
+    def __init__(self, *, kind, component_name, check, skip, **kwargs):
+        super().__init__(**kwargs)
+        self.kind, self.component_name, self.check, self.skip = kind, component_name, check, skip
+
+    def runtest(self):
+        if self.skip:
+            pytest.skip(self.skip)
+        from . import _run
+
+        _run(self.check, self.kind, self.component_name, _made(self.kind, self.component_name))
+
+    def repr_failure(self, excinfo):
+        if isinstance(excinfo.value, AssertionError):
+            return str(excinfo.value)
+        return super().repr_failure(excinfo)
+
+    def reportinfo(self):
+        return self.path, None, f"kit:{self.kind}:{self.component_name}-{self.check.__name__}"
+
+
+def pytest_collection_modifyitems(session, config, items):
+    wanted = config.getoption("flockkit_kit")
+    if wanted is None:
+        return
+    from ..errors import ValidationError
+    from ..kinds import KINDS
+    from ..registry import describe
+    from . import checks_for, skipped_checks
+
+    kinds = list(KINDS) if wanted == "all" else [k.strip() for k in wanted.split(",") if k.strip()]
+    unknown = [k for k in kinds if k not in KINDS]
+    if unknown:
+        raise pytest.UsageError(f"--flockkit-kit: unknown kind {unknown[0]!r}; the kinds are {', '.join(KINDS)}")
+    for kind in kinds:
+        for found in describe(kind):
+            try:
+                component = _made(kind, found.name)
+            except ValidationError as exc:  # parameters without defaults: a test must configure it
+                reason = (
+                    f"{kind} {found.name!r} cannot be made with its default parameters ({exc}); check it "
+                    "from a test: flockkit.testing.parametrize_with_checks([(kind, configured_component)])"
+                )
+                skipped, applicable = {check.__name__: reason for check in checks_for(kind)}, {}
+            else:
+                skipped = skipped_checks(kind, component)
+                applicable = {check.__name__: check for check in checks_for(kind, component)}
+            for check in checks_for(kind):
+                check_name = check.__name__
+                items.append(
+                    KitItem.from_parent(
+                        session,
+                        name=f"kit:{kind}:{found.name}-{check_name}",
+                        kind=kind,
+                        component_name=found.name,
+                        check=applicable.get(check_name, check),
+                        skip=skipped.get(check_name),
+                    )
+                )
