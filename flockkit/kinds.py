@@ -55,6 +55,9 @@ class Kind:
         (a behavior declaring ``obstacles`` takes ``obstacles=``).
     kit : str
         The module of ``flockkit.testing`` whose ``CHECKS`` check the kind's behaviour.
+    receives, returns : tuple of str
+        The value types (dotted paths) its components are handed and give back: what its
+        reference page documents, field by field, and ``flockkit.testing.strategies`` draws.
     """
 
     name: str
@@ -65,6 +68,8 @@ class Kind:
     optional: Mapping = attrs.field(factory=dict, converter=_frozen)
     factory_parameters: Mapping = attrs.field(factory=dict, converter=_frozen)
     kit: str
+    receives: tuple = ()
+    returns: tuple = ()
 
 
 KINDS: Mapping[str, Kind] = _frozen(
@@ -84,6 +89,8 @@ KINDS: Mapping[str, Kind] = _frozen(
             },
             factory_parameters={"obstacles": ("obstacles",)},
             kit="flockkit.testing.behavior",
+            receives=("flockkit.motion.State", "flockkit.motion.Motion"),
+            returns=("flockkit.motion.Motion",),
         ),
         Kind(
             name="metric",
@@ -96,6 +103,8 @@ KINDS: Mapping[str, Kind] = _frozen(
                 "pairwise": interfaces.Pairwise,
             },
             kit="flockkit.testing.metric",
+            receives=("flockkit.motion.Configuration",),
+            returns=("flockkit.motion.Alignment",),
         ),
         Kind(
             name="builder",
@@ -104,6 +113,8 @@ KINDS: Mapping[str, Kind] = _frozen(
             fields={"progress"},
             optional={"progress": interfaces.BuildProgress},
             kit="flockkit.testing.builder",
+            receives=("flockkit.motion.Motion",),
+            returns=("flockkit.graphs.MotionGraph", "flockkit.graphs.Clip", "flockkit.graphs.Transition"),
         ),
         Kind(
             name="walk",
@@ -112,24 +123,32 @@ KINDS: Mapping[str, Kind] = _frozen(
             fields={"targets"},
             factory_parameters={"targets": ("target", "features", "avoid")},
             kit="flockkit.testing.walk",
+            receives=("flockkit.graphs.MotionGraph", "flockkit.graphs.Clip", "flockkit.graphs.Transition"),
+            returns=("flockkit.graphs.Walk",),
         ),
         Kind(
             name="proposal",
             hook="flockkit_register_proposals",
             protocol=interfaces.ProposalMove,
             kit="flockkit.testing.proposal",
+            receives=("flockkit.motion.Motion", "flockkit.constrained.ProposalContext"),
+            returns=("flockkit.constrained.Proposal",),
         ),
         Kind(
             name="objective",
             hook="flockkit_register_objectives",
             protocol=interfaces.Objective,
             kit="flockkit.testing.objective",
+            receives=("flockkit.motion.Motion", "flockkit.constrained.Problem"),
+            returns=(),
         ),
         Kind(
             name="segmenter",
             hook="flockkit_register_segmenters",
             protocol=interfaces.Segmenter,
             kit="flockkit.testing.segmenter",
+            receives=("flockkit.motion.Motion",),
+            returns=("flockkit.scene.Segmentation",),
         ),
         Kind(
             name="controller",
@@ -139,6 +158,8 @@ KINDS: Mapping[str, Kind] = _frozen(
             fields={"clip_player"},
             factory_parameters={"clip_player": ("clip", "rate")},
             kit="flockkit.testing.controller",
+            receives=(),
+            returns=("flockkit.skeleton.Pose", "flockkit.skeleton.Event", "flockkit.skeleton.Skeleton"),
         ),
     )
 )

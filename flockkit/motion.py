@@ -201,10 +201,12 @@ class _OneInstant:
 
     @property
     def n_agents(self) -> int:
+        """N, the number of agents."""
         return self.positions.shape[0]
 
     @property
     def dims(self) -> int:
+        """D, the number of dimensions (2 or 3)."""
         return self.positions.shape[1]
 
 
@@ -364,14 +366,17 @@ class Motion:
 
     @property
     def n_frames(self) -> int:
+        """T, the number of frames."""
         return self.positions.shape[0]
 
     @property
     def n_agents(self) -> int:
+        """N, the number of agents."""
         return self.positions.shape[1]
 
     @property
     def dims(self) -> int:
+        """D, the number of dimensions (2 or 3)."""
         return self.positions.shape[2]
 
     @property

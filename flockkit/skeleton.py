@@ -81,6 +81,7 @@ class Pose:
 
     @property
     def n_joints(self) -> int:
+        """J, the number of joints."""
         return self.rotations.shape[-2]
 
     @property
@@ -150,6 +151,11 @@ class Skeleton:
         translation keeps its rest translation.
     scales : (J, 3), optional
         Each joint's local scale (default 1): fixed, since clips do not animate scale.
+
+    Attributes
+    ----------
+    depth : (J,) int
+        Each joint's number of ancestors (0 for a root), computed on construction.
     """
 
     names: tuple = attrs.field(converter=tuple)
@@ -186,6 +192,7 @@ class Skeleton:
 
     @property
     def n_joints(self) -> int:
+        """J, the number of joints."""
         return len(self.parents)
 
     def index(self, name: str) -> int:

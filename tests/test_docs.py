@@ -1,5 +1,7 @@
 """The documentation: every code block runs as written, and every hook, kind and public name is documented."""
 
+import functools
+import inspect
 import os
 import re
 from pathlib import Path
@@ -164,3 +166,54 @@ def test_every_builtin_parameter_and_capability_is_documented_on_its_kind_page()
         f"Capabilities docstring: {f.name}" for f in attrs.fields(flockkit.Capabilities) if f.name not in documented
     ]
     assert missing == []
+
+
+def _value_types():
+    import importlib
+
+    paths = sorted({path for kind in KINDS.values() for path in (*kind.receives, *kind.returns)})
+    return [(path, getattr(importlib.import_module(path.rpartition(".")[0]), path.rpartition(".")[2]))
+            for path in paths]  # fmt: skip
+
+
+@pytest.mark.parametrize("path, value_type", _value_types(), ids=lambda v: v if isinstance(v, str) else "")
+def test_every_value_a_kind_handles_documents_its_fields(path, value_type):
+    """A plugin author reads a value's fields, properties and invariants on the reference pages
+    (rendered from these docstrings), never in the source."""
+    import attrs
+
+    doc = inspect.getdoc(value_type) or ""
+    fields = [f.name for f in attrs.fields(value_type) if not f.name.startswith("_")] if attrs.has(value_type) else []
+    assert not [f for f in fields if f not in doc], f"{path}: fields not described in its docstring"
+    for name, member in vars(value_type).items():
+        if isinstance(member, property | functools.cached_property) and not name.startswith("_"):
+            assert inspect.getdoc(member), f"{path}.{name} has no docstring"
+
+
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_every_kind_page_renders_the_values_it_handles(kind):
+    page = (ROOT / "docs" / "kinds" / f"{kind}.md").read_text()
+    for path in (*KINDS[kind].receives, *KINDS[kind].returns):
+        assert f"::: {path}" in page, f"docs/kinds/{kind}.md does not render {path}"
+
+
+def _validate_table() -> str:
+    from flockkit import validate
+
+    rows = ["| function | what it checks | options |", "|---|---|---|"]
+    for name in validate.__all__:
+        function = getattr(validate, name)
+        first = " ".join((inspect.getdoc(function) or "").split("\n\n")[0].split())
+        first = first.replace(":func:", "").replace("``", "`")
+        options = [
+            f"`{p.name}`"
+            for p in inspect.signature(function).parameters.values()
+            if p.kind is p.KEYWORD_ONLY or p.default is not p.empty
+        ]
+        rows.append(f"| `{name}` | {first} | {', '.join(options) or '-'} |")
+    return "\n".join(rows)
+
+
+def test_the_validate_catalogue_lists_every_check_and_option():
+    page = (ROOT / "docs" / "api" / "core.md").read_text()
+    assert _validate_table() in page, "docs/api/core.md: the validate catalogue differs from flockkit.validate"

@@ -295,6 +295,7 @@ class Problem:
 
     @property
     def n_frames(self) -> int:
+        """T, the number of frames: duration / dt + 1."""
         return round(self.duration / self.dt) + 1
 
     def frame(self, time: float) -> int:

@@ -31,7 +31,15 @@ GRAPH_FORMAT_VERSION = 1
 
 @attrs.frozen(kw_only=True)
 class Clip:
-    """An edge that plays source frames ``start..stop`` (both included) from node `source` to `target`."""
+    """An edge that plays source frames ``start..stop`` (both included) from node `source` to `target`.
+
+    Attributes
+    ----------
+    source, target : int
+        The nodes it joins: clip k of a MotionGraph joins node k to node k + 1.
+    start, stop : int
+        The source frames of those nodes (``graph.nodes[k]``, ``graph.nodes[k + 1]``), start < stop.
+    """
 
     source: int
     target: int
@@ -40,6 +48,7 @@ class Clip:
 
     @property
     def n_frames(self) -> int:
+        """The source frames it spans, both ends included: ``stop - start + 1``."""
         return self.stop - self.start + 1
 
 
@@ -55,6 +64,17 @@ class Transition:
     A transition from a frame to itself (`start` == `end`) is a *turn*: the same motion, rotated
     about the group's center of mass, so that over the blend the group steers onto a new
     heading. Builders add turns so that walks can steer a group that the recording barely turns.
+
+    Attributes
+    ----------
+    source, target : int
+        The nodes it joins (indices into ``graph.nodes``).
+    start, end : int
+        Their source frames: ``graph.nodes[source]`` and ``graph.nodes[target]``.
+    alignment : Alignment
+        As above; its rotation and translation are proper and finite, its assignment a permutation.
+    blend : int
+        Frames of blending after it, >= 0; a walk takes no other transition until they have played.
     """
 
     source: int
@@ -73,6 +93,7 @@ class Transition:
 
     @property
     def is_turn(self) -> bool:
+        """Whether it leads from a frame to itself (a turn, see above)."""
         return self.start == self.end
 
 
@@ -102,14 +123,24 @@ def _edge(value) -> tuple[str, int]:
 class Walk:
     """A path through a MotionGraph: where it starts, how the source is placed, and its edges.
 
+    Its length is that of the motion it plays, ``flockkit.synthesize(graph, walk)``: the start
+    node's frame, then for each ``("clip", k)`` the clip's frames after its first
+    (``clip.n_frames - 1``); a transition plays no frame of its own (the next clip carries on from
+    its target, blended over ``transition.blend`` frames). Its duration in seconds is (frames
+    played - 1) x the source's dt: a walk strategy asked for `duration` returns a walk at least
+    that long.
+
     Attributes
     ----------
     start : int
         The node the walk starts at.
     edges : tuple of (str, int)
-        ``("clip", k)`` or ``("transition", k)``, each leaving the node the previous one reached.
-    rotation, translation : ndarray
-        The start pose: source coordinates map to the world as ``rotation @ p + translation``.
+        ``("clip", k)`` (``graph.clips[k]``) or ``("transition", k)`` (``graph.transitions[k]``),
+        each leaving the node the previous one reached; a transition only once the previous
+        one's blend has played.
+    rotation, translation : ndarray or None
+        The start pose: source coordinates map to the world as ``rotation @ p + translation``
+        (a proper (D, D) rotation and a (D,) vector; None: the identity).
     """
 
     start: int = attrs.field(converter=lambda v: integer(v, "Walk.start", minimum=0))

@@ -26,7 +26,17 @@ def _labels(value) -> np.ndarray:
 
 @attrs.frozen(kw_only=True, eq=False)
 class Segmentation:
-    """The part of each point: `labels` (N,) in 0..n_parts-1, every part non-empty."""
+    """The part of each point: `labels` (N,) in 0..n_parts-1, every part non-empty.
+
+    Made as ``Segmentation(labels=[0, 0, 1], n_parts=2)``; a segmenter returns one.
+
+    Attributes
+    ----------
+    labels : ndarray of int, shape (N,)
+        The part of each point (agent) of the motion segmented, read-only.
+    n_parts : int
+        The number of parts, 1 <= n_parts <= N; each label in 0..n_parts-1 is used.
+    """
 
     labels: np.ndarray = attrs.field(converter=_labels)
     n_parts: int = attrs.field()
@@ -48,6 +58,7 @@ class Segmentation:
 
     @property
     def n_points(self) -> int:
+        """N, the number of points labelled."""
         return len(self.labels)
 
     def parts(self) -> list[np.ndarray]:
