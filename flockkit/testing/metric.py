@@ -188,9 +188,13 @@ def check_degenerate_configurations(name, metric):
 
 @applies_when("lower_bound")
 def check_lower_bound(name, metric):
-    """lower_bound(a, b) never exceeds compare(a, b).distance."""
+    """lower_bound(a, b) never exceeds compare(a, b).distance, on random pairs and on rigid
+    copies of random and of tied, symmetric configurations."""
+    from .inputs import degenerate_configurations
+
     rng = np.random.default_rng(SEED + 3)
-    for a, b in [*_pairs(metric), *((c, _rigid_copy(c, rng)) for c in _configurations(metric))]:
+    tied = [c for d in dims_of(metric) for _, c in degenerate_configurations(d)]
+    for a, b in [*_pairs(metric), *((c, _rigid_copy(c, rng)) for c in [*_configurations(metric), *tied])]:
         bound, distance = float(metric.lower_bound(a, b)), metric.compare(a, b).distance
         assert np.isfinite(bound) and bound <= distance + 1e-9 * _scale(a), (
             f"{name}.lower_bound = {bound} exceeds compare's distance {distance}"

@@ -90,6 +90,14 @@ class IcaKmeans:
         points = energy.shape[1]
         if wanted is not None and wanted > points:
             raise ValidationError(f"ica-kmeans: {wanted} moving parts asked for but only {points} points move")
+        if wanted is None:
+            # points whose energies are the same series move together: one row each for ICA (a
+            # rigid group translating at constant speed gives the same constant series, on
+            # which ICA's rows are noise)
+            scaled = energy / max(float(energy.max()), 1e-300)
+            _, first, same = np.unique(np.round(scaled, 9), axis=1, return_index=True, return_inverse=True)
+            if len(first) < points:
+                return self._moving_parts(energy[:, first], None, seed)[same.ravel()]
         components = self.n_components or _explaining(energy, self.max_components)
         components = min(components, points, energy.shape[0])
         if wanted == 1 or points == 1 or (wanted is None and components == 1):
@@ -115,6 +123,8 @@ def _explaining(energy: np.ndarray, most: int) -> int:
     """Principal components explaining _EXPLAINED of the energy's variance, at most `most`."""
     centered = energy - energy.mean(axis=0)
     singular = np.linalg.svd(centered, compute_uv=False)
+    if np.sum(singular**2) <= 1e-18 * max(float(np.sum(energy**2)), 1e-300):
+        return 1  # every series constant: nothing varies for components to explain
     share = np.cumsum(singular**2) / max(np.sum(singular**2), 1e-300)
     return int(min(np.searchsorted(share, _EXPLAINED) + 1, most))
 

@@ -753,10 +753,22 @@ class AcceptsArrays(IcaKmeans):
         return super().segment(motion, rng)
 
 
+class SplitsBySide(IcaKmeans):
+    """Cuts a group that moves as one into its left and right halves."""
+
+    def segment(self, motion, rng):
+        found = super().segment(motion, rng)
+        if found.n_parts > 1 or motion.n_agents < 2:
+            return found
+        left = motion.positions[0, :, 0] < np.median(motion.positions[0, :, 0])
+        return flockkit.Segmentation(labels=left.astype(int), n_parts=2) if 0 < left.sum() < motion.n_agents else found
+
+
 BROKEN_BY_KIND["segmenter"] = {
     "check_interface": NoSegment,
     "check_labels_cover_every_point": DropsAPoint,
     "check_still_points_apart_from_moving_ones": ByPosition,
+    "check_identical_motion_is_one_part": SplitsBySide,
     "check_deterministic": UnseededSegment,
     "check_order_of_points_does_not_matter": OrderDependent,
     "check_inputs_unchanged": MutatesMotionSegment,
