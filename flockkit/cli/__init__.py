@@ -43,6 +43,7 @@ ORDER = (
     "crowd",
     "import",
     "check",
+    "new-plugin",
 )
 GROUPS = (flocks, graphs, scenes, crowds, solve, plugins, demo)
 COMMANDS = {name: group.COMMANDS[name] for name in ORDER for group in GROUPS if name in group.COMMANDS}
