@@ -1,4 +1,5 @@
-"""``flockkit plugins`` and ``flockkit check``: the installed components and the conformance kit."""
+"""``flockkit plugins``, ``flockkit check`` and ``flockkit new-plugin``: the installed components,
+the conformance kit, and a ready distribution to start a new plugin from."""
 
 from __future__ import annotations
 
@@ -31,6 +32,15 @@ def _cmd_check(args) -> int:
         args.kind, component, name=args.name, partners=_partners(args.partner), progress=shows_progress(args)
     )
     print(f"{args.kind} {args.name!r}: {report.summary()}")
+    return 0
+
+
+def _cmd_new_plugin(args) -> int:
+    from ..testing.template import write_plugin
+
+    path = write_plugin(args.kind, args.name, args.directory)
+    print(f"wrote {path}: a {args.kind} plugin {args.name!r}")
+    print(f'next: cd {path} && pip install -e ".[test]" && pytest')
     return 0
 
 
@@ -67,8 +77,27 @@ def _check_arguments(parser) -> None:
     add_quiet(parser)
 
 
+def _new_plugin_arguments(parser) -> None:
+    # KIND is checked by write_plugin, not by argparse, so that a wrong one is a one-line error
+    parser.add_argument("kind", metavar="KIND", help=f"the extension kind: {', '.join(KINDS)}")
+    parser.add_argument(
+        "name", metavar="NAME", help="the component's registered name: lower-case words joined by - or _"
+    )
+    parser.add_argument(
+        "directory",
+        metavar="DIR",
+        nargs="?",
+        help="the folder to write (default: ./flockkit-NAME); it must not exist, or be empty",
+    )
+
+
 # command -> (help, arguments, run)
 COMMANDS = {
     "plugins": ("list installed plugin components", _plugins_arguments, _cmd_plugins),
     "check": ("run the conformance kit on an installed plugin component", _check_arguments, _cmd_check),
+    "new-plugin": (
+        "write a ready distribution for a new plugin of any kind",
+        _new_plugin_arguments,
+        _cmd_new_plugin,
+    ),
 }
