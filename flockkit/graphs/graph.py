@@ -296,6 +296,11 @@ class MotionGraph:
                 raise ValidationError(f"{field}.alignment is not for {n} agents in {d}D")
             if not 0 <= transition.blend < frames:
                 raise ValidationError(f"{field}.blend must be a frame count in 0..{frames - 1}; got {transition.blend}")
+            if transition.start + transition.blend > frames - 1:
+                raise ValidationError(
+                    f"{field} leaves frame {transition.start} with a blend of {transition.blend} frames, past the "
+                    f"recording's last frame {frames - 1}: the motion it blends away from must go on that long"
+                )
 
     # -- building ---------------------------------------------------------------------------
 
@@ -311,8 +316,9 @@ class MotionGraph:
         """Build a graph from transitions ``(start_frame, end_frame, alignment, blend)``: nodes at
         every transition frame, clips between consecutive nodes, trimmed to the largest strongly
         connected component (ties: the one holding the earliest frame). Transitions that land less
-        than the longest blend before the last kept frame are dropped (and the trimming repeated),
-        so a walk can always continue.
+        than the longest blend before the last kept frame, or leave less than their blend before the
+        recording's end (the motion they blend away from runs out), are dropped (and the trimming
+        repeated), so a walk can always continue and be played.
 
         Raises ValidationError if no transitions are given (a graph needs at least one loop).
         """
@@ -329,7 +335,8 @@ class MotionGraph:
             # A transition must land at least the longest blend before the last frame, so that a
             # walk can always go on: clips are always allowed, and at the last node every blend is done.
             longest = max(t[3] for t in transitions)
-            usable = [t for t in transitions if t[0] in kept and t[1] in kept and t[1] + longest <= last]
+            lands = [t for t in transitions if t[0] in kept and t[1] in kept and t[1] + longest <= last]
+            usable = [t for t in lands if t[0] + t[3] < motion.n_frames]
             if len(usable) == len(transitions):
                 break
             transitions = usable

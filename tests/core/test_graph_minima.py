@@ -1,9 +1,11 @@
 """flockkit.graphs.local_minima and local_minima_of_cells against a cell-by-cell reference."""
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import flockkit
 from flockkit.graphs import local_minima, local_minima_of_cells
 from flockkit.testing import strategies as fst
 
@@ -39,3 +41,30 @@ def test_local_minima_are_the_cells_at_most_their_neighbors(values, apart):
     rows, cols = rows[shuffled], cols[shuffled]
     got = local_minima_of_cells(rows, cols, values[rows, cols], far[rows, cols])
     assert [tuple(map(int, cell)) for cell in got] == expected
+
+
+def test_a_transition_whose_blend_runs_past_the_recording_is_refused_or_dropped():
+    """synthesis blends away from the motion after a transition's start: a graph whose transition
+    leaves within its blend of the recording's end cannot be played, so it is never made."""
+    import attrs
+
+    from flockkit.errors import ValidationError
+    from flockkit.graphs import MotionGraph, Walk
+    from flockkit.testing import inputs
+
+    graph = inputs.graph()
+    motion, last = graph.motion, graph.motion.n_frames - 1
+    given = [(t.start, t.end, t.alignment, t.blend) for t in graph.transitions]
+    late = (last - 2, 10, inputs._alignment(motion, last - 2, 10), 5)
+    assembled = MotionGraph.assemble(motion, [*given, late])
+    assert all(t.start + t.blend <= last for t in assembled.transitions) and len(assembled.transitions) == len(given)
+    nodes = sorted({*graph.nodes.tolist(), last - 2})
+    renumber = {frame: i for i, frame in enumerate(nodes)}
+    transitions = [attrs.evolve(t, source=renumber[t.start], target=renumber[t.end]) for t in graph.transitions]
+    clips = [
+        flockkit.graphs.Clip(source=i, target=i + 1, start=a, stop=b) for i, (a, b) in enumerate(zip(nodes, nodes[1:]))
+    ]
+    leaving = attrs.evolve(transitions[0], source=renumber[last - 2], start=last - 2)
+    with pytest.raises(ValidationError, match=r"transitions\[\d+\] leaves frame 118 with a blend of 5"):
+        MotionGraph(motion=motion, nodes=nodes, clips=clips, transitions=[*transitions, leaving])
+    assert flockkit.synthesize(assembled, Walk(start=0, edges=[("clip", 0)])).n_frames == 3
