@@ -311,3 +311,21 @@ def test_small_groups_are_matched_as_well_as_brute_force(dims):
             flockkit.Configuration(positions=b, velocities=np.zeros_like(b)),
         ).distance
         assert found <= 1.01 * exact_distance(a, b)
+
+
+@settings(max_examples=40, deadline=None)
+@given(fst.symmetric_configurations(max_agents=30), st.integers(0, 2**32 - 1))
+def test_a_rigid_reordered_copy_of_a_symmetric_configuration_is_at_distance_zero(config, seed):
+    """Squares, polygons, grids, agents on one spot or a line: ties in every distance the search
+    starts from, and the principal axes say nothing; a rigid copy must still be found exactly."""
+    rng = np.random.default_rng(seed)
+    q, r = np.linalg.qr(rng.standard_normal((config.dims, config.dims)))
+    rotation = q * np.sign(np.diag(r))
+    rotation[:, 0] *= np.sign(np.linalg.det(rotation))
+    order = rng.permutation(config.n_agents)
+    copy = flockkit.Configuration(positions=(config.positions @ rotation.T + 5.0)[order],
+                                  velocities=(config.velocities @ rotation.T)[order])  # fmt: skip
+    scale = max(1.0, float(np.mean(np.sum((config.positions - config.center_of_mass()) ** 2, axis=1))))
+    metric = flockkit.get("metric", "icp-hungarian")
+    assert metric.compare(config, copy).distance <= 1e-8 * scale
+    assert metric.compare(copy, config).distance <= 1e-8 * scale
