@@ -27,17 +27,18 @@ RESERVED = {
 }  # fmt: skip
 
 
-def parse_params(pairs, command: str | None = None) -> dict:
-    """``key=value`` strings to keyword arguments; values are read as JSON when they parse."""
+def parse_params(pairs, command: str | None = None, option: str = "--param") -> dict:
+    """``key=value`` strings (of `option`) to keyword arguments; values are read as JSON when they
+    parse."""
     params = {}
     reserved = RESERVED.get(command, {})
     for pair in pairs or ():
         key, sep, raw = pair.partition("=")
         if not sep or not key.isidentifier():
-            raise ValidationError(f"--param expects key=value with key a Python identifier; got {pair!r}")
+            raise ValidationError(f"{option} expects key=value with key a Python identifier; got {pair!r}")
         if key in reserved:
-            option = reserved[key]
-            raise ValidationError(f"--param {key}: {f'set it with {option}' if option else 'not a parameter here'}")
+            setter = reserved[key]
+            raise ValidationError(f"{option} {key}: {f'set it with {setter}' if setter else 'not a parameter here'}")
         try:
             params[key] = json.loads(raw)
         except json.JSONDecodeError:
@@ -152,6 +153,23 @@ def add_quiet(parser) -> None:
 
 def add_param(parser, what: str) -> None:
     parser.add_argument("--param", action="append", metavar="KEY=VALUE", help=f"{what} parameter, repeatable")
+
+
+def add_component_params(parser, main: str, *others: str) -> None:
+    """``--<kind>-param KEY=VALUE`` (repeatable) for the command's `main` component kind and each
+    of `others`; ``--param`` is the main one's, another name for ``--<main>-param``."""
+    parser.add_argument(
+        "--param", f"--{main}-param", dest=f"{main}_param", action="append", metavar="KEY=VALUE",
+        help=f"a parameter of the {main} (the command's main component), repeatable",
+    )  # fmt: skip
+    for kind in others:
+        parser.add_argument(f"--{kind}-param", dest=f"{kind}_param", action="append", metavar="KEY=VALUE",
+                            help=f"a parameter of the {kind}, repeatable")  # fmt: skip
+
+
+def component_params(args, kind: str, command: str | None = None) -> dict:
+    """The keyword arguments ``--<kind>-param`` (or, for the main component, ``--param``) gave."""
+    return parse_params(getattr(args, f"{kind}_param"), command, option=f"--{kind}-param")
 
 
 def add_scale_out(parser) -> None:

@@ -6,14 +6,15 @@ from pathlib import Path
 
 import flockkit
 
+from ..errors import ValidationError
 from ._options import (
+    add_component_params,
     add_mesh_options,
     add_output,
-    add_param,
     add_quiet,
     add_scale_out,
+    component_params,
     joblib_backend,
-    parse_params,
     parse_region,
     read_source,
     require_suffix,
@@ -24,9 +25,12 @@ from ._options import (
 def _cmd_build(args) -> int:
     output = require_suffix(args.output, (".npz",), "-o")
     source = read_source(args.motion, args.clip, args.fps, args.allow_outside)
-    params = parse_params(args.param, "build")
+    params = component_params(args, "builder", "build")
+    metric_params = component_params(args, "metric", "build")
     if args.threshold is not None:
         params["threshold"] = args.threshold
+    if (args.layers or args.parts) and metric_params:
+        raise ValidationError("--metric-param: --layers builds each part with its builder's own comparison")
     if args.layers or args.parts:
         segmentation = flockkit.Segmentation.load(args.parts) if args.parts else None
         layers = flockkit.build_layers(source, segmentation=segmentation, builder=args.builder or "windowed",
@@ -40,8 +44,8 @@ def _cmd_build(args) -> int:
         params["n_jobs"] = args.jobs
     with joblib_backend(args):
         graph = flockkit.build_graph(
-            motion, builder=args.builder or "kovar", metric=args.metric, seed=args.seed, progress=shows_progress(args),
-            **params,
+            motion, builder=args.builder or "kovar", metric=args.metric, metric_params=metric_params, seed=args.seed,
+            progress=shows_progress(args), **params,
         )  # fmt: skip
     graph.save(output)
     stats = graph.stats()
@@ -58,7 +62,7 @@ def _cmd_walk(args) -> int:
     output = require_suffix(args.output, (".npz",), "-o")
     layered = kind_of(args.graph) == "layers"
     graph = (flockkit.GraphLayers if layered else flockkit.MotionGraph).load(args.graph)
-    params = parse_params(args.param, "walk")
+    params = component_params(args, "strategy", "walk")
     if args.region is not None:
         params["region"] = parse_region(args.region)
     path = flockkit.walk(graph, strategy=args.strategy, duration=args.duration, seed=args.seed, **params)
@@ -84,19 +88,20 @@ def _build_arguments(parser) -> None:
     add_mesh_options(parser)
     parser.add_argument("--threshold", type=float, help="absolute transition threshold (default: adaptive)")
     add_scale_out(parser)
-    add_param(parser, "builder")
+    add_component_params(parser, "builder", "metric")
     add_quiet(parser)
 
 
 def _walk_arguments(parser) -> None:
     parser.add_argument("graph", help="graph or layers file (.npz, from build)")
     parser.add_argument("--duration", type=float, required=True, help="seconds of motion to synthesize")
-    parser.add_argument("--strategy", default="random", help="walk strategy (default random; region needs --region)")
+    parser.add_argument("--strategy", default="random",
+                        help="walk strategy (default random; region needs --region; any installed)")  # fmt: skip
     parser.add_argument(
         "--region", help="box:x0,y0,x1,y1 | ball:cx,cy,r | polygon:x0,y0,x1,y1,... (for --strategy region)"
     )
     parser.add_argument("--seed", type=int, default=None, help="random seed")
-    add_param(parser, "strategy")
+    add_component_params(parser, "strategy")
     add_output(parser, "motion file to write (.npz)")
 
 

@@ -9,13 +9,13 @@ import flockkit
 from ..errors import ValidationError
 from ._options import (
     add_allow_outside,
+    add_component_params,
     add_mesh_options,
     add_output,
-    add_param,
     add_quiet,
     add_scale_out,
+    component_params,
     joblib_backend,
-    parse_params,
     read_source,
     require_suffix,
 )
@@ -58,7 +58,7 @@ def _cmd_scene(args) -> int:
 def _cmd_segment(args) -> int:
     output = require_suffix(args.output, (".npz",), "-o")
     source = read_source(args.source, args.clip, args.fps, args.allow_outside)
-    params = parse_params(args.param, "segmenter")
+    params = component_params(args, "segmenter", "segmenter")
     if args.parts is not None:
         params["n_parts"] = args.parts
     found = flockkit.segment(source, segmenter=args.segmenter, seed=args.seed, **params)
@@ -75,7 +75,7 @@ def _segment_arguments(parser) -> None:
     parser.add_argument("--segmenter", default="ica-kmeans", help="segmenter (default ica-kmeans)")
     parser.add_argument("--seed", type=int, default=None, help="random seed")
     add_mesh_options(parser)
-    add_param(parser, "segmenter")
+    add_component_params(parser, "segmenter")
 
 
 def _scene_arguments(parser) -> None:

@@ -369,7 +369,9 @@ def test_simulate_in_an_arena_and_around_obstacles(capsys, tmp_path):
     assert code == 1 and "--obstacle 'ball:0,0'" in err
     code, _, err = run(capsys, "simulate", "--agents", "3", "--steps", "3", "--behavior", "vicsek", "--arena", "5",
                        "-o", str(tmp_path / "v.npz"))  # fmt: skip
-    assert code == 1 and "obstacles" in err and not (tmp_path / "v.npz").exists()
+    assert code == 1 and not (tmp_path / "v.npz").exists()
+    assert "declaring Capabilities(obstacles=True); behavior vicsek does not declare it" in err
+    assert "unexpected keyword" not in err and len(err.strip().splitlines()) == 1
 
 
 def test_meshes_from_the_command_line(capsys, tmp_path, shared_data):
@@ -612,3 +614,23 @@ def test_crowd_exports_to_unwritable_places_are_refused_naming_them(tmp_path):
     with pytest.raises(FileNotFoundError, match="nothere"):
         write_engine_buffers(crowd, tmp_path / "nothere" / "buffers.npz", 0.2)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_each_component_takes_its_own_parameters(capsys, tmp_path):
+    """--param is the main component's (--builder-param for build); --metric-param reaches the
+    metric, as the graph's provenance records; a key a component lacks is one line naming it."""
+    recording, graph = tmp_path / "sim.npz", tmp_path / "graph.npz"
+    code, _, err = run(capsys, "simulate", "--agents", "8", "--steps", "60", "--seed", "1",
+                       "--behavior-param", "cohesion_weight=2", "-o", str(recording))  # fmt: skip
+    assert code == 0, err
+    assert flockkit.Motion.load(recording) == flockkit.simulate(n_agents=8, steps=60, seed=1, cohesion_weight=2)
+    code, _, err = run(capsys, "build", str(recording), "--metric-param", "velocity_weight=0", "--param",
+                       "blend_time=0.3", "--quiet", "-o", str(graph))  # fmt: skip
+    assert code == 0, err
+    built = flockkit.MotionGraph.load(graph)
+    assert built.provenance["metric_params"]["velocity_weight"] == 0
+    assert built.provenance["builder_params"]["blend_time"] == 0.3
+    code, _, err = run(capsys, "build", str(recording), "--metric-param", "bogus=1", "-o", str(tmp_path / "g2.npz"))
+    assert code == 1 and "metric 'icp-hungarian'" in err and "'bogus'" in err and len(err.strip().splitlines()) == 1
+    code, _, err = run(capsys, "build", str(recording), "--builder-param", "x", "-o", str(tmp_path / "g3.npz"))
+    assert code == 1 and "--builder-param expects key=value" in err
