@@ -23,7 +23,10 @@ dt = 0.1 s) for proposals, a ``graph`` for walks. The defaults are the built-in 
 and ``boids`` where installed, and the kit's own graph (``flockkit.testing.inputs``); no check
 needs a built-in when its partners are given.
 
-Hypothesis strategies for flockkit values are in ``flockkit.testing.strategies``.
+Hypothesis strategies for every value a kind handles are in ``flockkit.testing.strategies``;
+the pytest plugin (fixtures, ``--flockkit-kit``) is ``flockkit.testing.pytest_plugin``, and
+``flockkit.testing.template.write_plugin`` (``flockkit new-plugin``) writes a new plugin's
+distribution.
 """
 
 from __future__ import annotations
