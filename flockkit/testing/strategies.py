@@ -22,14 +22,20 @@ from hypothesis.extra import numpy as hnp
 from ..constrained.problem import ComConstraint
 from ..mesh import AnimatedMesh
 from ..motion import Alignment, Configuration, Motion, State
+from ..scene.features import Features
 from ..scene.segmentation import Segmentation
 from ..skeleton import Event, Pose, SkeletalClip, Skeleton
 
 __all__ = [
     "configurations",
+    "tied_configurations",
+    "TIED_SHAPES",
     "symmetric_configurations",
+    "configuration_lists",
+    "index_pairs",
     "states",
     "motions",
+    "frame_windows",
     "alignments",
     "com_tracks",
     "problems",
@@ -37,12 +43,20 @@ __all__ = [
     "proposal_contexts",
     "motion_graphs",
     "walks",
+    "features",
+    "keyframed_arrows",
     "segmentations",
     "poses",
     "skeletons",
     "events",
     "skeletal_clips",
+    "pose_times",
+    "time_windows",
     "animated_meshes",
+    "guides",
+    "group_guides",
+    "regions",
+    "declared_capabilities",
     "difference_matrices",
     "anything",
     "damaged",
@@ -92,10 +106,15 @@ def _validate(min_agents, max_agents, max_coordinate, max_speed):
     _check_positive("max_speed", max_speed)
 
 
-def configurations(*, min_agents=1, max_agents=10, dims=None, max_coordinate=100.0, max_speed=10.0):
+def configurations(*, min_agents=1, max_agents=10, dims=None, max_coordinate=100.0, max_speed=10.0, degenerate=False):
     """Configurations with N in [min_agents, max_agents], D = `dims` (None: 2 or 3), coordinates
-    in [-max_coordinate, max_coordinate] and velocity components in [-max_speed, max_speed]."""
+    in [-max_coordinate, max_coordinate] and velocity components in [-max_speed, max_speed].
+
+    With ``degenerate=True``, also the tied and symmetric ones of :func:`tied_configurations`
+    (within the same bounds), which random coordinates almost never produce."""
     _validate(min_agents, max_agents, max_coordinate, max_speed)
+    if not isinstance(degenerate, bool):
+        raise InvalidArgument(f"degenerate must be True or False; got {degenerate!r}")
     dims_strategy = _dims(dims)
 
     @st.composite
@@ -105,7 +124,12 @@ def configurations(*, min_agents=1, max_agents=10, dims=None, max_coordinate=100
             positions=draw(_vectors(shape, max_coordinate)), velocities=draw(_vectors(shape, max_speed))
         )
 
-    return draw_configuration()
+    if not degenerate:
+        return draw_configuration()
+    tied = tied_configurations(
+        dims=dims, min_agents=min_agents, max_agents=max_agents, max_coordinate=max_coordinate, max_speed=max_speed
+    )
+    return st.one_of(draw_configuration(), tied)
 
 
 def states(*, min_agents=1, max_agents=10, dims=None, max_coordinate=100.0, max_speed=10.0, extra=()):
@@ -250,17 +274,34 @@ def damaged(data: bytes, *, max_flips: int = 3):
 # -- the other values a kind receives or returns -------------------------------------------------
 
 
+# Quarter, half and eighth turns map squares, grids and regular polygons onto themselves (or
+# nearly), so rotations take them as often as arbitrary angles.
+_SPECIAL_ANGLES = (0.0, math.pi / 2, math.pi, -math.pi / 2, math.pi / 4)
+
+
+def _angles(limit=math.pi):
+    special = [a for a in _SPECIAL_ANGLES if abs(a) <= limit]
+    return st.one_of(st.sampled_from(special), st.floats(-limit, limit))
+
+
+def _turn(angle, i, j, dims):
+    """The rotation by `angle` in the plane of axes i and j."""
+    matrix = np.eye(dims)
+    c, s = math.cos(angle), math.sin(angle)
+    matrix[i, i], matrix[i, j], matrix[j, i], matrix[j, j] = c, -s, s, c
+    return matrix
+
+
 def _rotations(dims):
-    """Proper rotations (D, D), uniformly spread (QR of a Gaussian matrix, signs fixed)."""
+    """Proper rotations (D, D) of any angle: in 2D one angle, in 3D yaw, pitch and roll (which
+    reach every rotation), quarter and half turns among them; the identity where shrunk."""
 
     @st.composite
     def draw_rotation(draw):
-        matrix = draw(hnp.arrays("float64", (dims, dims), elements=st.floats(-1, 1).filter(lambda x: abs(x) > 1e-3)))
-        q, r = np.linalg.qr(matrix + 3 * np.eye(dims))
-        q = q * np.sign(np.diag(r))
-        if np.linalg.det(q) < 0:
-            q[:, 0] *= -1
-        return q
+        if dims == 2:
+            return _turn(draw(_angles()), 0, 1, 2)
+        yaw, pitch, roll = draw(_angles()), draw(_angles(math.pi / 2)), draw(_angles())
+        return _turn(yaw, 0, 1, 3) @ _turn(pitch, 2, 0, 3) @ _turn(roll, 1, 2, 3)
 
     return draw_rotation()
 
@@ -289,50 +330,145 @@ def alignments(*, n_agents=None, dims=None, max_translation=100.0, max_distance=
     return draw_alignment()
 
 
-def symmetric_configurations(*, dims=None, max_agents=16, max_coordinate=10.0):
-    """Configurations with ties and symmetries, placed and turned at random: regular polygons,
-    square (cubic) grids, agents on one spot, pairs of coincident agents, one agent, evenly
-    spaced agents on a line; at rest, all heading one way, or turning about their centre. N at
-    most `max_agents` (>= 4), D = `dims` (None: 2 or 3), centres within `max_coordinate`."""
-    _check_count("max_agents", max_agents, low=4)
-    _check_positive("max_coordinate", max_coordinate)
-    dims_strategy = _dims(dims)
+# The shapes of tied_configurations, and how many agents each can have (at least).
+TIED_SHAPES = ("polygon", "hub", "grid", "spot", "pairs", "one", "line", "collinear")
+_FEWEST = {"polygon": 3, "hub": 4, "spot": 2, "pairs": 2, "line": 2, "collinear": 2}
+_MOVES = ("rest", "heading", "turning", "spreading")
+
+
+def _counts(shape, d, low, high):
+    """The numbers of agents in [low, high] that `shape` can have in `d` dimensions."""
+    if shape == "one":
+        return [1] if low <= 1 else []
+    if shape == "grid":
+        sizes, side = [], 2
+        while side**d <= high:
+            sizes += [side**d] if side**d >= low else []
+            side += 1
+        return sizes
+    return list(range(max(low, _FEWEST[shape]), high + 1))
+
+
+def _unit_shape(draw, shape, n, d):
+    """`n` points of `shape` about the origin, the farthest at distance 1 (all 0 if coincident);
+    flat shapes lie along the first axis or in the plane of the first two."""
+    if shape in ("polygon", "hub"):
+        k = n if shape == "polygon" else n - 1
+        angle = np.arange(k) * 2 * math.pi / k
+        points = np.zeros((n, d))
+        points[:k, 0], points[:k, 1] = np.cos(angle), np.sin(angle)
+        return points
+    if shape == "grid":
+        side = round(n ** (1 / d))
+        points = np.stack(np.meshgrid(*[np.arange(float(side))] * d, indexing="ij"), axis=-1).reshape(-1, d)
+    elif shape in ("spot", "one"):
+        return np.zeros((n, d))
+    elif shape == "pairs":  # n // 2 spots of two agents each, one of three if n is odd
+        spots = draw(_vectors((n // 2, d), 1.0))
+        points = spots[np.minimum(np.arange(n) // 2, n // 2 - 1)]
+    elif shape == "line":
+        points = np.outer(np.arange(float(n)), np.eye(d)[0])
+    else:  # collinear: anywhere on one line, coincident agents allowed
+        points = np.outer(draw(_vectors((n,), 1.0)), np.eye(d)[0])
+    points = points - points.mean(axis=0)
+    farthest = np.linalg.norm(points, axis=1).max()
+    return points / farthest if farthest > 1e-12 else np.zeros_like(points)
+
+
+def tied_configurations(
+    *,
+    dims=None,
+    min_agents=1,
+    max_agents=16,
+    max_coordinate=10.0,
+    max_radius=None,
+    max_speed=2.0,
+    shapes=TIED_SHAPES,
+):
+    """Degenerate configurations, which metrics and behavior models must handle and random
+    coordinates almost never produce: tied distances, coincident agents, tied (zero) spreads that
+    leave principal axes undefined. ``inputs.degenerate_configurations`` lists a fixed few of
+    them; these are drawn, placed, turned and sized at random.
+
+    Shapes (`shapes`, a subset of ``TIED_SHAPES``):
+
+    - ``"polygon"``: a regular polygon of any number of corners;
+    - ``"hub"``: a regular polygon with one more agent at its centre;
+    - ``"grid"``: a square (2D) or cubic (3D) grid;
+    - ``"spot"``: every agent on one spot;
+    - ``"pairs"``: agents coincident two by two (one three if N is odd);
+    - ``"one"``: a single agent;
+    - ``"line"``: agents evenly spaced on a line;
+    - ``"collinear"``: agents anywhere on one line.
+
+    Each moves in one of four ways: at rest, all heading one way, turning rigidly about the
+    centre, or spreading from (or gathering to) it. N in [min_agents, max_agents], D = `dims`
+    (None: 2 or 3). The farthest agent lies at a radius in [max_radius / 100, max_radius]
+    (default max_coordinate / 2) of the centre, every coordinate in [-max_coordinate,
+    max_coordinate], and every velocity at most `max_speed` long. Distances tie up to rounding
+    (a rotation by an arbitrary angle rounds them), as they do in real data."""
+    _validate(min_agents, max_agents, max_coordinate, max_speed)
+    max_radius = max_coordinate / 2 if max_radius is None else max_radius
+    _check_positive("max_radius", max_radius)
+    if max_radius > max_coordinate:
+        raise InvalidArgument(f"max_radius={max_radius} must be <= max_coordinate={max_coordinate}")
+    if isinstance(shapes, str):
+        raise InvalidArgument(f"shapes must be a collection of shape names, not one string; got {shapes!r}")
+    shapes = tuple(shapes)
+    unknown = [s for s in shapes if s not in TIED_SHAPES]
+    if not shapes or unknown:
+        raise InvalidArgument(f"shapes must be a non-empty subset of {TIED_SHAPES}; got {shapes!r}")
+    _dims(dims)
+    fitting = {
+        d: [s for s in shapes if _counts(s, d, min_agents, max_agents)] for d in ((2, 3) if dims is None else (dims,))
+    }
+    fitting = {d: found for d, found in fitting.items() if found}
+    if not fitting:
+        raise InvalidArgument(f"no shape of {shapes} has between {min_agents} and {max_agents} agents in {dims}D")
 
     @st.composite
     def draw_degenerate(draw):
-        d = draw(dims_strategy)
-        shape = draw(st.sampled_from(["polygon", "grid", "spot", "pairs", "one", "line"]))
-        if shape == "polygon":
-            n = draw(st.integers(3, max_agents))
-            angle = np.arange(n) * 2 * math.pi / n
-            flat = np.column_stack([np.cos(angle), np.sin(angle)])
-            points = np.column_stack([flat, np.zeros((n, d - 2))])
-        elif shape == "grid":
-            side = draw(st.integers(2, max(2, int(max_agents ** (1 / d)))))
-            points = np.stack(np.meshgrid(*[np.arange(float(side))] * d, indexing="ij"), axis=-1).reshape(-1, d)
-        elif shape == "spot":
-            points = np.zeros((draw(st.integers(2, max_agents)), d))
-        elif shape == "pairs":
-            points = np.repeat(draw(_vectors((draw(st.integers(2, max_agents // 2)), d), 1.0)), 2, axis=0)
-        elif shape == "one":
-            points = np.zeros((1, d))
-        else:
-            points = np.outer(np.arange(float(draw(st.integers(2, max_agents)))), np.eye(d)[0])
-        scale = draw(st.floats(0.1, 2.0))
+        d = draw(st.sampled_from(sorted(fitting)))
+        shape = draw(st.sampled_from(fitting[d]))
+        n = draw(st.sampled_from(_counts(shape, d, min_agents, max_agents)))
+        unit = _unit_shape(draw, shape, n, d)
+        radius = max_radius * draw(st.floats(0.01, 1.0))
         rotation = draw(_rotations(d))
-        centered = (points - points.mean(axis=0)) * scale
-        motion = draw(st.sampled_from(["rest", "heading", "turning"]))
-        if motion == "rest":
-            velocities = np.zeros_like(centered)
-        elif motion == "heading":
-            velocities = np.tile(np.eye(d)[0], (len(centered), 1))
+        room = max_coordinate - radius
+        centre = draw(_vectors((d,), room)) if room > 0 else np.zeros(d)
+        positions = unit @ rotation.T * radius + centre
+        speed = max_speed * draw(st.floats(0.0, 1.0))
+        move = draw(st.sampled_from(_MOVES))
+        if move == "rest":
+            velocities = np.zeros_like(unit)
+        elif move == "heading":
+            velocities = np.tile(draw(_rotations(d))[:, 0] * speed, (n, 1))
+        elif move == "turning":  # about the axis normal to the plane of the (turned) first two axes
+            local = np.zeros_like(unit)
+            local[:, 0], local[:, 1] = -unit[:, 1], unit[:, 0]
+            velocities = local @ rotation.T * speed
         else:
-            velocities = np.zeros_like(centered)
-            velocities[:, 0], velocities[:, 1] = -centered[:, 1], centered[:, 0]
-        shift = draw(_vectors((d,), max_coordinate))
-        return Configuration(positions=centered @ rotation.T + shift, velocities=velocities @ rotation.T)
+            velocities = unit @ rotation.T * speed * draw(st.sampled_from([1.0, -1.0]))
+        return Configuration(
+            positions=np.clip(positions, -max_coordinate, max_coordinate),  # rounding, at most an ulp
+            velocities=velocities,
+        )
 
     return draw_degenerate()
+
+
+def symmetric_configurations(*, dims=None, max_agents=16, max_coordinate=10.0):
+    """:func:`tied_configurations` whose every agent ties with another: regular polygons,
+    square (cubic) grids, agents on one spot, coincident pairs, one agent, evenly spaced agents on
+    a line; N at most `max_agents` (>= 4), D = `dims` (None: 2 or 3), coordinates within
+    `max_coordinate`. A rigid, reordered copy of one must be at distance 0 from it."""
+    _check_count("max_agents", max_agents, low=4)
+    return tied_configurations(
+        dims=dims,
+        max_agents=max_agents,
+        max_coordinate=max_coordinate,
+        shapes=("polygon", "grid", "spot", "pairs", "one", "line"),
+    )
 
 
 def _unit_quaternions(shape):
@@ -392,7 +528,8 @@ def events(*, max_time=10.0, names=("step", "cheer")):
 
 def skeletal_clips(*, min_joints=1, max_joints=6, min_frames=2, max_frames=30, fps=30.0):
     """Skeletal clips over a drawn skeleton: T in [min_frames, max_frames] frames at `fps`, unit
-    rotations per frame and joint, root translations, and events within the clip's duration."""
+    rotations per frame and joint, translations of the roots alone (T, 3) or of every joint
+    (T, J, 3), and up to three events within the clip's duration (its ends included)."""
     _check_range("min_joints", min_joints, "max_joints", max_joints)
     _check_range("min_frames", min_frames, "max_frames", max_frames)
     _check_positive("fps", fps)
@@ -402,12 +539,15 @@ def skeletal_clips(*, min_joints=1, max_joints=6, min_frames=2, max_frames=30, f
         skeleton = draw(skeletons(min_joints=min_joints, max_joints=max_joints))
         t = draw(st.integers(min_frames, max_frames))
         duration = (t - 1) / fps
+        times = st.one_of(st.sampled_from([0.0, duration]), st.floats(0.0, duration))
+        tags = st.builds(Event, time=times, name=st.sampled_from(["step", "cheer"]))
+        shape = draw(st.sampled_from([(t, 3), (t, skeleton.n_joints, 3)]))
         return SkeletalClip(
             skeleton=skeleton,
             fps=float(fps),
             rotations=draw(_unit_quaternions((t, skeleton.n_joints))),
-            translations=draw(_vectors((t, 3), 10.0)),
-            events=draw(st.lists(events(max_time=max(duration, 1e-9)), max_size=3)) if duration > 0 else [],
+            translations=draw(_vectors(shape, 10.0)),
+            events=draw(st.lists(tags, max_size=3)),
             name=draw(st.sampled_from(["walk", "idle", "run"])),
         )
 
@@ -431,19 +571,24 @@ def segmentations(*, min_points=1, max_points=20, max_parts=None):
     return draw_segmentation()
 
 
-def animated_meshes(*, min_frames=1, max_frames=10, max_vertices=12, max_coordinate=10.0):
-    """Animated meshes: a motion (T, V, 3) of V in [3, max_vertices] vertices and triangles
-    indexing them (a fan over the vertices)."""
+def animated_meshes(*, min_frames=1, max_frames=10, max_vertices=12, max_faces=8, max_coordinate=10.0):
+    """Animated meshes: a motion (T, V, 3) of T in [min_frames, max_frames] frames and V in
+    [3, max_vertices] vertices, and 1 to `max_faces` faces, all triangles or all quads (where
+    V >= 4), each of distinct vertices of the mesh; not every vertex need be on a face."""
     _check_range("min_frames", min_frames, "max_frames", max_frames)
     _check_count("max_vertices", max_vertices, low=3)
+    _check_count("max_faces", max_faces)
+    _check_positive("max_coordinate", max_coordinate)
 
     @st.composite
     def draw_mesh(draw):
         v = draw(st.integers(3, max_vertices))
         motion = draw(motions(min_frames=min_frames, max_frames=max_frames, min_agents=v, max_agents=v, dims=3,
                               max_coordinate=max_coordinate))  # fmt: skip
-        faces = np.array([[0, k, k + 1] for k in range(1, v - 1)])
-        return AnimatedMesh(motion=motion, faces=faces, name="mesh")
+        corners = draw(st.sampled_from([3, 4] if v >= 4 else [3]))
+        face = st.lists(st.integers(0, v - 1), min_size=corners, max_size=corners, unique=True)
+        faces = np.array(draw(st.lists(face, min_size=1, max_size=max_faces)))
+        return AnimatedMesh(motion=motion, faces=faces, name=draw(st.sampled_from(["mesh", "flag", "plant"])))
 
     return draw_mesh()
 
@@ -470,18 +615,21 @@ def motion_graphs(*, dims=None, max_agents=6):
     return draw_graph()
 
 
-def walks(graph, *, max_edges=12):
+def walks(graph, *, max_edges=12, max_translation=10.0):
     """Walks that fit `graph` (a MotionGraph): a start node, then up to `max_edges` edges, each
     leaving the node the previous one reached, a transition only once the previous one's blend has
-    played."""
+    played; the start pose either left out (the identity) or a proper rotation and a translation
+    in [-max_translation, max_translation]."""
     from ..graphs import MotionGraph, Walk
 
     if not isinstance(graph, MotionGraph):
         raise InvalidArgument(f"graph must be a flockkit.MotionGraph; got {type(graph).__name__}")
     _check_count("max_edges", max_edges, low=0)
+    _check_positive("max_translation", max_translation)
     leaving = {}
     for k, t in enumerate(graph.transitions):
         leaving.setdefault(t.source, []).append(k)
+    d = graph.motion.dims
 
     @st.composite
     def draw_walk(draw):
@@ -500,7 +648,11 @@ def walks(graph, *, max_edges=12):
                 node = graph.clips[index].target
             else:
                 owed, node = graph.transitions[index].blend, graph.transitions[index].target
-        return Walk(start=start, edges=edges)
+        if draw(st.booleans()):
+            return Walk(start=start, edges=edges)
+        return Walk(
+            start=start, edges=edges, rotation=draw(_rotations(d)), translation=draw(_vectors((d,), max_translation))
+        )
 
     return draw_walk()
 
@@ -577,3 +729,247 @@ def proposal_contexts(behavior, *, dims=None, max_agents=6):
         return context, motion
 
     return draw_context()
+
+
+# -- what optional capabilities and factory parameters hand a component -------------------------
+
+
+def features(*, min_frames=1, max_frames=20, dims=None, dt=None):
+    """Feature arrows (``flockkit.Features``) of T in [min_frames, max_frames] frames, D = `dims`
+    (None: 2 or 3), `dt` seconds apart (None: drawn from [0.01, 1]): each arrow of length in
+    [0, 1], the ends included (calm, and the strongest force), pointing any way."""
+    _check_range("min_frames", min_frames, "max_frames", max_frames)
+    if dt is not None:
+        _check_positive("dt", dt)
+    dims_strategy = _dims(dims)
+    dt_strategy = st.just(float(dt)) if dt is not None else st.floats(0.01, 1.0)
+
+    @st.composite
+    def draw_features(draw):
+        t, d = draw(st.integers(min_frames, max_frames)), draw(dims_strategy)
+        return Features(vectors=draw(_arrows(t, d)), dt=draw(dt_strategy))
+
+    return draw_features()
+
+
+def _arrows(count, d):
+    """(count, d) arrows of lengths in [0, 1] (0 and 1 as often as the rest), any direction."""
+
+    @st.composite
+    def draw_arrows(draw):
+        raw = draw(_vectors((count, d), 1.0))
+        norms = np.linalg.norm(raw, axis=1, keepdims=True)
+        directions = np.where(norms > 1e-6, raw / np.maximum(norms, 1e-6), np.eye(d)[0])
+        lengths = draw(
+            hnp.arrays("float64", (count, 1), elements=st.one_of(st.sampled_from([0.0, 1.0]), st.floats(0, 1)))
+        )
+        return directions * lengths
+
+    return draw_arrows()
+
+
+def keyframed_arrows(*, dims=None, duration=10.0, max_keyframes=5):
+    """Keyframed arrows as a walk's ``target`` takes them: a list of 1 to `max_keyframes`
+    (time, vector) pairs, times increasing within [0, duration] seconds, vectors of D = `dims`
+    (None: 2 or 3) coordinates and length at most 1."""
+    _check_positive("duration", duration)
+    _check_count("max_keyframes", max_keyframes)
+    dims_strategy = _dims(dims)
+
+    @st.composite
+    def draw_keyframes(draw):
+        d = draw(dims_strategy)
+        times = sorted(draw(st.lists(st.floats(0.0, duration), min_size=1, max_size=max_keyframes, unique=True)))
+        vectors = draw(_arrows(len(times), d))
+        return [(float(t), v) for t, v in zip(times, vectors)]
+
+    return draw_keyframes()
+
+
+def pose_times(*, min_size=1, max_size=8, max_time=10.0):
+    """What a controller's ``pose(times)`` is asked: 1D arrays of `min_size` to `max_size` times
+    in seconds in [0, max_time], in any order, repeats and 0 among them."""
+    _check_range("min_size", min_size, "max_size", max_size, floor=0)
+    _check_positive("max_time", max_time)
+    elements = st.one_of(st.just(0.0), st.floats(0.0, max_time))
+    return hnp.arrays("float64", st.integers(min_size, max_size), elements=elements)
+
+
+def time_windows(*, max_windows=4, max_time=10.0):
+    """What a controller's ``events(start, stop)`` is asked in turn: a tuple of 1 to
+    `max_windows` consecutive windows (start, stop) of seconds, the first starting in
+    [0, max_time], each starting where the one before stopped, some empty (start == stop)."""
+    _check_count("max_windows", max_windows)
+    _check_positive("max_time", max_time)
+
+    @st.composite
+    def draw_windows(draw):
+        count = draw(st.integers(1, max_windows))
+        cuts = sorted(draw(st.lists(st.floats(0.0, max_time), min_size=count + 1, max_size=count + 1)))
+        return tuple((float(a), float(b)) for a, b in zip(cuts[:-1], cuts[1:]))
+
+    return draw_windows()
+
+
+def frame_windows(n_frames):
+    """The windows ``log_plausibility`` and ``log_terms`` take for a motion of `n_frames` frames:
+    (start, stop) with 0 <= start <= stop <= n_frames (empty windows too), or stop None (the
+    end)."""
+    _check_count("n_frames", n_frames)
+
+    @st.composite
+    def draw_window(draw):
+        start = draw(st.integers(0, n_frames))
+        return start, draw(st.one_of(st.none(), st.integers(start, n_frames)))
+
+    return draw_window()
+
+
+def configuration_lists(*, min_size=2, max_size=6, min_agents=1, max_agents=6, dims=None, max_coordinate=10.0):
+    """What a metric's ``pairs_within`` and ``pairwise`` take: lists of `min_size` to `max_size`
+    configurations of one N in [min_agents, max_agents] and one D = `dims` (None: 2 or 3),
+    coordinates in [-max_coordinate, max_coordinate], copies and degenerate ones among them
+    (:func:`configurations` with ``degenerate=True``)."""
+    _check_range("min_size", min_size, "max_size", max_size)
+    _validate(min_agents, max_agents, max_coordinate, 1.0)
+    dims_strategy = _dims(dims)
+
+    @st.composite
+    def draw_list(draw):
+        n, d = draw(st.integers(min_agents, max_agents)), draw(dims_strategy)
+        one = configurations(min_agents=n, max_agents=n, dims=d, max_coordinate=max_coordinate, max_speed=2.0,
+                             degenerate=True)  # fmt: skip
+        found = draw(st.lists(one, min_size=1, max_size=max_size))
+        while len(found) < min_size or (len(found) < max_size and draw(st.booleans())):
+            found.append(found[draw(st.integers(0, len(found) - 1))])  # a copy: distance 0
+        return found
+
+    return draw_list()
+
+
+def index_pairs(n_items, *, max_pairs=None):
+    """Pairs as ``pairwise(configurations, pairs)`` takes them: integer arrays (P, 2) of distinct
+    rows (i, j), 0 <= i < j < `n_items` (>= 2), in any order, P in [1, max_pairs] (None: all)."""
+    _check_count("n_items", n_items, low=2)
+    if max_pairs is not None:
+        _check_count("max_pairs", max_pairs)
+    every = [(i, j) for i in range(n_items) for j in range(i + 1, n_items)]
+
+    @st.composite
+    def draw_pairs(draw):
+        chosen = draw(st.lists(st.sampled_from(every), min_size=1, max_size=max_pairs or len(every), unique=True))
+        return np.array(chosen, dtype=np.int64).reshape(-1, 2)
+
+    return draw_pairs()
+
+
+def guides(*, n_agents, steps, dims, max_guided=None, max_coordinate=10.0):
+    """What a behavior declaring ``Capabilities(guide=True)`` takes as ``guide``: a mapping of 1
+    to `max_guided` (None: all) of `n_agents` agents to (steps + 1, `dims`) paths, coordinates in
+    [-max_coordinate, max_coordinate]."""
+    _check_count("n_agents", n_agents)
+    _check_count("steps", steps, low=0)
+    _dims(dims)
+    if dims is None:
+        raise InvalidArgument("dims must be 2 or 3: a guide is for a flock of known dimension")
+    if max_guided is not None:
+        _check_count("max_guided", max_guided)
+    _check_positive("max_coordinate", max_coordinate)
+
+    @st.composite
+    def draw_guide(draw):
+        agents = draw(st.lists(st.integers(0, n_agents - 1), min_size=1, max_size=max_guided or n_agents, unique=True))
+        return {a: draw(_vectors((steps + 1, dims), max_coordinate)) for a in sorted(agents)}
+
+    return draw_guide()
+
+
+def group_guides(*, n_agents, steps, dims, max_groups=3, max_coordinate=10.0):
+    """What a behavior declaring ``Capabilities(group_guide=True)`` takes as ``group_guide``: a
+    list of 1 to `max_groups` (agents, path) pairs, agents a sorted tuple of distinct indices of
+    `n_agents` (no agent in two groups), path the (steps + 1, `dims`) positions its centre of mass
+    should follow, coordinates in [-max_coordinate, max_coordinate]."""
+    _check_count("n_agents", n_agents)
+    _check_count("steps", steps, low=0)
+    _dims(dims)
+    if dims is None:
+        raise InvalidArgument("dims must be 2 or 3: a group guide is for a flock of known dimension")
+    _check_count("max_groups", max_groups)
+    _check_positive("max_coordinate", max_coordinate)
+
+    @st.composite
+    def draw_groups(draw):
+        order = draw(st.permutations(range(n_agents)))
+        count = draw(st.integers(1, min(max_groups, n_agents)))
+        cuts = sorted(draw(st.lists(st.integers(1, n_agents), min_size=count, max_size=count, unique=True)))
+        starts = [0, *cuts[:-1]]
+        return [
+            (tuple(sorted(order[a:b])), draw(_vectors((steps + 1, dims), max_coordinate))) for a, b in zip(starts, cuts)
+        ]
+
+    return draw_groups()
+
+
+def regions(*, dims=None, kinds=("ball", "box", "polygon"), max_coordinate=10.0, max_size=5.0):
+    """Regions (``flockkit.regions``) as obstacles, walk regions and constraint shapes: balls
+    (discs, spheres), axis-aligned boxes and, in 2D, simple polygons of 3 to 8 vertices, convex
+    or not (in order of angle about their centre, no gap of half a turn, so never self-crossing
+    and the centre inside); D = `dims` (None: 2 or 3), centres in [-max_coordinate,
+    max_coordinate], radii and half-sides in [max_size / 100, max_size]."""
+    from ..regions import Ball, Box, Polygon
+
+    _dims(dims)
+    kinds = tuple(kinds) if not isinstance(kinds, str) else (kinds,)
+    if not kinds or any(k not in ("ball", "box", "polygon") for k in kinds):
+        raise InvalidArgument(f"kinds must be a non-empty subset of ('ball', 'box', 'polygon'); got {kinds!r}")
+    if dims == 3:  # polygons are 2D
+        kinds = tuple(k for k in kinds if k != "polygon")
+        if not kinds:
+            raise InvalidArgument("polygons are 2D; kinds=('polygon',) needs dims=2 or None")
+    _check_positive("max_coordinate", max_coordinate)
+    _check_positive("max_size", max_size)
+    sizes = st.floats(max_size / 100, max_size)
+
+    @st.composite
+    def draw_region(draw):
+        kind = draw(st.sampled_from(kinds))
+        d = 2 if kind == "polygon" else draw(_dims(dims))
+        centre = draw(_vectors((d,), max_coordinate))
+        if kind == "ball":
+            return Ball(center=centre, radius=draw(sizes))
+        if kind == "box":
+            half = draw(hnp.arrays("float64", (d,), elements=sizes))
+            return Box(lower=centre - half, upper=centre + half)
+        k = draw(st.integers(3, 8))
+        jitter = draw(hnp.arrays("float64", (k,), elements=st.floats(-0.24, 0.24)))  # gaps under half a turn
+        angle = (np.arange(k) + jitter) * 2 * math.pi / k
+        radius = draw(hnp.arrays("float64", (k,), elements=sizes))
+        return Polygon(vertices=centre + radius[:, None] * np.column_stack([np.cos(angle), np.sin(angle)]))
+
+    return draw_region()
+
+
+def declared_capabilities(*, kind):
+    """Capabilities (``flockkit.Capabilities``) a component of `kind` (a name in
+    ``flockkit.kinds.KINDS``) may declare: a non-empty set of dimensions, and any of the fields
+    that kind reads, ``coupling`` only with ``residuals``."""
+    from ..interfaces import Capabilities
+    from ..kinds import KINDS
+
+    if kind not in KINDS:
+        raise InvalidArgument(f"kind must be one of {sorted(KINDS)}; got {kind!r}")
+    fields = sorted(KINDS[kind].fields)
+
+    @st.composite
+    def draw_capabilities(draw):
+        declared = {"dims": draw(st.sampled_from([(2,), (3,), (2, 3)]))}
+        for field in fields:
+            if field == "plausibility_reach":
+                declared[field] = draw(st.one_of(st.none(), st.integers(0, 5)))
+            else:
+                declared[field] = draw(st.booleans())
+        if declared.get("coupling"):
+            declared["residuals"] = True
+        return Capabilities(**declared)
+
+    return draw_capabilities()
