@@ -1,49 +1,140 @@
-"""What the commands share: --param parsing, output checks, common options, the joblib backend."""
+"""What the commands share: the components each makes and their parameters, capability checks,
+output checks, common options, the joblib backend."""
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import sys
 from pathlib import Path
 
 import flockkit
 
+from .. import registry
 from .._atomic import check_writable
 from ..errors import MissingDependencyError, ValidationError
 
-# per command, the keyword arguments its options set (and the option that sets each): a --param
-# of one of these names would clash with them
+# The components a command can make, by option (``--strategy``): the kind ``flockkit.get`` takes.
+KINDS_OF_OPTIONS = {"behavior": "behavior", "metric": "metric", "builder": "builder", "strategy": "walk",
+                    "segmenter": "segmenter"}  # fmt: skip
+
+# Per command and component option, the keyword arguments the command passes itself (and the option
+# that sets each; None: the command alone does): a parameter of one of these names would clash.
 RESERVED = {
-    "simulate": {"dt": "--dt", "n_agents": "--agents", "steps": "--steps", "seed": "--seed", "dims": "--dims",
-                 "behavior": "--behavior", "progress": "--quiet", "initial": None,
-                 "obstacles": "--obstacle or --arena"},
-    "build": {"metric": "--metric", "builder": "--builder", "threshold": "--threshold", "n_jobs": "--jobs",
-              "seed": "--seed", "progress": "--quiet", "metric_params": None, "motion": None,
-              "segmentation": "--parts", "segmenter": None, "segmenter_params": None, "source": None},
-    "segmenter": {"n_parts": "--parts"},
-    "walk": {"duration": "--duration", "seed": "--seed", "strategy": "--strategy", "region": "--region",
-             "graph": None},
+    "simulate": {
+        "behavior": {"dt": "--dt", "n_agents": "--agents", "steps": "--steps", "seed": "--seed", "dims": "--dims",
+                     "behavior": "--behavior", "progress": "--quiet", "initial": None,
+                     "obstacles": "--arena or --obstacle"},
+    },
+    "build": {
+        "builder": {"metric": "--metric", "builder": "--builder", "threshold": "--threshold", "n_jobs": "--jobs",
+                    "seed": "--seed", "progress": "--quiet", "metric_params": "--metric-param", "motion": None,
+                    "segmentation": "--parts", "segmenter": "--segmenter", "segmenter_params": "--segmenter-param",
+                    "source": None, "features": None},
+        "segmenter": {"seed": "--seed", "segmenter": "--segmenter", "source": None},
+    },
+    "segment": {
+        "segmenter": {"n_parts": "--parts", "seed": "--seed", "segmenter": "--segmenter", "source": None},
+    },
+    "walk": {
+        "strategy": {"duration": "--duration", "seed": "--seed", "strategy": "--strategy", "region": "--region",
+                     "graph": None},
+    },
 }  # fmt: skip
 
 
-def parse_params(pairs, command: str | None = None, option: str = "--param") -> dict:
+def parse_params(pairs, reserved=None, option: str = "--param") -> dict:
     """``key=value`` strings (of `option`) to keyword arguments; values are read as JSON when they
-    parse."""
+    parse. `reserved`: names the command sets itself -> the option that sets each (None: no option)."""
     params = {}
-    reserved = RESERVED.get(command, {})
+    reserved = reserved or {}
     for pair in pairs or ():
         key, sep, raw = pair.partition("=")
         if not sep or not key.isidentifier():
             raise ValidationError(f"{option} expects key=value with key a Python identifier; got {pair!r}")
         if key in reserved:
             setter = reserved[key]
-            raise ValidationError(f"{option} {key}: {f'set it with {setter}' if setter else 'not a parameter here'}")
+            how = f"set it with {setter}" if setter else "the command sets it itself; it is not a parameter here"
+            raise ValidationError(f"{option} {key}: {how}")
         try:
             params[key] = json.loads(raw)
         except json.JSONDecodeError:
             params[key] = raw
     return params
+
+
+@dataclasses.dataclass(frozen=True)
+class Component:
+    """A component a command makes: any installed one of its kind, named with ``--<option> NAME``
+    (`default` when not given; None lets the command choose, as `shown` tells --help), configured
+    with ``--<option>-param KEY=VALUE``."""
+
+    option: str
+    default: str | None = None
+    shown: str | None = None
+
+    @property
+    def kind(self) -> str:
+        return KINDS_OF_OPTIONS[self.option]
+
+    @property
+    def noun(self) -> str:
+        """What --help calls it: the kind, and the option's word where they differ ("walk strategy")."""
+        return self.kind if self.kind == self.option else f"{self.kind} {self.option}"
+
+
+def add_components(parser, command: str, main: Component, *others: Component) -> None:
+    """Declare the components `command` makes: for each, ``--<option> NAME`` and the repeatable
+    ``--<option>-param KEY=VALUE``; ``--param`` is another name for the `main` one's parameters.
+    :func:`component_params` reads them back."""
+    for component in (main, *others):
+        kind, noun, shown = component.kind, component.noun, component.shown or component.default
+        parser.add_argument(
+            f"--{component.option}", default=component.default, metavar="NAME",
+            help=f"the {noun} (default {shown}); any installed {kind}: flockkit plugins --kind {kind}",
+        )  # fmt: skip
+        parser.add_argument(f"--{component.option}-param", dest=f"{component.option}_param", action="append",
+                            metavar="KEY=VALUE", help=f"a parameter of the {noun}, repeatable")  # fmt: skip
+    parser.add_argument(
+        "--param", action="append", metavar="KEY=VALUE",
+        help=f"a parameter of the command's main component, the {main.noun} (as --{main.option}-param), repeatable",
+    )  # fmt: skip
+    parser.set_defaults(components=(command, main.option))
+
+
+def component_params(args, option: str) -> dict:
+    """The keyword arguments of the component of `option` (declared by :func:`add_components`):
+    its ``--<option>-param`` pairs, and ``--param`` for the command's main component. Names the
+    command sets itself are refused, naming the option that sets them."""
+    command, main = args.components
+    reserved = RESERVED.get(command, {}).get(option, {})
+    params = parse_params(args.param, reserved, "--param") if option == main else {}
+    return {**params, **parse_params(getattr(args, f"{option}_param"), reserved, f"--{option}-param")}
+
+
+def params_given(args, option: str) -> bool:
+    """Whether the command line names the component of `option` or gives it parameters."""
+    main = args.components[1] == option and args.param
+    return bool(getattr(args, option) is not None or getattr(args, f"{option}_param") or main)
+
+
+def require_capability(args, option: str, field: str, *, what: str, needed_by: dict) -> None:
+    """Refuse, before anything is made, the options that need the component of `option` to
+    declare ``Capabilities.<field>`` (`needed_by`: option -> whether the command line gives it):
+    one line naming the options, the component, the capability, and the installed components of
+    its kind that declare it. `what` names what the options ask of the component ("obstacles")."""
+    given = " and ".join(name for name, present in needed_by.items() if present)
+    if not given:
+        return
+    kind, name = KINDS_OF_OPTIONS[option], getattr(args, option)
+    try:
+        registry.require(kind, name, field, f"{what} ({given})")
+    except ValidationError as exc:
+        declaring = [n for n in registry.available(kind) if getattr(registry.capabilities_of(kind, n), field)]
+        instead = (f"choose one that does with --{option} (installed: {', '.join(declaring)})" if declaring
+                   else f"no installed {kind} declares it")  # fmt: skip
+        raise ValidationError(f"{exc}; {instead}, or leave out {given}") from None
 
 
 def require_suffix(path: str, suffixes: tuple[str, ...], option: str) -> Path:
@@ -153,23 +244,6 @@ def add_quiet(parser) -> None:
 
 def add_param(parser, what: str) -> None:
     parser.add_argument("--param", action="append", metavar="KEY=VALUE", help=f"{what} parameter, repeatable")
-
-
-def add_component_params(parser, main: str, *others: str) -> None:
-    """``--<kind>-param KEY=VALUE`` (repeatable) for the command's `main` component kind and each
-    of `others`; ``--param`` is the main one's, another name for ``--<main>-param``."""
-    parser.add_argument(
-        "--param", f"--{main}-param", dest=f"{main}_param", action="append", metavar="KEY=VALUE",
-        help=f"a parameter of the {main} (the command's main component), repeatable",
-    )  # fmt: skip
-    for kind in others:
-        parser.add_argument(f"--{kind}-param", dest=f"{kind}_param", action="append", metavar="KEY=VALUE",
-                            help=f"a parameter of the {kind}, repeatable")  # fmt: skip
-
-
-def component_params(args, kind: str, command: str | None = None) -> dict:
-    """The keyword arguments ``--<kind>-param`` (or, for the main component, ``--param``) gave."""
-    return parse_params(getattr(args, f"{kind}_param"), command, option=f"--{kind}-param")
 
 
 def add_scale_out(parser) -> None:

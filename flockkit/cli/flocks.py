@@ -8,16 +8,17 @@ from pathlib import Path
 
 import flockkit
 
-from ..registry import require
 from ._options import (
     MESH_SUFFIXES,
-    add_component_params,
+    Component,
+    add_components,
     add_output,
     add_quiet,
     component_params,
     parse_region,
     pixel_size,
     read_source,
+    require_capability,
     require_suffix,
     shows_progress,
 )
@@ -30,6 +31,9 @@ def _cmd_simulate(args) -> int:
         from ..viz import PICTURE_SUFFIXES
 
         picture = require_suffix(args.picture, PICTURE_SUFFIXES, "--picture")
+    require_capability(args, "behavior", "obstacles", what="obstacles",
+                       needed_by={"--arena": args.arena is not None, "--obstacle": bool(args.obstacle)})  # fmt: skip
+    params = component_params(args, "behavior")
     motion = flockkit.simulate(
         args.behavior,
         n_agents=args.agents,
@@ -38,7 +42,7 @@ def _cmd_simulate(args) -> int:
         dt=args.dt,
         seed=args.seed,
         progress=not args.quiet and sys.stderr.isatty(),
-        **component_params(args, "behavior", "simulate"),
+        **params,
         **_obstacles(args),
     )
     motion.save(output)
@@ -52,10 +56,7 @@ def _cmd_simulate(args) -> int:
 
 
 def _obstacles(args) -> dict:
-    """The obstacles --arena and --obstacle ask for, as behavior parameters (none: no parameter);
-    the behavior must declare that it avoids obstacles."""
-    if args.arena is not None or args.obstacle:
-        require("behavior", args.behavior, "obstacles", "--arena and --obstacle")
+    """The obstacles --arena and --obstacle ask for, as behavior parameters (none: no parameter)."""
     obstacles = [
         *(flockkit.fence(args.arena) if args.arena is not None else ()),
         *(parse_region(o, "--obstacle") for o in args.obstacle or ()),
@@ -173,8 +174,7 @@ def _simulate_arguments(parser) -> None:
     parser.add_argument("--dims", type=int, default=2, choices=(2, 3), help="2 or 3 dimensions (default 2)")
     parser.add_argument("--dt", type=float, default=0.1, help="seconds per step (default 0.1)")
     parser.add_argument("--seed", type=int, default=None, help="random seed; the same seed gives the same motion")
-    parser.add_argument("--behavior", default="boids", help="behavior model (default boids; any installed one)")
-    add_component_params(parser, "behavior")
+    add_components(parser, "simulate", Component("behavior", "boids"))
     parser.add_argument("--arena", type=float, metavar="R", help="fence the flock in a ring of posts R from the origin")
     parser.add_argument(
         "--obstacle", action="append", metavar="SPEC", help="an obstacle (as --region of walk), repeatable"

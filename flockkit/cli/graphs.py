@@ -8,13 +8,15 @@ import flockkit
 
 from ..errors import ValidationError
 from ._options import (
-    add_component_params,
+    Component,
+    add_components,
     add_mesh_options,
     add_output,
     add_quiet,
     add_scale_out,
     component_params,
     joblib_backend,
+    params_given,
     parse_region,
     read_source,
     require_suffix,
@@ -24,17 +26,20 @@ from ._options import (
 
 def _cmd_build(args) -> int:
     output = require_suffix(args.output, (".npz",), "-o")
-    source = read_source(args.motion, args.clip, args.fps, args.allow_outside)
-    params = component_params(args, "builder", "build")
-    metric_params = component_params(args, "metric", "build")
+    if params_given(args, "segmenter") and not (args.layers and not args.parts):
+        raise ValidationError("--segmenter, --segmenter-param: the source is split into parts by a segmenter only "
+                              "with --layers and no --parts")  # fmt: skip
+    params = component_params(args, "builder")
+    params["metric_params"] = component_params(args, "metric")
     if args.threshold is not None:
         params["threshold"] = args.threshold
-    if (args.layers or args.parts) and metric_params:
-        raise ValidationError("--metric-param: --layers builds each part with its builder's own comparison")
+    source = read_source(args.motion, args.clip, args.fps, args.allow_outside)
     if args.layers or args.parts:
         segmentation = flockkit.Segmentation.load(args.parts) if args.parts else None
+        segmenter = {} if args.segmenter is None else {"segmenter": args.segmenter}
         layers = flockkit.build_layers(source, segmentation=segmentation, builder=args.builder or "windowed",
-                                       seed=args.seed, **params)  # fmt: skip
+                                       segmenter_params=component_params(args, "segmenter"), **segmenter,
+                                       metric=args.metric, seed=args.seed, **params)  # fmt: skip
         layers.save(output)
         counts = ", ".join(str(g.stats()["transitions"]) for g in layers.graphs)
         print(f"wrote {output}: {layers.n_parts} parts, each a graph (transitions: {counts})")
@@ -44,8 +49,8 @@ def _cmd_build(args) -> int:
         params["n_jobs"] = args.jobs
     with joblib_backend(args):
         graph = flockkit.build_graph(
-            motion, builder=args.builder or "kovar", metric=args.metric, metric_params=metric_params, seed=args.seed,
-            progress=shows_progress(args), **params,
+            motion, builder=args.builder or "kovar", metric=args.metric, seed=args.seed, progress=shows_progress(args),
+            **params,
         )  # fmt: skip
     graph.save(output)
     stats = graph.stats()
@@ -62,7 +67,7 @@ def _cmd_walk(args) -> int:
     output = require_suffix(args.output, (".npz",), "-o")
     layered = kind_of(args.graph) == "layers"
     graph = (flockkit.GraphLayers if layered else flockkit.MotionGraph).load(args.graph)
-    params = component_params(args, "strategy", "walk")
+    params = component_params(args, "strategy")
     if args.region is not None:
         params["region"] = parse_region(args.region)
     path = flockkit.walk(graph, strategy=args.strategy, duration=args.duration, seed=args.seed, **params)
@@ -80,28 +85,29 @@ def _build_arguments(parser) -> None:
         "motion", help="motion or animated-mesh file (.npz from simulate, import or walk; .glb, .gltf, .usd*, OBJ)"
     )
     add_output(parser, "graph file to write (.npz)")
-    parser.add_argument("--metric", default="icp-hungarian", help="configuration metric (default icp-hungarian)")
-    parser.add_argument("--builder", help="graph builder (default kovar; windowed for --layers)")
     parser.add_argument("--layers", action="store_true", help="split into parts and build one graph per part")
     parser.add_argument("--parts", help="the segmentation to use for --layers (.npz, from segment)")
     parser.add_argument("--seed", type=int, default=None, help="random seed (of the segmentation for --layers)")
     add_mesh_options(parser)
     parser.add_argument("--threshold", type=float, help="absolute transition threshold (default: adaptive)")
     add_scale_out(parser)
-    add_component_params(parser, "builder", "metric")
+    add_components(
+        parser, "build", Component("builder", shown="kovar; windowed with --layers"),
+        Component("metric", "icp-hungarian"),
+        Component("segmenter", shown="ica-kmeans; it splits the source for --layers without --parts"),
+    )  # fmt: skip
     add_quiet(parser)
 
 
 def _walk_arguments(parser) -> None:
     parser.add_argument("graph", help="graph or layers file (.npz, from build)")
     parser.add_argument("--duration", type=float, required=True, help="seconds of motion to synthesize")
-    parser.add_argument("--strategy", default="random",
-                        help="walk strategy (default random; region needs --region; any installed)")  # fmt: skip
     parser.add_argument(
-        "--region", help="box:x0,y0,x1,y1 | ball:cx,cy,r | polygon:x0,y0,x1,y1,... (for --strategy region)"
+        "--region",
+        help="box:x0,y0,x1,y1 | ball:cx,cy,r | polygon:x0,y0,x1,y1,...: the strategy's region= (--strategy region)",
     )
     parser.add_argument("--seed", type=int, default=None, help="random seed")
-    add_component_params(parser, "strategy")
+    add_components(parser, "walk", Component("strategy", "random"))
     add_output(parser, "motion file to write (.npz)")
 
 

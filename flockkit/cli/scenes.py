@@ -8,8 +8,9 @@ import flockkit
 
 from ..errors import ValidationError
 from ._options import (
+    Component,
     add_allow_outside,
-    add_component_params,
+    add_components,
     add_mesh_options,
     add_output,
     add_quiet,
@@ -57,8 +58,8 @@ def _cmd_scene(args) -> int:
 
 def _cmd_segment(args) -> int:
     output = require_suffix(args.output, (".npz",), "-o")
+    params = component_params(args, "segmenter")
     source = read_source(args.source, args.clip, args.fps, args.allow_outside)
-    params = component_params(args, "segmenter", "segmenter")
     if args.parts is not None:
         params["n_parts"] = args.parts
     found = flockkit.segment(source, segmenter=args.segmenter, seed=args.seed, **params)
@@ -72,10 +73,9 @@ def _segment_arguments(parser) -> None:
     parser.add_argument("source", help="animated mesh (.glb, .gltf, .usd*, OBJ folder or glob) or motion (.npz)")
     add_output(parser, "segmentation file to write (.npz)")
     parser.add_argument("--parts", type=int, help="number of parts (default: chosen by the segmenter)")
-    parser.add_argument("--segmenter", default="ica-kmeans", help="segmenter (default ica-kmeans)")
     parser.add_argument("--seed", type=int, default=None, help="random seed")
     add_mesh_options(parser)
-    add_component_params(parser, "segmenter")
+    add_components(parser, "segment", Component("segmenter", "ica-kmeans"))
 
 
 def _scene_arguments(parser) -> None:
