@@ -402,9 +402,7 @@ def register(plugin: object, name: str | None = None) -> None:
     """Add a plugin object (a module or any object with hook implementations) without an entry
     point, for scripts and tests. It is kept until :func:`reset`."""
     with _state.lock:
-        _state.runtime_plugins.append((plugin, name or getattr(plugin, "__name__", None) or repr(plugin)))
-        _state.manager = None
-        _state.components = None
+        _runtime_plugins([*_state.runtime_plugins, (plugin, name or getattr(plugin, "__name__", None) or repr(plugin))])
 
 
 @contextlib.contextmanager
@@ -417,16 +415,18 @@ def registered(plugin: object, name: str | None = None):
     try:
         yield plugin
     finally:
-        with _state.lock:
-            _state.runtime_plugins[:] = before
-            _state.manager = None
-            _state.components = None
+        _runtime_plugins(before)
 
 
 def reset() -> None:
     """Forget the plugin manager and run-time plugins; the next lookup discovers plugins afresh."""
+    _runtime_plugins([])
+
+
+def _runtime_plugins(plugins: list) -> None:
+    """Make `plugins` the run-time plugins; the next lookup builds the manager afresh."""
     with _state.lock:
-        _state.runtime_plugins.clear()
+        _state.runtime_plugins = list(plugins)
         _state.manager = None
         _state.components = None
 

@@ -176,6 +176,14 @@ def _run(check, kind: str, name: str, component) -> None:
         ) from exc
 
 
+def _plan(kind: str, component, partners: Mapping | None = None) -> list[tuple[Callable, str | None]]:
+    """Every check of `kind`, in order, with why it does not apply to `component` (None where it
+    does, the check then bound to its partners)."""
+    applicable = {c.__name__: c for c in checks_for(kind, component, partners=partners)}
+    skipped = skipped_checks(kind, component)
+    return [(applicable.get(c.__name__, c), skipped.get(c.__name__)) for c in _all_checks(kind)]
+
+
 def _expected(expected_failed_checks, component) -> dict:
     if expected_failed_checks is None:
         return {}
@@ -248,16 +256,9 @@ def parametrize_with_checks(components, *, partners: Mapping | None = None, expe
     for index, (kind, component) in enumerate(components):
         name = component_id(kind, component) if ids is None else ids[index]
         expected = _expected(expected_failed_checks, component)
-        applicable = {c.__name__: c for c in checks_for(kind, component, partners=partners)}
-        skipped = skipped_checks(kind, component)
-        for check in _all_checks(kind):
-            check_name = check.__name__
-            marks = []
-            if check_name in skipped:
-                marks.append(pytest.mark.skip(reason=skipped[check_name]))
-                run = check
-            else:
-                run = applicable[check_name]
+        for run, reason in _plan(kind, component, partners):
+            check_name = run.__name__
+            marks = [] if reason is None else [pytest.mark.skip(reason=reason)]
             if check_name in expected:
                 marks.append(pytest.mark.xfail(reason=expected[check_name], strict=True))
             params.append(

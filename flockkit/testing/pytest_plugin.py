@@ -150,7 +150,7 @@ def pytest_collection_modifyitems(session, config, items):
     from ..errors import ValidationError
     from ..kinds import KINDS
     from ..registry import describe
-    from . import checks_for, skipped_checks
+    from . import _plan, checks_for
 
     kinds = list(KINDS) if wanted == "all" else [k.strip() for k in wanted.split(",") if k.strip()]
     unknown = [k for k in kinds if k not in KINDS]
@@ -159,25 +159,21 @@ def pytest_collection_modifyitems(session, config, items):
     for kind in kinds:
         for found in describe(kind):
             try:
-                component = _made(kind, found.name)
+                plan = _plan(kind, _made(kind, found.name))
             except ValidationError as exc:  # parameters without defaults: a test must configure it
                 reason = (
                     f"{kind} {found.name!r} cannot be made with its default parameters ({exc}); check it "
                     "from a test: flockkit.testing.parametrize_with_checks([(kind, configured_component)])"
                 )
-                skipped, applicable = {check.__name__: reason for check in checks_for(kind)}, {}
-            else:
-                skipped = skipped_checks(kind, component)
-                applicable = {check.__name__: check for check in checks_for(kind, component)}
-            for check in checks_for(kind):
-                check_name = check.__name__
+                plan = [(check, reason) for check in checks_for(kind)]
+            for check, skip in plan:
                 items.append(
                     KitItem.from_parent(
                         session,
-                        name=f"kit:{kind}:{found.name}-{check_name}",
+                        name=f"kit:{kind}:{found.name}-{check.__name__}",
                         kind=kind,
                         component_name=found.name,
-                        check=applicable.get(check_name, check),
-                        skip=skipped.get(check_name),
+                        check=check,
+                        skip=skip,
                     )
                 )

@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from hypothesis.errors import InvalidArgument
 from hypothesis.extra import numpy as hnp
 
+from .. import rigid
 from ..constrained.problem import ComConstraint
 from ..mesh import AnimatedMesh
 from ..motion import Alignment, Configuration, Motion, State
@@ -284,14 +285,6 @@ def _angles(limit=math.pi):
     return st.one_of(st.sampled_from(special), st.floats(-limit, limit))
 
 
-def _turn(angle, i, j, dims):
-    """The rotation by `angle` in the plane of axes i and j."""
-    matrix = np.eye(dims)
-    c, s = math.cos(angle), math.sin(angle)
-    matrix[i, i], matrix[i, j], matrix[j, i], matrix[j, j] = c, -s, s, c
-    return matrix
-
-
 def _rotations(dims):
     """Proper rotations (D, D) of any angle: in 2D one angle, in 3D yaw, pitch and roll (which
     reach every rotation), quarter and half turns among them; the identity where shrunk."""
@@ -299,9 +292,10 @@ def _rotations(dims):
     @st.composite
     def draw_rotation(draw):
         if dims == 2:
-            return _turn(draw(_angles()), 0, 1, 2)
+            return rigid.rotation(draw(_angles()))
         yaw, pitch, roll = draw(_angles()), draw(_angles(math.pi / 2)), draw(_angles())
-        return _turn(yaw, 0, 1, 3) @ _turn(pitch, 2, 0, 3) @ _turn(roll, 1, 2, 3)
+        x, y, z = np.eye(3)
+        return rigid.rotation(yaw, z) @ rigid.rotation(pitch, y) @ rigid.rotation(roll, x)
 
     return draw_rotation()
 
