@@ -20,6 +20,7 @@ import numpy as np
 from . import _npzfile, rigid
 from ._arrays import check_agent_array, check_finite, readonly_float, readonly_int, readonly_mapping
 from .errors import FileFormatError, ValidationError
+from .validate import allocation
 from .validate import dims as validate_dims
 from .validate import integer, number
 
@@ -485,6 +486,7 @@ def random_flock(
     dims = validate_dims(dims)
     spacing = number(spacing, "spacing", minimum=0, strict=True)
     speed = number(speed, "speed", minimum=0, strict=True)
+    allocation(3 * n_agents * dims, f"a random flock of {n_agents} agents")
     unit_ball = math.pi if dims == 2 else 4.0 * math.pi / 3.0
     radius = spacing * (n_agents / unit_ball) ** (1.0 / dims)
     directions = rng.standard_normal((n_agents, dims))

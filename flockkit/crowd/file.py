@@ -3,7 +3,7 @@
 ::
 
     seconds = 20                 # how long to run
-    fps = 24                     # the animation system's frame rate
+    fps = 24                     # the animation system's frame rate, 1 to 1000
     seed = 1
     record = 64                  # optional: agents kept for the USD file and the picture
 
@@ -56,7 +56,7 @@ from ..registry import get, require, require_dims, resolve
 from ..validate import allocation
 from .drive import CLIP_CONTROLLER, Cue, Driver, Gait, StateMachine
 from .feet import ground_speed, plant_feet
-from .pool import Stream, StreamPool
+from .pool import MAX_FPS, Stream, StreamPool
 from .runtime import Crowd
 
 __all__ = ["CrowdScene", "read_crowd_scene"]
@@ -118,8 +118,10 @@ def _trajectories(path: Path, entry: dict, fps: float, seconds: float, inside) -
         steps = int(math.ceil(seconds * fps))
         # a flock from a random start, as flockkit.simulate makes one
         rng = np.random.default_rng(validate.seed(spec.get("seed", 0), "[trajectories] simulate seed"))
-        initial = random_flock(n_agents=spec["agents"], dims=spec.get("dims", 2), rng=rng)
-        allocation(2 * (steps + 1) * initial.n_agents * initial.dims, f"[trajectories] {steps + 1} frames")
+        n_agents = validate.integer(spec["agents"], "[trajectories] simulate agents", minimum=1)
+        dims = validate.dims(spec.get("dims", 2), "[trajectories] simulate dims")
+        allocation(2 * (steps + 1) * n_agents * dims, f"[trajectories] {steps + 1} frames of {n_agents} agents")
+        initial = random_flock(n_agents=n_agents, dims=dims, rng=rng)
         model = get("behavior", spec.get("behavior", DEFAULT_BEHAVIOR), dt=1.0 / fps)
         require_dims("behavior", model, initial.dims, f"a {initial.dims}D flock")
         return model.forward(initial, steps, rng)
@@ -144,9 +146,8 @@ def read_crowd_scene(path, *, allow_outside: bool = False) -> CrowdScene:
 
     try:
         _table(data, "", _KEYS, {"seconds", "trajectories", "character", "streams", "states"}, "the file")
-        seconds, fps = float(data["seconds"]), float(data.get("fps", 30.0))
-        if not (seconds > 0 and fps > 0):
-            raise ValidationError("seconds and fps must be positive")
+        seconds = validate.number(data["seconds"], "seconds", minimum=0, strict=True)
+        fps = validate.number(data.get("fps", 30.0), "fps", minimum=1, maximum=MAX_FPS)
         sources = _table(data, "trajectories", {"simulate", "motion", "walk"}, set(), "[trajectories]")
         motion = _trajectories(path, sources, fps, seconds, inside)
         keys = {"clips", "up", "forward", "scale", "feet", "legs", "plant"}

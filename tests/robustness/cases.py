@@ -51,6 +51,7 @@ def library(tmp) -> list[tuple[str, object]]:
         ("simulate dt 1e300", lambda: flockkit.simulate(n_agents=5, steps=20, dt=1e300)),
         ("simulate 1e8 steps", lambda: flockkit.simulate(n_agents=20, steps=100_000_000)),
         ("simulate 10 million agents", lambda: flockkit.simulate(n_agents=10_000_000, steps=3)),
+        ("random_flock 1e13 agents", lambda: flockkit.random_flock(n_agents=10**13, rng=np.random.default_rng(0))),
         ("walk 1e7 s", lambda: flockkit.walk(graph, duration=1e7)),
         ("walk 1e9 s", lambda: flockkit.walk(graph, duration=1e9)),
         ("solve 1e13 iterations", lambda: flockkit.solve(_problem(), iterations=10**13)),

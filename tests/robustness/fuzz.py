@@ -4,11 +4,12 @@
 
 Each reader is fuzzed for N minutes in a process of its own, from seeds made here (a tiny skinned
 glTF as text and as GLB, small BVH, OBJ, flockkit .npz files and the example scenarios), with a
-dictionary of its format's keywords. An input "works" when the reader returns or raises a
-documented error (``FlockkitError``, ``FileNotFoundError``); anything else, a hang past 10 s or a
-process past 3 GB is a finding: its input is kept in ``tests/robustness/crashes/<reader>/``, one
-per distinct failure (exception type and the flockkit line that raised it), where
-``test_crashes.py`` replays it. The run prints a table: reader, inputs run, findings.
+dictionary of its format's keywords, and with flockkit's memory budget (FLOCKKIT_MEMORY_LIMIT) at
+256 MiB unless set. An input "works" when the reader returns or raises a documented error
+(``FlockkitError``, ``FileNotFoundError``); anything else, a hang past 10 s or a process past 3 GB
+is a finding: its input is kept in ``tests/robustness/crashes/<reader>/``, one per distinct failure
+(exception type and the flockkit line that raised it), where ``test_crashes.py`` replays it. The
+run prints a table: reader, inputs run, findings.
 
 Needs atheris (``pip install atheris``), which is in the test extra.
 """
@@ -17,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import hashlib
+import os
 import subprocess
 import sys
 import tempfile
@@ -28,6 +30,9 @@ CRASHES = Path(__file__).resolve().parent / "crashes"
 READERS = ("gltf", "bvh", "obj", "npz", "scenario")
 SECONDS = 10  # an input that takes longer hangs
 MEMORY_MB = 3072  # a process that grows past this is a finding (libFuzzer's -rss_limit_mb)
+# flockkit's memory budget in the fuzzed process: what one input may ask for, and so (simulating,
+# sampling) about how much work it may describe, is well inside MEMORY_MB and SECONDS
+BUDGET = "256M"
 
 KEYWORDS = {
     "gltf": ["asset", "version", "2.0", "buffers", "bufferViews", "accessors", "byteLength", "byteOffset",
@@ -272,6 +277,7 @@ def _child(reader: str, seconds: float, corpus: Path, runs: int | None, crashes:
     run finds every bug it can reach. Prints the inputs run."""
     import atheris
 
+    os.environ.setdefault("FLOCKKIT_MEMORY_LIMIT", BUDGET)
     with atheris.instrument_imports(include=["flockkit", "flockkit_controllers"]):
         import flockkit  # noqa: F401
         import flockkit.constrained.scenario  # noqa: F401
