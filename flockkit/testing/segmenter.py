@@ -1,9 +1,10 @@
 """Conformance checks for segmenters (``flockkit.interfaces.Segmenter``).
 
 Each check is ``check_<property>(name, segmenter)``; they segment the kit's ``inputs.parts``: a
-motion of three groups of points, one still and two that move at different times, and motions
-whose points all move alike (``inputs.degenerate_configurations`` gliding or swaying), so every
-segmenter has an answer that is clearly right.
+motion of three groups of points, one still and two rigid ones that swing at different times;
+rigid bodies that turn as they travel; and motions whose points all move alike
+(``inputs.degenerate_configurations`` gliding or swaying), so every segmenter has an answer that is
+clearly right.
 """
 
 from __future__ import annotations
@@ -32,16 +33,70 @@ def check_labels_cover_every_point(name, segmenter):
         )
 
 
-def check_still_points_apart_from_moving_ones(name, segmenter):
-    """Points that never move share no part with points that move, and points that move together
-    (a rigid group) share one."""
+def _kit_parts(name, segmenter):
+    """(labels, truth) of every declared dimension's ``inputs.parts``."""
     for dims in dims_of(segmenter):
         motion, truth = parts(dims=dims)
-        labels = _segment(segmenter, motion).labels
+        with on_input(name, segmenter, dims, "the kit's parts"):
+            yield _segment(segmenter, motion).labels, truth
+
+
+@fixed_by("label by how points move (energies, velocities), never by where they are or by their index")
+def check_still_points_apart_from_moving_ones(name, segmenter):
+    """Points that never move (the kit's still group) share no part with points that move."""
+    for labels, truth in _kit_parts(name, segmenter):
         still = truth == 0
         assert not np.isin(labels[still], labels[~still]).any(), f"{name}.segment puts still points with moving ones"
-        for group in np.unique(truth[~still]):
-            assert len(np.unique(labels[truth == group])) == 1, f"{name}.segment splits a group that moves as one"
+
+
+@fixed_by(
+    "do not merge parts whose motions differ in time: two groups that swing at different times are "
+    "independent, whatever their sizes or the amount they move"
+)
+def check_independent_groups_apart(name, segmenter):
+    """Two rigid groups that move at different times (the kit's flap and tail) share no part."""
+    for labels, truth in _kit_parts(name, segmenter):
+        assert not np.isin(labels[truth == 1], labels[truth == 2]).any(), (
+            f"{name}.segment puts two groups that move at different times in one part"
+        )
+
+
+def _rigid_bodies(dims: int) -> dict[str, Motion]:
+    """A rigid cloud of 30 points turning as it travels, swinging as it glides, spinning in place."""
+    body = np.random.default_rng(31).uniform(-1.0, 1.0, (30, dims))
+    t = np.arange(61) * 0.1
+    ahead = np.eye(dims)[0]
+    found = {}
+    for label, angle, travel in (("turning as it travels", 0.8 * t, 1.5 * t),
+                                 ("swinging as it glides", 0.6 * np.sin(2 * np.pi * 0.7 * t), t),
+                                 ("spinning in place", 1.5 * t, 0 * t)):  # fmt: skip
+        turns = np.zeros((len(t), dims, dims))
+        turns[:, :2, :2] = np.stack([np.cos(angle), -np.sin(angle), np.sin(angle), np.cos(angle)], -1).reshape(-1, 2, 2)
+        if dims == 3:
+            turns[:, 2, 2] = 1.0
+        positions = np.einsum("tij,nj->tni", turns, body) + travel[:, None, None] * ahead + 5.0
+        found[f"a rigid body {label}"] = Motion(positions=positions, dt=0.1)
+    return found
+
+
+@fixed_by(
+    "a rigid body's points move differently (those far from its turning centre more), yet nothing in "
+    "it moves independently: merge parts that together move rigidly (each frame a rotation and "
+    "translation of the first), or segment motion relative to the best rigid fit"
+)
+def check_rigid_body_is_one_part(name, segmenter):
+    """Every point of each kit group that swings rigidly shares one part, and so does a rigid body
+    that turns as it travels, swings as it glides or spins in place."""
+    for labels, truth in _kit_parts(name, segmenter):
+        for group in (1, 2):
+            assert len(np.unique(labels[truth == group])) == 1, (
+                f"{name}.segment splits a rigid group of the kit's parts into {len(np.unique(labels[truth == group]))}"
+            )
+    for dims in dims_of(segmenter):
+        for label, motion in _rigid_bodies(dims).items():
+            with on_input(name, segmenter, dims, label):
+                result = _segment(segmenter, motion)
+                assert result.n_parts == 1, f"{name}.segment splits {label} into {result.n_parts} parts; expected one"
 
 
 def check_deterministic(name, segmenter):
@@ -113,6 +168,8 @@ def check_identical_motion_is_one_part(name, segmenter):
 CHECKS = (
     check_labels_cover_every_point,
     check_still_points_apart_from_moving_ones,
+    check_independent_groups_apart,
+    check_rigid_body_is_one_part,
     check_identical_motion_is_one_part,
     check_deterministic,
     check_order_of_points_does_not_matter,

@@ -9,6 +9,10 @@
    motion carries.
 4. k-means on those rows, scaled to unit length (which components a point follows, not how far it
    moves; the amount of motion is what the energy already separates from static points).
+5. With `n_parts` None, parts whose points together move as one rigid body (every frame a
+   rotation and translation of the first, to 1e-5 of their extent) are merged: the energies of
+   a body that turns as it travels differ from point to point, and k-means cuts it, although
+   nothing in it moves independently.
 
 The paper sets the number of parts by hand and names choosing it as future work. With `n_parts`
 None it is chosen: `n_components` (if None) is the number of principal components that explain
@@ -33,6 +37,8 @@ from flockkit.errors import ValidationError
 # 1e-6 of the energy is 0.1% of the displacement)
 _STILL = 1e-6
 _EXPLAINED = 0.99
+# parts that move together as one rigid body within this fraction of their extent are one part
+_RIGID = 1e-5
 
 
 def velocity_energy(positions: np.ndarray, window: int) -> np.ndarray:
@@ -82,6 +88,8 @@ class IcaKmeans:
             return flockkit.Segmentation(labels=labels, n_parts=1)
         seed = int(rng.integers(2**31 - 1))
         found = self._moving_parts(energy[:, moving], wanted, seed)
+        if wanted is None:
+            found = _merge_rigid(motion.positions[:, moving], found)
         labels[moving] = found + still
         return flockkit.Segmentation(labels=flockkit.scene.canonical_labels(labels), n_parts=int(labels.max()) + 1)
 
@@ -149,3 +157,44 @@ def _kmeans(rows: np.ndarray, k: int, seed: int) -> np.ndarray:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # rigid groups give identical rows: fewer distinct clusters than k
         return KMeans(n_clusters=k, n_init=10, random_state=seed).fit_predict(rows).astype(np.int64)
+
+
+def _rigid(points: np.ndarray) -> bool:
+    """Whether (T, n, D) points move as one rigid body: every frame a rotation and translation of
+    the first, to _RIGID of their extent (Kabsch, all frames at once)."""
+    centered = points - points.mean(axis=1, keepdims=True)
+    extent = float(np.abs(centered).max())
+    if extent == 0.0:
+        return True
+    frames, n, dims = centered.shape
+    chunk = max(1, 2**22 // (n * dims * dims))  # kabsch forms (frames, n, D, D) products
+    for start in range(0, frames, chunk):
+        part = centered[start : start + chunk]
+        rotations = flockkit.rigid.kabsch(centered[:1], part)  # each frame onto the first
+        placed = np.einsum("tij,tnj->tni", rotations, part)
+        if float(np.abs(placed - centered[0]).max()) > _RIGID * extent:
+            return False
+    return True
+
+
+def _merge_rigid(positions: np.ndarray, labels: np.ndarray) -> np.ndarray:
+    """`labels` with every set of parts that together move rigidly made one part (0..k-1)."""
+    parts = [np.flatnonzero(labels == k) for k in range(int(labels.max()) + 1)]
+    rigid = [p for p in parts if _rigid(positions[:, p])]  # a part that deforms joins nothing
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(rigid)):
+            for j in range(i + 1, len(rigid)):
+                union = np.concatenate([rigid[i], rigid[j]])
+                if _rigid(positions[:, union]):
+                    rigid[i] = union
+                    del rigid[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    out = labels.copy()
+    for group in rigid:
+        out[group] = labels[group[0]]
+    return np.unique(out, return_inverse=True)[1].ravel().astype(np.int64)

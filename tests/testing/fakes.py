@@ -764,10 +764,38 @@ class SplitsBySide(IcaKmeans):
         return flockkit.Segmentation(labels=left.astype(int), n_parts=2) if 0 < left.sum() < motion.n_agents else found
 
 
+class MergesMovingParts(IcaKmeans):
+    """Keeps still points apart but puts every moving point in one part."""
+
+    def segment(self, motion, rng):
+        super().segment(motion, rng)
+        moving = np.ptp(motion.positions, axis=0).max(axis=1) > 0
+        labels = np.unique(moving, return_inverse=True)[1].ravel()
+        return flockkit.Segmentation(labels=labels, n_parts=int(labels.max()) + 1)
+
+
+class CutsByReach(IcaKmeans):
+    """Splits each part whose points travel different distances (points far from a turning
+    centre travel more) into the nearer and the farther half."""
+
+    def segment(self, motion, rng):
+        found = super().segment(motion, rng)
+        travel = np.linalg.norm(np.diff(motion.positions, axis=0), axis=2).sum(axis=0)
+        labels = found.labels.copy()
+        for part in found.parts():
+            far = travel[part] > np.median(travel[part])
+            if np.ptp(travel[part]) > 1e-9 * max(travel[part].max(), 1.0) and 0 < far.sum() < len(part):
+                labels[part[far]] = labels.max() + 1
+        return flockkit.Segmentation(labels=np.unique(labels, return_inverse=True)[1].ravel(),
+                                     n_parts=len(np.unique(labels)))  # fmt: skip
+
+
 BROKEN_BY_KIND["segmenter"] = {
     "check_interface": NoSegment,
     "check_labels_cover_every_point": DropsAPoint,
     "check_still_points_apart_from_moving_ones": ByPosition,
+    "check_independent_groups_apart": MergesMovingParts,
+    "check_rigid_body_is_one_part": CutsByReach,
     "check_identical_motion_is_one_part": SplitsBySide,
     "check_deterministic": UnseededSegment,
     "check_order_of_points_does_not_matter": OrderDependent,
