@@ -17,11 +17,12 @@ from .flow import Arrow, FlowField, SelfMovement
 from .layers import GraphLayers, LayeredWalk, seam_stretch, synthesize_layers, walk_layers
 from .placement import Placement
 from .scene import Scene
-from .segmentation import Segmentation, canonical_labels, same_partition
+from .segmentation import Segmentation, canonical_labels, merge_rigid_parts, same_partition
 
 __all__ = [
     "Segmentation",
     "canonical_labels",
+    "merge_rigid_parts",
     "same_partition",
     "GraphLayers",
     "LayeredWalk",

@@ -6,13 +6,13 @@ from __future__ import annotations
 import attrs
 import numpy as np
 
-from .. import _npzfile
+from .. import _npzfile, rigid, validate
 from .._arrays import readonly_int
 from ..errors import FileFormatError, ValidationError
 from ..mesh import AnimatedMesh
 from ..motion import Motion
 
-__all__ = ["Segmentation", "canonical_labels", "same_partition", "motion_of"]
+__all__ = ["Segmentation", "canonical_labels", "same_partition", "merge_rigid_parts", "motion_of"]
 
 SEGMENTATION_FORMAT_VERSION = 1
 
@@ -111,3 +111,53 @@ def canonical_labels(labels) -> np.ndarray:
 def same_partition(a, b) -> bool:
     """Whether two labelings split the points the same way, whatever the part names."""
     return np.array_equal(canonical_labels(a), canonical_labels(b))
+
+
+def _moves_rigidly(points: np.ndarray, tolerance: float) -> bool:
+    """Whether (T, n, D) points move as one rigid body: every frame a rotation and translation of
+    the first, to `tolerance` of their extent (Kabsch, in chunks of frames)."""
+    centered = points - points.mean(axis=1, keepdims=True)
+    extent = float(np.abs(centered).max(initial=0.0))
+    if extent == 0.0:
+        return True
+    frames, n, dims = centered.shape
+    chunk = max(1, 2**22 // (n * dims * dims))  # kabsch forms (frames, n, D, D) products
+    for start in range(0, frames, chunk):
+        part = centered[start : start + chunk]
+        placed = np.einsum("tij,tnj->tni", rigid.kabsch(centered[:1], part), part)
+        if float(np.abs(placed - centered[0]).max()) > tolerance * extent:
+            return False
+    return True
+
+
+def merge_rigid_parts(motion, labels, *, tolerance: float = 1e-5) -> np.ndarray:
+    """`labels` (one per point of `motion`, a Motion or AnimatedMesh) with every set of parts that
+    together move as one rigid body made one part, relabelled 0, 1, ... (canonical_labels).
+
+    A body that turns as it travels moves each point differently (those far from the turning
+    centre more), so segmenters that compare points' motions cut it, though nothing in it moves
+    independently. Parts are rigid together when every frame is a rotation and translation of
+    the first to `tolerance` of their extent (largest coordinate from their centre). Parts that
+    never move are rigid with each other but with no moving part. A part that deforms joins
+    nothing, so on deforming objects this costs one test per part."""
+    positions = motion_of(motion, "motion").positions
+    labels = np.asarray(labels)
+    if labels.shape != (positions.shape[1],):
+        raise ValidationError(f"labels must have one entry per point ({positions.shape[1]}); got shape {labels.shape}")
+    tolerance = validate.number(tolerance, "tolerance", minimum=0)
+    parts = [np.flatnonzero(labels == k) for k in np.unique(labels)]
+    bodies = [p for p in parts if _moves_rigidly(positions[:, p], tolerance)]
+    merged = True
+    while merged:
+        merged = False
+        for i, j in ((i, j) for i in range(len(bodies)) for j in range(i + 1, len(bodies))):
+            union = np.concatenate([bodies[i], bodies[j]])
+            if _moves_rigidly(positions[:, union], tolerance):
+                bodies[i] = union
+                del bodies[j]
+                merged = True
+                break
+    out = labels.copy()
+    for body in bodies:
+        out[body] = labels[body[0]]
+    return canonical_labels(out)

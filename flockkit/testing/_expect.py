@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import contextlib
+import signal
+import threading
 
 from ..errors import ValidationError
 from ..interfaces import capabilities
@@ -109,16 +111,52 @@ def on_input(name: str, component, dims: int, what: str):
         raise AssertionError(f"{exc} (on {what} in {dims}D)") from exc
     except Exception as exc:  # noqa: BLE001 - reported as this check failing, with the input
         raise AssertionError(
-            f"{type(exc).__name__}: {exc} (on {what} in {dims}D){_hint(name, component, dims)}"
+            f"{type(exc).__name__}: {exc} (on {what} in {dims}D){_hint(name, component, dims, exc)}"
         ) from exc
 
 
-def _hint(name, component, dims) -> str:
+# words of an error that a component handling fewer dimensions than it declares would raise
+_SHAPE_WORDS = ("dim", "shape", "broadcast", "2d", "3d", "axis", "axes", "index", "size", "unpack")
+
+
+def _hint(name, component, dims, exc) -> str:
+    """Which declaration to add, when the error looks like a mismatch of dimensions and the
+    component declares others it may handle alone."""
     declared = dims_of(component)
     others = tuple(d for d in declared if d != dims)
-    if not others:
+    text = str(exc).lower()
+    if not others or not isinstance(exc, (ValueError, IndexError, TypeError)) or not any(w in text for w in _SHAPE_WORDS):
         return ""
     return (
         f". If {name} handles only {' and '.join(f'{d}D' for d in others)}, declare it: "
         f"capabilities = flockkit.Capabilities(dims={others!r})"
     )
+
+
+class _Expired(BaseException):
+    """Raised by the timer of `within`; a BaseException so that a plugin's ``except Exception``
+    does not swallow it."""
+
+
+@contextlib.contextmanager
+def within(seconds: float, what: str):
+    """Fail with an AssertionError naming `what` when the block runs past `seconds`, so that a
+    component that loops for ever is reported instead of waited for. It uses SIGALRM, so the limit
+    holds in the main thread of a POSIX process (where pytest runs tests); elsewhere the block runs
+    without one."""
+    if not hasattr(signal, "setitimer") or threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def expire(signum, frame):
+        raise _Expired
+
+    previous = signal.signal(signal.SIGALRM, expire)
+    signal.setitimer(signal.ITIMER_REAL, seconds)
+    try:
+        yield
+    except _Expired:
+        raise AssertionError(f"{what} ran past {seconds:g} s") from None
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)

@@ -107,6 +107,26 @@ def check_backward_ends_at_final(name, model):
             )
 
 
+@fixed_by(
+    "simulate backward as forward does, drawing the model's random choices from `rng` (paper 004: "
+    "forward from the final state with velocities and perception reversed, then time reversed); a "
+    "straight line or a copy of the final state gives the sampler no choice of backward motions"
+)
+def check_backward_is_a_simulation(name, model):
+    """backward is a simulation as forward is: where forward's motions from a flock differ between
+    seeds, so do backward's to it (the sampler draws backward proposals from it)."""
+    for state, context in _each(name, model):
+        with context:
+            forward = [_forward(model, state, seed=seed).positions for seed in (1, 2)]
+            if np.array_equal(*forward):
+                continue  # a model without random choices: nothing to vary
+            backward = [_backward(model, state, seed=seed).positions for seed in (1, 2)]
+            assert not np.array_equal(*backward), (
+                f"{name}.backward gives the same motion for seeds 1 and 2, though forward's differ: it does not "
+                "simulate (draw from rng)"
+            )
+
+
 def check_deterministic(name, model):
     """The same seeded Generator gives the same motion, forward and backward."""
     state = _flock(model)
@@ -397,6 +417,7 @@ CHECKS = (
     check_backward_shape,
     check_forward_starts_at_initial,
     check_backward_ends_at_final,
+    check_backward_is_a_simulation,
     check_deterministic,
     check_inputs_unchanged,
     check_rejects_negative_steps,

@@ -18,6 +18,7 @@ from ..motion import Alignment, Configuration, Motion
 __all__ = [
     "recording",
     "graph",
+    "loop_graph",
     "parts",
     "plants",
     "walker",
@@ -87,6 +88,17 @@ def graph(*, dims: int = 2) -> MotionGraph:
         for a, b in ((start, start + lag), (start + lag, start)):
             transitions.append((a, b, _alignment(motion, a, b), blend))
     return MotionGraph.assemble(motion, transitions, params={"lag": lag}, provenance={"builder": "flockkit.testing"})
+
+
+@functools.lru_cache(maxsize=4)
+def loop_graph(*, dims: int = 2) -> MotionGraph:
+    """The smallest motion graph there is: frames 40..63 of ``recording(dims=dims)`` (2.3 s) and
+    one transition from the last back to the first (the same configuration, turned). A walk has no
+    choice: it plays the loop over and over."""
+    motion = recording(dims=dims)
+    start, stop = 40, 40 + round(WOBBLE_PERIOD / motion.dt)
+    return MotionGraph.assemble(motion, [(stop, start, _alignment(motion, stop, start), 5)], params={},
+                                provenance={"builder": "flockkit.testing"})  # fmt: skip
 
 
 def _alignment(motion: Motion, a: int, b: int) -> Alignment:

@@ -111,6 +111,39 @@ def check_distance_covers_alignment(name, metric):
         )
 
 
+def _noisy_copies(metric):
+    """(a, b, known) with b a rigid, reordered copy of a whose positions carry small noise (0.02),
+    velocities turned with it, and `known` the mean squared position residual of the alignment the
+    kit made b with (the true rotation and correspondence, centres matched), under which the
+    velocities match exactly."""
+    rng = np.random.default_rng(SEED + 8)
+    for a in _configurations(metric):
+        noisy = a.positions + rng.normal(0.0, 0.02, a.positions.shape)
+        rotation, order, shift = _rotation(a.dims, rng), rng.permutation(a.n_agents), rng.normal(0, 10, a.dims)
+        b = Configuration(positions=(noisy @ rotation.T + shift)[order], velocities=(a.velocities @ rotation.T)[order])
+        x, y = a.positions - a.positions.mean(axis=0), noisy - noisy.mean(axis=0)
+        yield a, b, float(np.mean(np.sum((x - y) ** 2, axis=1)))
+
+
+@fixed_by(
+    "return the mean over agents of squared distances (not their sum, not its square root), minimised "
+    "over rotations, translations and assignments; a velocity term, if any, must vanish when the "
+    "velocities match under the alignment"
+)
+def check_distance_is_a_mean_of_squares(name, metric):
+    """The distance is at most the mean squared residual of an alignment the kit knows (a noisy
+    rigid, reordered copy with matching velocities): a minimum over alignments of a mean of squared
+    distances, not a sum over agents or a root mean square."""
+    for (a, b, known), context in _each(name, metric, _noisy_copies(metric)):
+        with context:
+            found = metric.compare(a, b).distance
+            assert found <= known * (1 + 1e-6) + 1e-9 * _scale(a), (
+                f"{name}.compare(a, b).distance = {found:.6g} exceeds {known:.6g}, the mean squared residual of a "
+                f"known alignment of b (a's agents moved by noise of 0.02, then rigidly moved and reordered; "
+                f"{'a sum over agents' if np.isclose(found, a.n_agents * known, rtol=0.05) else 'a root' if np.isclose(found, np.sqrt(known), rtol=0.05) else 'not a minimum'}?)"
+            )
+
+
 @fixed_by(
     "compute the distance from a and b in a way that does not depend on their order: search the same "
     "rotations and assignments both ways (an alignment of b onto a, inverted, aligns a onto b)"
@@ -296,6 +329,7 @@ CHECKS = (
     check_identical_is_zero,
     check_rigid_and_permutation_invariant,
     check_distance_covers_alignment,
+    check_distance_is_a_mean_of_squares,
     check_symmetric,
     check_relaxed_triangle,
     check_degenerate_configurations,

@@ -925,10 +925,11 @@ _SEGMENTER = _KindTemplate(
 A point's speed at each frame, divided by its own largest speed, is its activity profile;
 points whose profiles differ by at most `tolerance` at every frame share a part (and so, in a
 chain, do points linked through such neighbors). Points whose largest speed is under `still`
-times the fastest point's never move: they form one part of their own. The points of a rigid
-part turning or gliding speed up and slow down together, so they share a part, and parts that
-move at different times are told apart. The partition depends neither on the order of the points
-nor on the generator.
+times the fastest point's never move: they form one part of their own. Parts that move at
+different times are told apart; the points of a rigid body that turns as it travels speed up and
+slow down differently, so parts that together move rigidly are merged
+(flockkit.scene.merge_rigid_parts). The partition depends neither on the order of the points nor
+on the generator.
 """
 
 import attrs
@@ -968,7 +969,8 @@ class $Class:
             parts, found = connected_components(links, directed=False)
             labels[moving] = found
         labels[~moving] = parts
-        return flockkit.Segmentation(labels=labels, n_parts=parts + int(np.any(~moving)))
+        labels = flockkit.scene.merge_rigid_parts(motion, labels)
+        return flockkit.Segmentation(labels=labels, n_parts=int(labels.max()) + 1)
 ''',
     properties='''
 """Properties of $Class for any motion: hypothesis draws them."""

@@ -2,15 +2,36 @@
 
 Each check is ``check_<property>(name, strategy, *, graph=None)``; they walk the partner `graph`,
 by default the kit's own (``flockkit.testing.inputs.graph``: a group circling the origin, its
-transitions exact), which needs no plugin.
+transitions exact), which needs no plugin, and the smallest graph there is
+(``inputs.loop_graph``: one clip, one transition back). A walk that runs past WALK_SECONDS fails.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..errors import FlockkitError
 from ..graphs import Walk, synthesize_graph
-from ._expect import dims_of, expect_validation_error, needs
+from ._expect import dims_of, expect_validation_error, fixed_by, needs, on_input, within
+
+WALK_SECONDS = 60.0  # a walk of the kit's graphs that takes longer loops, or nearly so
+
+
+def _walk(name, strategy, graph, seed, duration):
+    with within(WALK_SECONDS, f"{name}.walk(duration={duration}) on a graph of {len(graph.clips)} clips"):
+        return strategy.walk(graph, np.random.default_rng(seed), duration)
+
+
+def _played(name, graph, walk) -> float:
+    """Seconds `walk` plays on `graph`; AssertionError when it is no Walk or does not fit."""
+    assert isinstance(walk, Walk), f"{name}.walk returned {type(walk).__name__}, not a flockkit.Walk"
+    try:
+        return synthesize_graph(graph, walk).duration
+    except FlockkitError as exc:
+        raise AssertionError(
+            f"{name}.walk returned a Walk that does not fit the graph: {exc}. Each edge must be one that "
+            "graph.allowed_edges(node, frames_since_transition) lists at the node the walk has reached"
+        ) from exc
 
 
 def _graph(strategy, graph):
@@ -26,10 +47,26 @@ def check_walk_covers_duration(name, strategy, *, graph=None):
     """walk returns a Walk that fits the graph and plays at least the duration asked for."""
     graph = _graph(strategy, graph)
     for duration in (5.0, 30.0):
-        walk = strategy.walk(graph, np.random.default_rng(1), duration)
-        assert isinstance(walk, Walk), f"{name}.walk returned {type(walk).__name__}, not a flockkit.Walk"
-        motion = synthesize_graph(graph, walk)
-        assert motion.duration >= duration - 1e-9, f"{name}.walk(duration={duration}) plays only {motion.duration} s"
+        played = _played(name, graph, _walk(name, strategy, graph, 1, duration))
+        assert played >= duration - 1e-9, f"{name}.walk(duration={duration}) plays only {played} s"
+
+
+@fixed_by(
+    "on a graph with one loop the only walk plays it over and over: let the walk repeat edges (a tabu "
+    "list must give way when nothing else is allowed), and where a goal truly cannot be met raise a "
+    "flockkit error saying why instead of searching on"
+)
+def check_walks_a_single_loop(name, strategy):
+    """On the smallest graph (``inputs.loop_graph``: one clip of 2.3 s, one transition back) a walk
+    of 60 s is made, within WALK_SECONDS, and plays at least 60 s."""
+    from .inputs import loop_graph
+
+    dims = dims_of(strategy)[0]
+    graph = loop_graph(dims=dims)
+    with on_input(name, strategy, dims, "the kit's single-loop graph"):
+        walk = _walk(name, strategy, graph, 3, 60.0)
+    played = _played(name, graph, walk)
+    assert played >= 60.0 - 1e-9, f"{name}.walk(duration=60) on a single loop plays only {played} s"
 
 
 @needs("graph")
@@ -38,8 +75,8 @@ def check_deterministic(name, strategy, *, graph=None):
     by chance)."""
     graph = _graph(strategy, graph)
     for seed in (7, 8, 9):
-        first = strategy.walk(graph, np.random.default_rng(seed), 60.0)
-        assert first == strategy.walk(graph, np.random.default_rng(seed), 60.0), (
+        first = _walk(name, strategy, graph, seed, 60.0)
+        assert first == _walk(name, strategy, graph, seed, 60.0), (
             f"{name}.walk differs for the same seed"
         )
 
@@ -55,4 +92,4 @@ def check_rejects_bad_duration(name, strategy, *, graph=None):
         )
 
 
-CHECKS = (check_walk_covers_duration, check_deterministic, check_rejects_bad_duration)
+CHECKS = (check_walk_covers_duration, check_walks_a_single_loop, check_deterministic, check_rejects_bad_duration)

@@ -88,9 +88,9 @@ class IcaKmeans:
             return flockkit.Segmentation(labels=labels, n_parts=1)
         seed = int(rng.integers(2**31 - 1))
         found = self._moving_parts(energy[:, moving], wanted, seed)
-        if wanted is None:
-            found = _merge_rigid(motion.positions[:, moving], found)
         labels[moving] = found + still
+        if wanted is None:
+            labels = flockkit.scene.merge_rigid_parts(motion, labels, tolerance=_RIGID)
         return flockkit.Segmentation(labels=flockkit.scene.canonical_labels(labels), n_parts=int(labels.max()) + 1)
 
     def _moving_parts(self, energy: np.ndarray, wanted: int | None, seed: int) -> np.ndarray:
@@ -158,43 +158,3 @@ def _kmeans(rows: np.ndarray, k: int, seed: int) -> np.ndarray:
         warnings.simplefilter("ignore")  # rigid groups give identical rows: fewer distinct clusters than k
         return KMeans(n_clusters=k, n_init=10, random_state=seed).fit_predict(rows).astype(np.int64)
 
-
-def _rigid(points: np.ndarray) -> bool:
-    """Whether (T, n, D) points move as one rigid body: every frame a rotation and translation of
-    the first, to _RIGID of their extent (Kabsch, all frames at once)."""
-    centered = points - points.mean(axis=1, keepdims=True)
-    extent = float(np.abs(centered).max())
-    if extent == 0.0:
-        return True
-    frames, n, dims = centered.shape
-    chunk = max(1, 2**22 // (n * dims * dims))  # kabsch forms (frames, n, D, D) products
-    for start in range(0, frames, chunk):
-        part = centered[start : start + chunk]
-        rotations = flockkit.rigid.kabsch(centered[:1], part)  # each frame onto the first
-        placed = np.einsum("tij,tnj->tni", rotations, part)
-        if float(np.abs(placed - centered[0]).max()) > _RIGID * extent:
-            return False
-    return True
-
-
-def _merge_rigid(positions: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """`labels` with every set of parts that together move rigidly made one part (0..k-1)."""
-    parts = [np.flatnonzero(labels == k) for k in range(int(labels.max()) + 1)]
-    rigid = [p for p in parts if _rigid(positions[:, p])]  # a part that deforms joins nothing
-    merged = True
-    while merged:
-        merged = False
-        for i in range(len(rigid)):
-            for j in range(i + 1, len(rigid)):
-                union = np.concatenate([rigid[i], rigid[j]])
-                if _rigid(positions[:, union]):
-                    rigid[i] = union
-                    del rigid[j]
-                    merged = True
-                    break
-            if merged:
-                break
-    out = labels.copy()
-    for group in rigid:
-        out[group] = labels[group[0]]
-    return np.unique(out, return_inverse=True)[1].ravel().astype(np.int64)

@@ -222,3 +222,26 @@ def test_the_annotated_walk_walks_every_part_of_layers_after_one_target():
         played = layers.features.vectors[flockkit.graphs.played_frames(graph, part)[0][:200]]
         assert np.mean(np.linalg.norm(played - wanted, axis=1) <= TOLERANCE) >= 0.9
     assert flockkit.synthesize(layers, walk).n_frames >= 200
+
+
+def _turning_body(points, seconds=6.0, dt=0.1, rate=0.8, travel=1.5):
+    t = np.arange(round(seconds / dt) + 1)[:, None] * dt
+    c, s = np.cos(rate * t), np.sin(rate * t)
+    x, y = points[:, 0], points[:, 1]
+    return np.stack([c * x - s * y + travel * t, s * x + c * y], axis=2)
+
+
+def test_merge_rigid_parts_joins_the_pieces_of_a_turning_body_and_keeps_independent_ones():
+    rng = np.random.default_rng(5)
+    body, other = rng.uniform(-1, 1, (12, 2)), rng.uniform(-1, 1, (8, 2)) + 4
+    positions = np.concatenate([_turning_body(body), _turning_body(other, rate=-0.5, travel=0.2)], axis=1)
+    motion = flockkit.Motion(positions=positions, dt=0.1)
+    cut = np.array([0, 1, 2] * 4 + [3, 4] * 4)  # each body cut into pieces
+    merged = flockkit.scene.merge_rigid_parts(motion, cut)
+    assert list(merged) == [0] * 12 + [1] * 8
+    bent = motion.positions.copy()
+    bent[:, 0] += np.linspace(0, 0.5, motion.n_frames)[:, None]  # one point slides: no longer rigid
+    found = flockkit.scene.merge_rigid_parts(flockkit.Motion(positions=bent, dt=0.1), cut)
+    assert len(np.unique(found[:12])) > 1 and len(np.unique(found[12:])) == 1
+    with pytest.raises(ValidationError, match="one entry per point"):
+        flockkit.scene.merge_rigid_parts(motion, cut[:-1])

@@ -129,6 +129,16 @@ class BackwardEndsElsewhere(RandomVelocity):
         return super().forward(final, steps, rng)
 
 
+class BallisticBackward(RandomVelocity):
+    """backward draws a straight line at the final velocities: it ends where it should, but it is
+    no simulation."""
+
+    def backward(self, final, steps, rng):
+        self._steps(steps)
+        before = np.arange(steps, -1, -1)[:, None, None] * self.dt
+        return flockkit.Motion(positions=final.positions - before * final.velocities, dt=self.dt)
+
+
 class GlobalRandomness(RandomVelocity):
     """Ignores rng and draws from a fresh, unseeded generator."""
 
@@ -253,6 +263,7 @@ BROKEN = {
     "check_backward_shape": BackwardOffByOne,
     "check_forward_starts_at_initial": ShiftedStart,
     "check_backward_ends_at_final": BackwardEndsElsewhere,
+    "check_backward_is_a_simulation": BallisticBackward,
     "check_deterministic": GlobalRandomness,
     "check_inputs_unchanged": MutatesInput,
     "check_rejects_negative_steps": AcceptsNegativeSteps,
@@ -405,6 +416,22 @@ class SquaredAgain(_Wrapped):
         return self._with(found, distance=found.distance + 10 * found.distance**2)
 
 
+class RootMeanSquare(_Wrapped):
+    """The root of the mean squared residual: invariant, symmetric, zero for copies, not a mean of squares."""
+
+    def compare(self, a, b):
+        found = super().compare(a, b)
+        return self._with(found, distance=float(np.sqrt(found.distance)))
+
+
+class SumOfSquares(_Wrapped):
+    """The residual summed over agents instead of averaged."""
+
+    def compare(self, a, b):
+        found = super().compare(a, b)
+        return self._with(found, distance=found.distance * a.n_agents)
+
+
 class TieBreaking:
     """Matches agents in the order of their distance to the centre of mass (ties by index), then
     rotates by Kabsch: exact for rigid copies of configurations without ties, wrong for a square."""
@@ -435,6 +462,7 @@ BROKEN_METRICS = {
     "check_identical_is_zero": OffsetDistance,
     "check_rigid_and_permutation_invariant": IgnoresRotation,
     "check_distance_covers_alignment": UnderReports,
+    "check_distance_is_a_mean_of_squares": SumOfSquares,
     "check_symmetric": Asymmetric,
     "check_relaxed_triangle": SquaredAgain,
     "check_degenerate_configurations": TieBreaking,
@@ -565,9 +593,36 @@ class ClampsDuration:
         return RandomWalk().walk(graph, rng, max(duration, 1.0))
 
 
+class TabuWalk:
+    """Random edges, never one taken in the last `tenure` edges: when every allowed edge is tabu it
+    raises (`patient=False`) or keeps drawing for ever (`patient=True`)."""
+
+    def __init__(self, tenure=4, patient=False):
+        self.tenure, self.patient = tenure, patient
+
+    def walk(self, graph, rng, duration):
+        if not duration > 0:
+            raise ValidationError(f"duration must be > 0; got {duration}")
+        node, since, played, edges = 0, math.inf, 0.0, []
+        while played < duration:
+            options = [e for e in graph.allowed_edges(node, since) if e not in edges[-self.tenure:]]
+            if not options:
+                if self.patient:
+                    continue
+                raise ValidationError("every allowed edge is tabu")
+            edge = options[int(rng.integers(len(options)))]
+            frames = graph.clips[edge[1]].stop - graph.clips[edge[1]].start if edge[0] == "clip" else 0
+            edges.append(edge)
+            played += frames * graph.motion.dt
+            since = since + frames if edge[0] == "clip" else 0
+            node = graph.edge_target(edge)
+        return flockkit.Walk(start=0, edges=edges)
+
+
 BROKEN_WALKS = {
     "check_interface": NoWalk,
     "check_walk_covers_duration": HalfWalk,
+    "check_walks_a_single_loop": TabuWalk,
     "check_deterministic": UnseededWalk,
     "check_rejects_bad_duration": ClampsDuration,
 }

@@ -169,3 +169,20 @@ def test_a_failure_through_pytest_names_check_component_and_fix():
     with pytest.raises(AssertionError) as info:
         run(BROKEN_BY_KIND["metric"]["check_symmetric"]())
     assert "check_symmetric failed for metric 'lopsided'" in str(info.value) and "to fix:" in str(info.value)
+
+
+def test_a_root_mean_square_metric_fails_the_mean_of_squares_check():
+    from .fakes import RootMeanSquare
+
+    with pytest.raises(AssertionError, match="a root"):
+        check_named("metric", "check_distance_is_a_mean_of_squares")("broken", RootMeanSquare())
+
+
+def test_a_walk_that_loops_for_ever_fails_its_check_within_the_time_limit(monkeypatch):
+    from flockkit.testing import walk as walk_checks
+
+    from .fakes import TabuWalk
+
+    monkeypatch.setattr(walk_checks, "WALK_SECONDS", 0.5)
+    with pytest.raises(AssertionError, match="ran past 0.5 s"):
+        walk_checks.check_walks_a_single_loop("tabu", TabuWalk(patient=True))
