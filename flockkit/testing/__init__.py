@@ -42,7 +42,7 @@ from ..interfaces import capabilities
 from ..kinds import KINDS
 from ..registry import interface_problems
 from . import inputs, strategies
-from ._expect import PARTNER_KINDS, advice, default_partner, skip_reason
+from ._expect import PARTNER_KINDS, advice, default_partner, said, skip_reason
 
 __all__ = [
     "check_plugin",
@@ -172,7 +172,7 @@ def _run(check, kind: str, name: str, component) -> None:
         check(name, component)
     except Exception as exc:  # noqa: BLE001 - every failure is reported the same way
         raise AssertionError(
-            f"{check.__name__} failed for {kind} {name!r}: {type(exc).__name__}: {exc}\n  to fix: {advice(check, kind)}"
+            f"{check.__name__} failed for {kind} {name!r}: {type(exc).__name__}: {said(exc)}\n  to fix: {advice(check, kind)}"
         ) from exc
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import signal
 import threading
+import traceback
 
 from ..errors import ValidationError
 from ..interfaces import capabilities
@@ -108,11 +109,20 @@ def on_input(name: str, component, dims: int, what: str):
     try:
         yield
     except AssertionError as exc:
-        raise AssertionError(f"{exc} (on {what} in {dims}D)") from exc
+        raise AssertionError(f"{said(exc)} (on {what} in {dims}D)") from exc
     except Exception as exc:  # noqa: BLE001 - reported as this check failing, with the input
         raise AssertionError(
-            f"{type(exc).__name__}: {exc} (on {what} in {dims}D){_hint(name, component, dims, exc)}"
+            f"{type(exc).__name__}: {said(exc)} (on {what} in {dims}D){_hint(name, component, dims, exc)}"
         ) from exc
+
+
+def said(exc: BaseException) -> str:
+    """What an exception says, or where it was raised when it says nothing (a bare ``assert``)."""
+    text = str(exc)
+    if text:
+        return text
+    frames = traceback.extract_tb(exc.__traceback__)
+    return f"(no message) at {frames[-1].filename}:{frames[-1].lineno}" if frames else "(no message)"
 
 
 # words of an error that a component handling fewer dimensions than it declares would raise

@@ -187,8 +187,9 @@ def check_log_plausibility_finite(name, model):
 
 
 @fixed_by(
-    "guard every division by a distance, a speed or a count of neighbours (agents on one spot, a lone "
-    "agent, agents at rest) and break ties between equally near neighbours the same way every time"
+    "return every agent in every frame whatever the flock (a lone agent, agents on one spot or on a "
+    "line, agents at rest); guard every division by a distance, a speed or a count of neighbours; "
+    "break ties between equally near neighbours the same way every time"
 )
 def check_degenerate_flocks(name, model):
     """Tied and symmetric flocks (a square, a hexagon, a grid, agents on one spot, pairs of

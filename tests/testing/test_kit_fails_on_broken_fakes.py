@@ -186,3 +186,14 @@ def test_a_walk_that_loops_for_ever_fails_its_check_within_the_time_limit(monkey
     monkeypatch.setattr(walk_checks, "WALK_SECONDS", 0.5)
     with pytest.raises(AssertionError, match="ran past 0.5 s"):
         walk_checks.check_walks_a_single_loop("tabu", TabuWalk(patient=True))
+
+
+def test_a_failure_without_a_message_says_where_it_was_raised():
+    from .fakes import RandomVelocity
+
+    class Silent(RandomVelocity):
+        def forward(self, initial, steps, rng):
+            raise AssertionError  # as a bare assert in a module pytest does not rewrite
+
+    with pytest.raises(AssertionError, match=r"check_forward_shape failed .*: \(no message\) at .*test_kit_fails"):
+        check_plugin("behavior", Silent(), name="silent")
