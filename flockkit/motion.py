@@ -20,9 +20,8 @@ import numpy as np
 from . import _npzfile, rigid
 from ._arrays import check_agent_array, check_finite, readonly_float, readonly_int, readonly_mapping
 from .errors import FileFormatError, ValidationError
-from .validate import allocation
+from .validate import allocation, integer, number
 from .validate import dims as validate_dims
-from .validate import integer, number
 
 __all__ = [
     "Motion",

@@ -197,6 +197,22 @@ def test_every_kind_page_renders_the_values_it_handles(kind):
         assert f"::: {path}" in page, f"docs/kinds/{kind}.md does not render {path}"
 
 
+@pytest.mark.parametrize("kind", list(KINDS))
+def test_every_kind_page_renders_its_protocol_and_what_the_kit_checks(kind):
+    """A plugin author reads the methods to write and every rule the kit will hold them to on the
+    kind's page: the protocol and the kit module's checks are rendered from their docstrings, and
+    every check says what it checks."""
+    import importlib
+
+    page = (ROOT / "docs" / "kinds" / f"{kind}.md").read_text()
+    protocol = KINDS[kind].protocol
+    assert f"::: {protocol.__module__}.{protocol.__name__}" in page.split("## The protocol")[1].split("##")[0]
+    checked = page.split("## What the kit checks")[1].split("## ")[0]
+    assert f"::: {KINDS[kind].kit}" in checked and 'filters: ["^check_"]' in checked
+    for check in importlib.import_module(KINDS[kind].kit).CHECKS:
+        assert check.__name__.startswith("check_") and inspect.getdoc(check), f"{check.__name__} says nothing"
+
+
 def _validate_table() -> str:
     from flockkit import validate
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import inspect
 import json
 import sys
 from pathlib import Path
@@ -135,6 +136,29 @@ def require_capability(args, option: str, field: str, *, what: str, needed_by: d
         instead = (f"choose one that does with --{option} (installed: {', '.join(declaring)})" if declaring
                    else f"no installed {kind} declares it")  # fmt: skip
         raise ValidationError(f"{exc}; {instead}, or leave out {given}") from None
+
+
+def require_parameter(args, option: str, parameter: str, given_as: str) -> None:
+    """Refuse `given_as` (an option given on the command line that sets `parameter`) when the
+    component of `option` does not take that parameter: one line naming the option, the
+    component, and the installed components of its kind that take it."""
+    kind, name = KINDS_OF_OPTIONS[option], getattr(args, option)
+    if name not in registry.available(kind):
+        return  # flockkit.get names the unknown component and what is installed
+    taking = [c.name for c in registry.describe(kind) if _takes(c.factory, parameter)]
+    if name in taking:
+        return
+    instead = (f"choose one that does with --{option} (installed: {', '.join(taking)})" if taking
+               else f"no installed {kind} takes it")  # fmt: skip
+    raise ValidationError(f"{given_as}: {kind} {name!r} takes no {parameter}=; {instead}")
+
+
+def _takes(factory, parameter: str) -> bool:
+    try:
+        parameters = inspect.signature(factory).parameters
+    except (TypeError, ValueError):
+        return True  # a factory without a signature: let the call say
+    return parameter in parameters or any(p.kind is p.VAR_KEYWORD for p in parameters.values())
 
 
 def require_suffix(path: str, suffixes: tuple[str, ...], option: str) -> Path:

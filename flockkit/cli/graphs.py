@@ -19,6 +19,7 @@ from ._options import (
     params_given,
     parse_region,
     read_source,
+    require_parameter,
     require_suffix,
     shows_progress,
 )
@@ -69,6 +70,7 @@ def _cmd_walk(args) -> int:
     graph = (flockkit.GraphLayers if layered else flockkit.MotionGraph).load(args.graph)
     params = component_params(args, "strategy")
     if args.region is not None:
+        require_parameter(args, "strategy", "region", "--region")
         params["region"] = parse_region(args.region)
     path = flockkit.walk(graph, strategy=args.strategy, duration=args.duration, seed=args.seed, **params)
     motion = flockkit.synthesize(graph, path)

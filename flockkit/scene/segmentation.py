@@ -130,6 +130,15 @@ def _moves_rigidly(points: np.ndarray, tolerance: float) -> bool:
     return True
 
 
+def _rigid_pair(positions, bodies, tolerance):
+    """The first (i, j), i < j, of bodies that together move rigidly, or None."""
+    for i in range(len(bodies)):
+        for j in range(i + 1, len(bodies)):
+            if _moves_rigidly(positions[:, np.concatenate([bodies[i], bodies[j]])], tolerance):
+                return i, j
+    return None
+
+
 def merge_rigid_parts(motion, labels, *, tolerance: float = 1e-5) -> np.ndarray:
     """`labels` (one per point of `motion`, a Motion or AnimatedMesh) with every set of parts that
     together move as one rigid body made one part, relabelled 0, 1, ... (canonical_labels).
@@ -147,16 +156,10 @@ def merge_rigid_parts(motion, labels, *, tolerance: float = 1e-5) -> np.ndarray:
     tolerance = validate.number(tolerance, "tolerance", minimum=0)
     parts = [np.flatnonzero(labels == k) for k in np.unique(labels)]
     bodies = [p for p in parts if _moves_rigidly(positions[:, p], tolerance)]
-    merged = True
-    while merged:
-        merged = False
-        for i, j in ((i, j) for i in range(len(bodies)) for j in range(i + 1, len(bodies))):
-            union = np.concatenate([bodies[i], bodies[j]])
-            if _moves_rigidly(positions[:, union], tolerance):
-                bodies[i] = union
-                del bodies[j]
-                merged = True
-                break
+    while (pair := _rigid_pair(positions, bodies, tolerance)) is not None:
+        i, j = pair
+        bodies[i] = np.concatenate([bodies[i], bodies[j]])
+        del bodies[j]
     out = labels.copy()
     for body in bodies:
         out[body] = labels[body[0]]

@@ -64,7 +64,8 @@ def advice(check, kind: str) -> str:
     if own:
         return own
     promise = " ".join((check.__doc__ or "").split()) or check.__name__
-    return f"make the {kind} meet this ({check.__name__}): {promise} The contract: docs/kinds/{kind}.md"
+    where = f'docs/kinds/{kind}.md, "What the kit checks"'
+    return f"make the {kind} meet this ({check.__name__}): {promise} The contract: {where}"
 
 
 def skip_reason(check, declared) -> str | None:
@@ -135,7 +136,11 @@ def _hint(name, component, dims, exc) -> str:
     declared = dims_of(component)
     others = tuple(d for d in declared if d != dims)
     text = str(exc).lower()
-    if not others or not isinstance(exc, (ValueError, IndexError, TypeError)) or not any(w in text for w in _SHAPE_WORDS):
+    if (
+        not others
+        or not isinstance(exc, (ValueError, IndexError, TypeError))
+        or not any(w in text for w in _SHAPE_WORDS)
+    ):
         return ""
     return (
         f". If {name} handles only {' and '.join(f'{d}D' for d in others)}, declare it: "

@@ -137,10 +137,11 @@ def check_distance_is_a_mean_of_squares(name, metric):
     for (a, b, known), context in _each(name, metric, _noisy_copies(metric)):
         with context:
             found = metric.compare(a, b).distance
+            guess = ("a sum over agents" if np.isclose(found, a.n_agents * known, rtol=0.05)
+                     else "a root" if np.isclose(found, np.sqrt(known), rtol=0.05) else "not a minimum")  # fmt: skip
             assert found <= known * (1 + 1e-6) + 1e-9 * _scale(a), (
                 f"{name}.compare(a, b).distance = {found:.6g} exceeds {known:.6g}, the mean squared residual of a "
-                f"known alignment of b (a's agents moved by noise of 0.02, then rigidly moved and reordered; "
-                f"{'a sum over agents' if np.isclose(found, a.n_agents * known, rtol=0.05) else 'a root' if np.isclose(found, np.sqrt(known), rtol=0.05) else 'not a minimum'}?)"
+                f"known alignment of b (a's agents moved by noise of 0.02, then rigidly moved and reordered; {guess}?)"
             )
 
 

@@ -76,9 +76,7 @@ def check_deterministic(name, strategy, *, graph=None):
     graph = _graph(strategy, graph)
     for seed in (7, 8, 9):
         first = _walk(name, strategy, graph, seed, 60.0)
-        assert first == _walk(name, strategy, graph, seed, 60.0), (
-            f"{name}.walk differs for the same seed"
-        )
+        assert first == _walk(name, strategy, graph, seed, 60.0), f"{name}.walk differs for the same seed"
 
 
 @needs("graph")

@@ -157,4 +157,3 @@ def _kmeans(rows: np.ndarray, k: int, seed: int) -> np.ndarray:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # rigid groups give identical rows: fewer distinct clusters than k
         return KMeans(n_clusters=k, n_init=10, random_state=seed).fit_predict(rows).astype(np.int64)
-

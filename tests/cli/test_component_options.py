@@ -180,6 +180,18 @@ def test_arena_with_a_behavior_lacking_obstacles_names_the_capability(capsys, tm
     assert code == 0, err
 
 
+def test_region_with_a_strategy_that_takes_none_names_the_option_and_those_that_do(capsys, tmp_path, recording):
+    graph, output = tmp_path / "graph.npz", tmp_path / "walk.npz"
+    assert run(capsys, "build", recording, "-o", graph)[0] == 0
+    code, _, err = run(capsys, "walk", graph, "--duration", "5", "--region", "box:-50,-50,50,50", "-o", output)
+    assert code == 1 and one_line(err), err
+    assert "--region: walk 'random' takes no region=" in err and "--strategy (installed: region)" in err, err
+    assert not output.exists()
+    code, _, err = run(capsys, "walk", graph, "--duration", "5", "--strategy", "region", "--region",
+                       "box:-50,-50,50,50", "-o", output)  # fmt: skip
+    assert code == 0 and output.exists(), err
+
+
 @pytest.mark.parametrize("command", sorted(MAIN))
 def test_help_names_the_main_component_of_param(capsys, command):
     option, kind, noun = MAIN[command]

@@ -605,7 +605,7 @@ class TabuWalk:
             raise ValidationError(f"duration must be > 0; got {duration}")
         node, since, played, edges = 0, math.inf, 0.0, []
         while played < duration:
-            options = [e for e in graph.allowed_edges(node, since) if e not in edges[-self.tenure:]]
+            options = [e for e in graph.allowed_edges(node, since) if e not in edges[-self.tenure :]]
             if not options:
                 if self.patient:
                     continue
