@@ -46,9 +46,9 @@ def read_sequence(pattern: str) -> tuple[np.ndarray, np.ndarray, str]:
     """(positions (T, V, 3), faces (F, 3 or 4), the first frame's name) of the OBJ sequence
     `pattern`: a folder, a glob, or one file (a path that exists is never read as a glob)."""
     files = _frames(pattern)
-    frames, faces = [], None
+    frames, faces, known = [], None, None
     for file in files:
-        points, polygons = _read_obj(file)
+        points, polygons, known = _read_obj(file, known)
         if faces is None:
             faces, first = polygons, file
             validate.allocation(len(files) * points.size, f"{pattern}: {len(files)} frames of {len(points)} vertices")
@@ -64,12 +64,50 @@ def read_sequence(pattern: str) -> tuple[np.ndarray, np.ndarray, str]:
 _MAX_VERTEX = 2**40  # far above any file's vertex count, far below numpy's int64
 
 
-def _read_obj(file) -> tuple[np.ndarray, np.ndarray]:
-    """The vertices (V, 3) and faces (F, 3 or 4) of one OBJ file: ``v x y z`` lines (a fourth
-    coordinate or vertex colours after them are ignored) and ``f`` lines of 1-based or negative
-    (relative) indices; other lines are ignored."""
+_VERTEX_LINE = re.compile(r"^[ \t]*v[ \t]+([^\r\n]*)", re.MULTILINE)
+_FACE_LINE = re.compile(r"^[ \t]*f[ \t]+([^\r\n]*)", re.MULTILINE)
+
+
+def _read_obj(file, known=None) -> tuple[np.ndarray, np.ndarray, tuple]:
+    """The vertices (V, 3) and faces (F, 3 or 4) of one OBJ file, and what a later frame of the
+    sequence may reuse: the text of its face lines and its faces.
+
+    Where the face lines are the same text as `known`'s (an earlier frame's) and use no relative
+    indices, the faces are those, and the vertices are parsed by numpy at once (every vertex line
+    then needs the same number of coordinates); anything else, or anything numpy refuses, goes
+    through the line-by-line parser, whose errors name the line."""
+    text = _files.read_text(file)
+    face_text = "\n".join(_FACE_LINE.findall(text))
+    if known is not None and face_text == known[0] and "-" not in face_text:
+        points = _vertices(text)
+        if points is not None:
+            return points, known[1], known
+    points, faces = _parse_obj(file, text)
+    return points, faces, (face_text, faces)
+
+
+def _vertices(text: str) -> np.ndarray | None:
+    """The (V, 3) finite vertices of an OBJ text parsed at once, or None where it cannot be."""
+    import warnings
+
+    lines = _VERTEX_LINE.findall(text)
+    if not lines:
+        return None
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")  # an empty or odd line: the careful parser says which
+            points = np.loadtxt(lines, dtype=float, ndmin=2, usecols=(0, 1, 2), comments=None)
+    except (ValueError, IndexError, Warning):
+        return None
+    return points if points.shape == (len(lines), 3) and np.all(np.isfinite(points)) else None
+
+
+def _parse_obj(file, text: str) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices (V, 3) and faces (F, 3 or 4) of one OBJ file's text: ``v x y z`` lines (a
+    fourth coordinate or vertex colours after them are ignored) and ``f`` lines of 1-based or
+    negative (relative) indices; other lines are ignored."""
     points, polygons = [], []
-    for number_, line in enumerate(_files.read_text(file).splitlines(), 1):
+    for number_, line in enumerate(text.splitlines(), 1):
         fields = line.split()
         if not fields or fields[0] not in ("v", "f"):
             continue

@@ -144,3 +144,41 @@ def test_npy_refuses_other_arrays(tmp_path):
     np.save(tmp_path / "objects.npy", np.array([{"a": 1}], dtype=object), allow_pickle=True)
     with pytest.raises(FileFormatError):
         read_npy(tmp_path / "objects.npy", fps=10)
+
+
+def _obj_frame(path, points, faces, *, extra=""):
+    vertices = "".join(f"v {float(x)!r} {float(y)!r} {float(z)!r}{extra}\n" for x, y, z in points)
+    path.write_text("# frame\no thing\n" + vertices + "".join("f " + " ".join(f"{i + 1}//{i + 1}" for i in f) + "\n"
+                                                              for f in faces))  # fmt: skip
+
+
+def test_obj_frames_after_the_first_equal_a_line_by_line_reading(tmp_path):
+    """Later frames with the first frame's face lines are parsed by numpy at once; what they give
+    is what the line-by-line parser gives, vertex colours and w coordinates included."""
+    from flockkit.io import obj
+
+    rng = np.random.default_rng(7)
+    points, faces = rng.normal(size=(50, 3)), rng.integers(0, 50, (60, 3))
+    for t, extra in enumerate(("", " 1.0", " 0.5 0.25 1", "")):  # plain, w, colours, plain
+        _obj_frame(tmp_path / f"frame{t}.obj", points + 0.1 * t, faces, extra=extra)
+    positions, found_faces, _ = obj.read_sequence(str(tmp_path))
+    for t in range(4):
+        careful, careful_faces = obj._parse_obj(tmp_path / f"frame{t}.obj", (tmp_path / f"frame{t}.obj").read_text())
+        np.testing.assert_array_equal(positions[t], careful)
+        np.testing.assert_array_equal(found_faces, careful_faces)
+    np.testing.assert_array_equal(positions[3], points + 0.1 * 3)  # repr round-trips a float exactly
+
+
+def test_a_bad_vertex_in_a_later_obj_frame_is_named_by_its_line(tmp_path):
+    from flockkit.io import obj
+
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
+    for t in range(3):
+        _obj_frame(tmp_path / f"frame{t}.obj", quad + t, [[0, 1, 2, 3]])
+    bad = tmp_path / "frame2.obj"
+    bad.write_text(bad.read_text().replace("v 2.0 3.0 2.0", "v 2.0 x 2.0"))
+    with pytest.raises(FileFormatError, match=r"frame2.obj, line 6: not an OBJ vertex"):
+        obj.read_sequence(str(tmp_path))
+    bad.write_text(bad.read_text().replace("v 2.0 x 2.0", "v 2.0 nan 2.0"))
+    with pytest.raises(FileFormatError, match="frame2.obj: vertices must have finite coordinates"):
+        obj.read_sequence(str(tmp_path))
