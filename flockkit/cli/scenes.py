@@ -50,8 +50,10 @@ def _cmd_scene(args) -> int:
     report = animation.report
     print(
         f"wrote {', '.join(str(p) for p in written)}: {animation.placement.n_objects} objects, "
-        f"{animation.n_frames} frames; neighbours in step {report['in_step_before']:.1%} of frames before "
-        f"de-synchronisation, {report['in_step_after']:.1%} after"
+        f"{animation.n_frames} frames; neighbours in step (within {report['in_step_frames']} frame) at most "
+        f"{report['in_step_before']:.1%} of frames before de-synchronisation, {report['in_step_after']:.1%} after; "
+        f"pairs in step over 5% of frames {report['pairs_in_step_before']:.1%} before, "
+        f"{report['pairs_in_step_after']:.1%} after"
     )
     return 0
 

@@ -12,7 +12,7 @@ from ..graphs import MotionGraph, Walk, played_frames
 from ..io import USD_FPS
 from ..motion import Motion
 from ..regions import Polygon
-from .desync import NEIGHBOUR_DIAGONALS, largest_in_step, stacked
+from .desync import NEAREST, NEIGHBOUR_DIAGONALS, largest_in_step, stacked
 from .flow import FlowField, SelfMovement, flow_constraints
 from .layers import GraphLayers
 from .placement import Placement, heading_turn, turned_half
@@ -44,8 +44,11 @@ class _Motions:
 class SceneAnimation:
     """A synthesized scene: the templates, where each object stands (`placement`), each object's
     walk (a Walk, or a LayeredWalk for layered templates), `n_frames` output frames `dt` apart,
-    and the constraints it followed. `report` holds the neighbours' in-step share before and
-    after de-synchronisation when it comes from Scene.synthesize."""
+    and the constraints it followed. `report`, when it comes from Scene.synthesize, holds before
+    and after de-synchronisation the largest share of frames two neighbours play in step
+    (``in_step_before``, ``in_step_after``: source frames at most ``in_step_frames`` apart in some
+    part) and the share of neighbour pairs in step on more than 5% of frames
+    (``pairs_in_step_before``, ``pairs_in_step_after``); see :meth:`neighbours`."""
 
     templates: tuple = attrs.field(converter=tuple)
     placement: Placement
@@ -104,19 +107,27 @@ class SceneAnimation:
 
     def neighbours(self) -> list[np.ndarray]:
         """For each object, the other objects of its template within NEIGHBOUR_DIAGONALS
-        footprint diagonals."""
+        footprint diagonals, and its NEAREST closest ones of its template however far (each way:
+        if b is among a's nearest, a is b's neighbour too), sorted."""
         from scipy.spatial import cKDTree
 
-        result = [np.zeros(0, dtype=np.int64)] * self.placement.n_objects
+        linked = [set() for _ in range(self.placement.n_objects)]
         for kind, (_, half) in enumerate(self._footprints):
             members = np.flatnonzero(self.placement.templates == kind)
             if len(members) < 2:
                 continue
             reach = NEIGHBOUR_DIAGONALS * 2 * np.linalg.norm(half) * self.placement.scales[members].max()
-            tree = cKDTree(self.placement.positions[members])
-            for row, near in zip(members, tree.query_ball_point(self.placement.positions[members], reach)):
-                result[row] = members[[j for j in near if members[j] != row]]
-        return result
+            places = self.placement.positions[members]
+            tree = cKDTree(places)
+            _, nearest = tree.query(places, k=min(NEAREST + 1, len(members)))
+            for row, near, closest in zip(
+                members, tree.query_ball_point(places, reach), nearest.reshape(len(members), -1)
+            ):
+                for other in members[np.union1d(near, closest)]:
+                    if other != row:
+                        linked[row].add(int(other))
+                        linked[int(other)].add(int(row))
+        return [np.array(sorted(own), dtype=np.int64) for own in linked]
 
     def save(self, path) -> None:
         """Write the templates, placement, walks and constraints to one .npz with JSON metadata
@@ -148,8 +159,8 @@ class SceneAnimation:
     __hash__ = None
 
     def in_step_share(self) -> float:
-        """The largest share of frames on which two neighbours play the same source frame at the
-        same time (in some part)."""
+        """The largest share of frames on which two neighbours play source frames at most
+        IN_STEP_FRAMES apart at the same time (in some part)."""
         return largest_in_step(self.source_frames(), self.neighbours())
 
 

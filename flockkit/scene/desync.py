@@ -1,5 +1,5 @@
 """De-synchronisation (paper 002, section 6.2): how much of the time neighbouring duplicates play
-the same source frames, the share above which one is walked again."""
+the same source frames (to within IN_STEP_FRAMES), the share above which one is walked again."""
 
 from __future__ import annotations
 
@@ -11,8 +11,15 @@ MAX_IN_STEP = 0.05
 
 
 # Same-template objects whose positions are closer than this many footprint diagonals are
-# neighbours (they are seen together).
+# neighbours (they are seen together), and so are each object's NEAREST closest ones, however far:
+# two lone objects seen side by side must not play alike.
 NEIGHBOUR_DIAGONALS = 3.0
+NEAREST = 2
+
+# Two objects play in step on a frame when a part of each plays source frames at most this many
+# frames apart: one frame apart is as alike to the eye as the same frame (and is what the walks'
+# `avoid` term steers away from).
+IN_STEP_FRAMES = 1
 
 
 def stacked(played, n_frames: int) -> np.ndarray:
@@ -30,8 +37,17 @@ def largest_in_step(frames: np.ndarray, neighbours) -> float:
     return float(max(shares, default=0.0))
 
 
+def pairs_in_step(frames: np.ndarray, neighbours) -> float:
+    """The share of neighbour pairs in step (see in_step) on more than MAX_IN_STEP of frames."""
+    pairs = {(min(i, j), max(i, j)) for i, near in enumerate(neighbours) for j in near}
+    if not pairs:
+        return 0.0
+    first, second = (np.array(side) for side in zip(*sorted(pairs)))
+    return float(np.mean([in_step(frames[i], frames[[j]])[0] > MAX_IN_STEP for i, j in zip(first, second)]))
+
+
 def in_step(frames: np.ndarray, others: np.ndarray) -> np.ndarray:
-    """Share of frames on which `frames` (parts, F) and each of `others` (K, parts, F) play the
-    same source frame in some part: (K,)."""
-    same = (frames[None] == others) & (frames[None] >= 0)
-    return same.any(axis=1).mean(axis=1)
+    """Share of frames on which `frames` (parts, F) and each of `others` (K, parts, F) play source
+    frames at most IN_STEP_FRAMES apart in some part: (K,)."""
+    close = (np.abs(frames[None] - others) <= IN_STEP_FRAMES) & (frames[None] >= 0) & (others >= 0)
+    return close.any(axis=1).mean(axis=1)

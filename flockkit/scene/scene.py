@@ -26,7 +26,7 @@ from ..regions import Polygon
 from ..registry import require
 from ..validate import integer, number
 from .animation import SceneAnimation
-from .desync import MAX_IN_STEP, in_step, largest_in_step, stacked
+from .desync import IN_STEP_FRAMES, MAX_IN_STEP, in_step, largest_in_step, pairs_in_step, stacked
 from .features import Features
 from .flow import Arrow, FlowField, SelfMovement, flow_constraints
 from .placement import PLACEMENT_TRIES, Placement, heading_turn, turned_half
@@ -261,9 +261,11 @@ class Scene:
                 n_frames=self.n_frames, constraints=self.constraints, region=self.region,
             )  # fmt: skip
             frames, neighbours = stacked(played, self.n_frames), animation.neighbours()
-            before = largest_in_step(frames, neighbours)
+            before, pairs_before = largest_in_step(frames, neighbours), pairs_in_step(frames, neighbours)
             walks = self._desynchronise(animation, targets, seeds, frames, neighbours, report)
-        report = {"in_step_before": before, "in_step_after": largest_in_step(frames, neighbours)}
+        report = {"in_step_before": before, "in_step_after": largest_in_step(frames, neighbours),
+                  "pairs_in_step_before": pairs_before, "pairs_in_step_after": pairs_in_step(frames, neighbours),
+                  "in_step_frames": IN_STEP_FRAMES}  # fmt: skip
         return attrs.evolve(animation, walks=walks, report=report)
 
     def _walk_many(self, placement, items, report, stage: str) -> tuple[list, list]:

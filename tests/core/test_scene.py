@@ -6,6 +6,7 @@ import json
 import os
 import subprocess
 
+import attrs
 import numpy as np
 import pytest
 
@@ -104,6 +105,19 @@ def test_neighbours_are_out_of_step_after_the_optimization():
     print(f"neighbours in step: {report['in_step_before']:.1%} of frames before, {report['in_step_after']:.1%} after")
     assert report["in_step_after"] == animation.in_step_share() <= 0.05
     assert report["in_step_before"] > report["in_step_after"]  # there was something to do
+    assert report["in_step_frames"] == 1 and report["pairs_in_step_after"] == 0.0 < report["pairs_in_step_before"]
+
+
+def test_in_step_counts_frames_one_apart_and_lone_objects_are_neighbours():
+    from flockkit.scene import desync
+
+    frames = np.array([[[0, 5, 9, 20]], [[1, 7, 9, -1]]])  # two objects, one part, four frames
+    assert desync.in_step(frames[0], frames[[1]])[0] == 0.5  # 0 vs 1 and 9 vs 9; -1 plays nothing
+    _, animation = turning_scene()
+    far = attrs.evolve(animation.placement, positions=animation.placement.positions * 1000.0)
+    neighbours = attrs.evolve(animation, placement=far).neighbours()
+    assert all(len(near) >= min(desync.NEAREST, animation.placement.n_objects - 1) for near in neighbours)
+    assert all(i in neighbours[j] for i, near in enumerate(neighbours) for j in near)  # each way
 
 
 def test_no_object_jumps_more_than_its_source():
