@@ -11,10 +11,10 @@ from ._version import __version__
 from .errors import ValidationError
 from .graphs import MotionGraph
 from .interfaces import capabilities
-from .mesh import AnimatedMesh
+from .mesh import AnimatedMesh, resolve_weld
 from .motion import Motion, State, random_flock
 from .registry import get, label, require_dims, resolve
-from .scene.layers import GraphLayers, part_motion, synthesize_layers, walk_layers
+from .scene.layers import GraphLayers, check_welds, part_motion, synthesize_layers, walk_layers
 from .scene.segmentation import Segmentation, motion_of
 from .validate import allocation, integer
 from .validate import dims as validate_dims
@@ -159,17 +159,32 @@ def synthesize(graph, walk) -> Motion:
     return graphs.synthesize_graph(graph, walk)
 
 
-def segment(source, *, segmenter="ica-kmeans", seed: int | None = None, **params) -> Segmentation:
+def segment(source, *, segmenter="ica-kmeans", seed: int | None = None, weld=None, **params) -> Segmentation:
     """Split the points of `source` (a Motion, or an AnimatedMesh's vertices) into parts that move
-    independently, with `segmenter` (a registered name made with `params`, or an instance)."""
+    independently, with `segmenter` (a registered name made with `params`, or an instance).
+
+    `weld`: the copies of one surface point (``flockkit.mesh.weld_map``) are segmented as one
+    point and get one part. None (the default) welds an AnimatedMesh's vertices that coincide in
+    every frame to ``flockkit.mesh.WELD_TOLERANCE`` of its size and leaves a Motion's agents
+    alone; False welds nothing; True, or a tolerance (a fraction of the object's size), welds
+    either. The labels are one per point of `source`, in its order."""
     motion = motion_of(source)
     made = resolve("segmenter", segmenter, **params)
     require_dims("segmenter", made, motion.dims, f"a {motion.dims}D motion", spec=segmenter)
-    result = made.segment(motion, np.random.default_rng(validate_seed(seed)))
+    return _segment(made, motion, resolve_weld(source, weld), seed)
+
+
+def _segment(made, motion: Motion, welds, seed) -> Segmentation:
+    """`made`'s segmentation of `motion`, the points welded by `welds` (or None) segmented once."""
+    kept = None if welds is None else np.flatnonzero(welds == np.arange(len(welds)))
+    segmented = motion if kept is None else Motion(positions=motion.positions[:, kept], dt=motion.dt)
+    result = made.segment(segmented, np.random.default_rng(validate_seed(seed)))
     if not isinstance(result, Segmentation):
         raise ValidationError(f"segmenter returned {type(result).__name__}, not a flockkit.Segmentation")
-    result.check_fits(motion)
-    return result
+    result.check_fits(segmented, "the (welded) motion")
+    if kept is None:
+        return result
+    return Segmentation(labels=result.labels[np.searchsorted(kept, welds)], n_parts=result.n_parts)
 
 
 def build_layers(
@@ -181,20 +196,32 @@ def build_layers(
     builder="windowed",
     features=None,
     seed: int | None = None,
+    weld=None,
     **params,
 ) -> GraphLayers:
     """Graph layers of `source` (a Motion, or an AnimatedMesh whose faces are kept for seams): its
     points split by `segmentation` (default: `segmenter` with `segmenter_params`), then one graph
     per part built by `builder` with `params` (as for :func:`flockkit.build_graph`). `features`
     (a ``flockkit.Features`` of the source's frames, e.g. ``Features.from_keyframes`` for a flag
-    in the wind or ``Features.from_motion`` for a walking animal) travel with the layers."""
+    in the wind or ``Features.from_motion`` for a walking animal) travel with the layers.
+
+    `weld` (as for :func:`segment`; by default a mesh's copies of one point, a triangle soup's
+    corners included) welds points for the segmentation and the seams, and synthesis plays every
+    copy of a point at one position, so the surface never cracks (``GraphLayers.welds``). A
+    given `segmentation` must put welded points in one part."""
     motion = motion_of(source)
+    welds = resolve_weld(source, weld)
     if segmentation is None:
-        segmentation = segment(motion, segmenter=segmenter, seed=seed, **dict(segmenter_params or {}))
+        made = resolve("segmenter", segmenter, **dict(segmenter_params or {}))
+        require_dims("segmenter", made, motion.dims, f"a {motion.dims}D motion", spec=segmenter)
+        segmentation = _segment(made, motion, welds, seed)
     elif not isinstance(segmentation, Segmentation):
         raise ValidationError(f"segmentation must be a flockkit.Segmentation; got {type(segmentation).__name__}")
     segmentation.check_fits(motion)
+    if welds is not None:
+        check_welds(welds, segmentation.labels, "build_layers: segmentation (welded points)")
     graphs = [build_graph(part_motion(motion, points), builder=builder, seed=seed, **params)
               for points in segmentation.parts()]  # fmt: skip
     faces = source.faces if isinstance(source, AnimatedMesh) else None
-    return GraphLayers(source=motion, segmentation=segmentation, graphs=graphs, faces=faces, features=features)
+    return GraphLayers(source=motion, segmentation=segmentation, graphs=graphs, faces=faces, features=features,
+                       welds=welds)  # fmt: skip

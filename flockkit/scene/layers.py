@@ -4,6 +4,12 @@
 independently ("asynchronous transitions") and playing them together gives endless, varied motion
 of the whole object from a short source. Where parts meet on a mesh, the seams are smoothed (see
 :func:`synthesize_layers`).
+
+A mesh whose file holds one point of the surface as several vertices (split where normals or
+texture coordinates change, or a triangle soup whose triangles share no vertex) is welded
+(``flockkit.mesh.weld_map``): the copies of a point are one point for segmentation and seams, and
+play the same position in every frame, so the surface cannot crack; the output keeps every vertex,
+in the file's order. :func:`crack_width` measures how far a motion pulls such copies apart.
 """
 
 from __future__ import annotations
@@ -13,19 +19,29 @@ import numpy as np
 from scipy.sparse import coo_matrix, diags, identity
 
 from .. import _npzfile
+from .._arrays import readonly_int
 from ..errors import FileFormatError, ValidationError
 from ..graphs import MotionGraph, blended_frames, played_length, played_positions, walk_parts
-from ..mesh import face_edges, faces_array
+from ..mesh import WELD_TOLERANCE, AnimatedMesh, face_edges, faces_array, object_size, weld_map
 from ..motion import Motion
 from .features import Features
 from .segmentation import Segmentation
 
-__all__ = ["GraphLayers", "LayeredWalk", "walk_layers", "synthesize_layers", "seam_stretch", "part_motion"]
+__all__ = [
+    "GraphLayers",
+    "LayeredWalk",
+    "walk_layers",
+    "synthesize_layers",
+    "seam_stretch",
+    "crack_width",
+    "part_motion",
+]
 
 LAYERS_FORMAT_VERSION = 1
 # Rings of mesh neighbors around a seam whose displacements are smoothed, and the smoothing
-# passes (our choice, measured on the Fox's minute: seams stretch 0.042 at most, against 0.48
-# unsmoothed and 0.039 with 2 rings and 8 passes, which cost 30% more time).
+# passes (our choice; on the Fox's minute, its copies of each vertex welded, seam edges stretch
+# 0.017 on average and 0.52 at most, against 0.019 and 0.47 unsmoothed, and 0.016 and 0.44 with 2
+# rings and 8 passes, which cost more time: bench/layers.py).
 SEAM_RINGS = 1
 SEAM_PASSES = 4
 # Synthesis gathers the points into place in blocks of frames whose indices take about this many
@@ -35,6 +51,10 @@ GATHER_BLOCK_BYTES = 1 << 20
 
 def _faces_or_none(value):
     return None if value is None else faces_array(value, "GraphLayers.faces")
+
+
+def _welds_or_none(value):
+    return None if value is None else readonly_int(value, field="GraphLayers.welds")
 
 
 @attrs.frozen(kw_only=True, eq=False)
@@ -53,6 +73,11 @@ class GraphLayers:
         The mesh's faces, when the source is a mesh: synthesis smooths the seams between parts.
     features : flockkit.Features, optional
         The source's feature arrows, one per source frame (paper 002, section 4.2).
+    welds : ndarray of int (N,), optional
+        The point each point is welded to (``flockkit.mesh.weld_map``): the smallest index of the
+        copies of one surface point, which share a part; seams are smoothed over the welded
+        faces and every copy plays its first's position, so copies never part. None: no point
+        is welded to another.
     """
 
     source: Motion
@@ -60,6 +85,7 @@ class GraphLayers:
     graphs: tuple = attrs.field(converter=tuple)
     faces: np.ndarray | None = attrs.field(default=None, converter=_faces_or_none)
     features: Features | None = attrs.field(default=None)
+    welds: np.ndarray | None = attrs.field(default=None, converter=_welds_or_none)
     _seams: object = attrs.field(init=False, default=None, repr=False, eq=False)  # made by synthesis
 
     def __attrs_post_init__(self):
@@ -84,6 +110,8 @@ class GraphLayers:
                 )
         if self.faces is not None and len(self.faces) and self.faces.max() >= self.source.n_agents:
             raise ValidationError(f"GraphLayers.faces index points beyond the source's {self.source.n_agents}")
+        if self.welds is not None:
+            check_welds(self.welds, self.segmentation.labels, "GraphLayers.welds")
 
     @property
     def n_parts(self) -> int:
@@ -105,7 +133,7 @@ class GraphLayers:
         )
         return (
             self.source == other.source and self.segmentation == other.segmentation and self.graphs == other.graphs
-            and faces_equal and self.features == other.features
+            and faces_equal and self.features == other.features and _same_welds(self.welds, other.welds)
         )  # fmt: skip
 
     __hash__ = None
@@ -120,6 +148,8 @@ class GraphLayers:
             arrays["faces"] = self.faces
         if self.features is not None:
             arrays["features"] = self.features.vectors
+        if self.welds is not None:
+            arrays["welds"] = self.welds
         for k, graph in enumerate(self.graphs):
             arrays.update({f"part{k}.{name}": array for name, array in graph._to_arrays().items()})
         metadata = {
@@ -143,7 +173,7 @@ class GraphLayers:
                                                        header["provenance"][k], source))  # fmt: skip
             features = Features(vectors=arrays["features"], dt=motion.dt) if "features" in arrays else None
             return cls(source=motion, segmentation=segmentation, graphs=graphs, faces=arrays.get("faces"),
-                       features=features)  # fmt: skip
+                       features=features, welds=arrays.get("welds"))  # fmt: skip
         except (KeyError, IndexError, TypeError, ValidationError) as exc:
             raise FileFormatError(f"{source}: invalid motion graph layers: {type(exc).__name__}: {exc}") from None
 
@@ -157,6 +187,32 @@ class GraphLayers:
         """Read a file written by :meth:`save`; FileFormatError naming the file if it is not one."""
         arrays, header = _npzfile.read(path, kind="layers", versions=(LAYERS_FORMAT_VERSION,))
         return cls._from_payload(arrays, header, path)
+
+
+def _same_welds(a, b) -> bool:
+    return (a is None and b is None) or (a is not None and b is not None and np.array_equal(a, b))
+
+
+def check_welds(welds: np.ndarray, labels: np.ndarray, field: str) -> None:
+    """ValidationError naming `field` unless `welds` is a weld map over `labels`' points (one entry
+    a point, each the smallest of its group: welds[welds] == welds <= its index) whose groups lie
+    in one part each."""
+    n = len(labels)
+    if welds.shape != (n,):
+        raise ValidationError(f"{field} must have one entry per point ({n}); got shape {welds.shape}")
+    if n and (welds.min() < 0 or np.any(welds > np.arange(n)) or np.any(welds[welds] != welds)):
+        raise ValidationError(
+            f"{field} must map each point to the smallest point of its group (0 <= welds[i] <= i, "
+            f"welds[welds] == welds), as flockkit.mesh.weld_map gives"
+        )
+    split = np.flatnonzero(labels[welds] != labels)
+    if len(split):
+        v = int(split[0])
+        raise ValidationError(
+            f"{field}: point {v} is welded to point {int(welds[v])} (they coincide throughout the source) but the "
+            f"segmentation puts them in parts {int(labels[v])} and {int(labels[welds[v]])}; welded points must "
+            f"share a part (segment with the same welding, or pass weld=False)"
+        )
 
 
 @attrs.frozen(kw_only=True, eq=False)
@@ -192,7 +248,10 @@ def synthesize_layers(layers: GraphLayers, walk: LayeredWalk) -> Motion:
     within SEAM_RINGS rings of mesh neighbors of a face that spans two parts, each point's
     displacement from its mean position in the source is replaced, SEAM_PASSES times, by the mean
     of its neighbors' (points farther away keep theirs), so a seam bends over a few edges instead of
-    tearing.
+    tearing. Where the layers weld points (``GraphLayers.welds``), the faces are read with every
+    point replaced by the one it is welded to, so the copies of a point are one point with all
+    their neighbours, and every copy plays that point's position: the output has every source
+    point, in the source's order, and welded points never part.
 
     One gather writes every frame: each part contributes a table of rows (its source frames and
     its blended frames, or its placed frames where its walk moves it) and the row each output
@@ -221,6 +280,8 @@ def synthesize_layers(layers: GraphLayers, walk: LayeredWalk) -> Motion:
     if seams is not None:
         column[seams.smoothed], local[seams.smoothed] = layers.n_parts, np.arange(smoothed)
         shares = [(play, part, part.table(play)) for play, part in zip(plays, seams.parts) if part is not None]
+    if layers.welds is not None:  # every copy reads the item of the point it is welded to
+        column, local = column[layers.welds], local[layers.welds]
     positions = np.empty((frames, n, d))
     block = items[offsets[-1] :].reshape(step, smoothed, d)
     for first in range(0, frames, step):
@@ -310,11 +371,17 @@ def _adjacency(n_points: int, faces: np.ndarray):
     return coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(n_points, n_points)).tocsr()
 
 
+def welded_faces(layers: GraphLayers) -> np.ndarray:
+    """The layers' faces with every point replaced by the one it is welded to."""
+    return layers.faces if layers.welds is None else layers.welds[layers.faces]
+
+
 def seam_points(layers: GraphLayers) -> np.ndarray:
-    """Points of faces that span two or more parts."""
-    labels = layers.segmentation.labels[layers.faces]
+    """Points of faces that span two or more parts (of the welded faces)."""
+    faces = welded_faces(layers)
+    labels = layers.segmentation.labels[faces]
     spanning = np.any(labels != labels[:, :1], axis=1)
-    return np.unique(layers.faces[spanning])
+    return np.unique(faces[spanning])
 
 
 @attrs.frozen(eq=False)
@@ -354,7 +421,7 @@ def _seam_shares(layers: GraphLayers) -> _Seams | None:
         return None
     if layers._seams is not None and layers._seams.passes == SEAM_PASSES:
         return layers._seams
-    adjacency = _adjacency(layers.source.n_agents, layers.faces)
+    adjacency = _adjacency(layers.source.n_agents, welded_faces(layers))
     zone = np.zeros(layers.source.n_agents, dtype=bool)
     zone[seam_points(layers)] = True
     for _ in range(SEAM_RINGS):
@@ -420,3 +487,45 @@ def seam_stretch(motion: Motion, faces, labels=None, *, reference: Motion | None
     lengths = length(motion.positions)
     mean = length((reference or motion).positions).mean(axis=0)
     return float(np.max(np.abs(lengths / np.maximum(mean, 1e-300) - 1)))
+
+
+def crack_width(motion, reference, *, tolerance: float = WELD_TOLERANCE, statistic: str = "max") -> float:
+    """How far `motion` pulls apart the copies of one surface point: points of `reference` (a
+    Motion, an AnimatedMesh, or GraphLayers, whose source is read) that stay within `tolerance`
+    times its size of each other in every frame (``flockkit.mesh.weld_map``), measured in
+    `motion` (a Motion or an AnimatedMesh over the same points, e.g. what synthesis played).
+
+    Returns the largest (`statistic` "max") or mean ("mean") distance, over frames and over every
+    copy, between a copy and the first point of its group, relative to
+    ``flockkit.mesh.object_size(reference)``; 0.0 where `reference` has no copies. A visible crack
+    in the surface is a large value; seam_stretch cannot see one, since the copies share no edge."""
+    if isinstance(reference, GraphLayers):
+        reference = reference.source
+    if statistic not in ("max", "mean"):
+        raise ValidationError(f"crack_width: statistic must be 'max' or 'mean'; got {statistic!r}")
+    if isinstance(motion, AnimatedMesh):
+        motion = motion.motion
+    if not isinstance(motion, Motion):
+        raise ValidationError(
+            f"crack_width: motion must be a flockkit.Motion or AnimatedMesh; got {type(motion).__name__}"
+        )
+    if not isinstance(reference, Motion | AnimatedMesh):
+        raise ValidationError(
+            f"crack_width: reference must be a flockkit.Motion, AnimatedMesh or GraphLayers; got "
+            f"{type(reference).__name__}"
+        )
+    welds = weld_map(reference, tolerance)
+    n = len(welds)
+    if motion.n_agents != n:
+        raise ValidationError(f"crack_width: motion has {motion.n_agents} points but the reference has {n}")
+    copies = np.flatnonzero(welds != np.arange(n))
+    size = object_size(reference)
+    if not len(copies) or size == 0:
+        return 0.0
+    largest, total = 0.0, 0.0
+    step = max(1, GATHER_BLOCK_BYTES // (24 * len(copies)))
+    for first in range(0, motion.n_frames, step):
+        block = motion.positions[first : first + step]
+        gaps = np.linalg.norm(block[:, copies] - block[:, welds[copies]], axis=2)
+        largest, total = max(largest, float(gaps.max())), total + float(gaps.sum())
+    return (largest if statistic == "max" else total / (motion.n_frames * len(copies))) / size

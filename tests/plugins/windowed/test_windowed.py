@@ -58,21 +58,35 @@ def test_a_layered_fox_plays_a_minute_without_jumps_or_tears(shared_data):
     assert len({(w.start, tuple(w.edges[:3])) for w in walks}) > 1
 
 
+def seam_edge_stretch(motion, mesh, labels):
+    """|length / mean source length - 1| of every edge of a face spanning two parts, every frame."""
+    faces = mesh.faces[np.any(labels[mesh.faces] != labels[mesh.faces][:, :1], axis=1)]
+    edges = flockkit.mesh.face_edges(faces)
+
+    def length(positions):
+        return np.linalg.norm(positions[:, edges[:, 0]] - positions[:, edges[:, 1]], axis=2)
+
+    return np.abs(length(motion.positions) / length(mesh.motion.positions).mean(axis=0) - 1)
+
+
 def test_seams_are_smoothed(shared_data, monkeypatch):
-    """Without the smoothing the same walk stretches its seams more."""
+    """Without the smoothing the same walk stretches its seams more, typically (the mean and the
+    90th percentile over seam edges and frames; the Fox's vertices are welded, so no copy parts).
+    Its largest stretch is not lowered: on a mesh this coarse the smoothed zone is most of the
+    body, and the smoothing moves it even where the parts play in step."""
     import flockkit.scene.layers
 
     survey = fox(shared_data, "Survey")
     layers = flockkit.build_layers(survey, seed=0)
+    assert layers.welds is not None
     walk = flockkit.walk(layers, duration=30, seed=2)
-    smooth = seam_stretch(
-        flockkit.synthesize(layers, walk), survey.faces, layers.segmentation.labels, reference=survey.motion
-    )
+    smoothed = flockkit.synthesize(layers, walk)
+    smooth = seam_edge_stretch(smoothed, survey, layers.segmentation.labels)
     monkeypatch.setattr(flockkit.scene.layers, "SEAM_PASSES", 0)
-    raw = seam_stretch(
-        flockkit.synthesize(layers, walk), survey.faces, layers.segmentation.labels, reference=survey.motion
-    )
-    assert smooth < raw
+    raw = seam_edge_stretch(flockkit.synthesize(layers, walk), survey, layers.segmentation.labels)
+    assert smooth.mean() < 0.9 * raw.mean()
+    assert np.percentile(smooth, 90) < 0.8 * np.percentile(raw, 90)
+    assert flockkit.scene.crack_width(smoothed, survey) <= 1e-6
 
 
 def test_layers_save_load_and_walk_deterministically(tmp_path, shared_data):
