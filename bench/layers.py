@@ -11,6 +11,14 @@ second of output per 1 000 vertices, with the seams smoothed (the default) and w
 (``flockkit.scene.layers.SEAM_PASSES = 0``).
 Targets (2 cores): the whole analysis of the 10 000-vertex, 300-frame object under 10 s;
 synthesis at most 1 ms per second of output per 1 000 vertices.
+
+Then cracks (``--part cracks`` prints only these): for every clip of every animated mesh in the
+data folder (Fox, RobotExpressive, MorphStressTest), a triangle soup of each asset's first clip
+(every face given its own corners) and of a 2 500-vertex flag, the layers are built (segmented by
+``ica-kmeans``, seed 0), walked for 60 s (seed 1) and synthesized with the seams smoothed; it
+prints ``flockkit.scene.crack_width`` (the largest and the mean distance between copies of one
+surface point, relative to the object's size) without welding (``weld=False``, the baseline) and
+with the default welding. Target: every crack 0 to 1e-6 of the object's size.
 """
 
 from __future__ import annotations
@@ -39,11 +47,60 @@ def flag(vertices: int = 10_000, frames: int = 300) -> flockkit.AnimatedMesh:
     return flockkit.AnimatedMesh(motion=flockkit.Motion(positions=positions, dt=1 / 30), faces=quads, name="flag")
 
 
+# every animated mesh of ../shared/data (its README)
+ANIMATED = (
+    "fox-gltf/Fox.glb",
+    "robot-expressive-gltf/RobotExpressive.glb",
+    "morph-stress-test-gltf/MorphStressTest.gltf",
+)
+
+
+def soup(mesh: flockkit.AnimatedMesh) -> flockkit.AnimatedMesh:
+    """`mesh` with every face given its own corners: no two faces share a vertex."""
+    faces = mesh.faces
+    motion = flockkit.Motion(positions=mesh.motion.positions[:, faces.ravel()], dt=mesh.motion.dt)
+    return flockkit.AnimatedMesh(motion=motion, faces=np.arange(faces.size).reshape(faces.shape),
+                                 name=f"{mesh.name} soup")  # fmt: skip
+
+
+def cracks(data: Path) -> None:
+    """The crack table (module docstring)."""
+    from flockkit.mesh import weld_map
+    from flockkit.scene import crack_width
+
+    meshes = []
+    for path in ANIMATED:
+        if not (data / path).exists():
+            print(f"{data / path} not found: skipped")
+            continue
+        clips = list(flockkit.io.list_clips(data / path))
+        meshes += [flockkit.io.read_mesh_animation(data / path, clip=clip) for clip in clips]
+        meshes.append(soup(meshes[-len(clips)]))
+    meshes.append(soup(flag(2_500, 120)))
+    print(f"\n{'object':>34} {'vertices':>8} {'frames':>6} {'copies':>6} {'parts':>5} "
+          f"{'crack unwelded':>14} {'mean':>8} {'crack welded':>12} {'mean':>8}")  # fmt: skip
+    for mesh in meshes:
+        figures = []
+        for weld in (False, None):
+            layers = flockkit.build_layers(mesh, seed=0, weld=weld)
+            played = flockkit.synthesize(layers, flockkit.walk(layers, duration=60, seed=1))
+            figures += [crack_width(played, mesh), crack_width(played, mesh, statistic="mean")]
+        copies = int(np.sum(weld_map(mesh) != np.arange(mesh.motion.n_agents)))
+        print(f"{mesh.name[-34:]:>34} {mesh.motion.n_agents:>8} {mesh.motion.n_frames:>6} {copies:>6} "
+              f"{layers.n_parts:>5} {figures[0]:>14.2e} {figures[1]:>8.1e} {figures[2]:>12.2e} {figures[3]:>8.1e}",
+              flush=True)  # fmt: skip
+
+
 def main():
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
+    parser.add_argument("--part", choices=("all", "timing", "cracks"), default="all")
     args = parser.parse_args()
     data = Path(args.data)
+    if args.part != "timing":
+        cracks(data)
+    if args.part == "cracks":
+        return
     flockkit.segment(flag(400, 30), seed=0)  # imports scikit-learn before anything is timed
     cases = [
         ("Fox Survey", lambda: flockkit.io.read_mesh_animation(data / "fox-gltf" / "Fox.glb", clip="Survey")),
