@@ -11,7 +11,7 @@ from ._version import __version__
 from .constrained import Proposal, Solution, solve
 from .constrained.problem import ComConstraint, PointConstraint, Problem, ShapeConstraint
 from .convenience import build_graph, build_layers, segment, simulate, synthesize, walk
-from .crowd import Crowd, Event, Pose, SkeletalClip, Skeleton, Stream, StreamPool, UniquePool
+from .crowd import Channel, Crowd, Event, Pose, SkeletalClip, Skeleton, Stream, StreamPool, UniquePool
 from .graphs import Clip, MotionGraph, Transition, Walk, synthesize_many
 from .hookspecs import hookimpl
 from .interfaces import Capabilities, capabilities
@@ -62,6 +62,7 @@ __all__ = [
     "Skeleton",
     "Pose",
     "SkeletalClip",
+    "Channel",
     "Event",
     "Stream",
     "StreamPool",

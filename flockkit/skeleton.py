@@ -10,14 +10,16 @@ composes its nodes.
 
 from __future__ import annotations
 
+import math
+
 import attrs
 import numpy as np
 
-from . import rigid
+from . import rigid, validate
 from ._arrays import readonly_float, readonly_int
 from .errors import ValidationError
 
-__all__ = ["Pose", "Skeleton", "SkeletalClip", "Event", "stream_times"]
+__all__ = ["Pose", "Skeleton", "SkeletalClip", "Channel", "Event", "sample_keys", "stream_times", "INTERPOLATIONS"]
 
 # Quaternions whose length is this close to 1 are normalized (file formats store float32 and
 # round); farther ones are refused, since they are not rotations somebody meant.
@@ -120,6 +122,15 @@ class Pose:
         s = np.asarray(weight, dtype=np.float64)[..., None, None]
         rotations = rigid.nlerp(a.rotations, b.rotations, s)
         return Pose._adopt(rotations, a.translations + s * (b.translations - a.translations))
+
+    @staticmethod
+    def interpolate(a: Pose, b: Pose, weight) -> Pose:
+        """The pose `weight` of the way from key `a` to key `b`, as a clip moves between two keys:
+        rotations slerped (the shorter way round, at a steady angular speed however far apart),
+        translations linearly; `weight` broadcasts against the leading axes (0: `a`, 1: `b`)."""
+        s = np.asarray(weight, dtype=np.float64)[..., None, None]
+        rotations = rigid.slerp(a.rotations, b.rotations, s)
+        return Pose._adopt(rotations, (1 - s) * a.translations + s * b.translations)
 
 
 def _parents(value) -> np.ndarray:
@@ -254,44 +265,298 @@ class Event:
             raise ValidationError(f"Event.time must be a finite time >= 0 in seconds; got {self.time}")
 
 
-def _fps(value) -> float:
+def _fps(value, field: str = "SkeletalClip.fps") -> float:
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise ValidationError(f"SkeletalClip.fps must be a positive number; got {value!r}")
+        raise ValidationError(f"{field} must be a positive number; got {value!r}")
     if not np.isfinite(value) or value <= 0:
-        raise ValidationError(f"SkeletalClip.fps must be a positive number; got {value!r}")
+        raise ValidationError(f"{field} must be a positive number; got {value!r}")
     return float(value)
+
+
+# How a channel's keys are joined (glTF 2.0, Appendix C): LINEAR (slerp for rotations), STEP (each
+# key held until the next) and CUBICSPLINE (Hermite, with an in- and an out-tangent per key).
+INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
+_WIDTH = {"rotation": 4, "translation": 3}
+# The frame rate of a clip made of channels that have no two keys to take a rate from.
+DEFAULT_FPS = 30.0
+
+
+def sample_keys(key_times, values, times, interpolation: str = "LINEAR", *, rotation: bool = False,
+                in_tangents=None, out_tangents=None) -> np.ndarray:  # fmt: skip
+    """Keyed values at `times`, as glTF 2.0 defines them (Appendix C), for keys that share times.
+
+    Parameters
+    ----------
+    key_times : (K,)
+        Strictly increasing key times in seconds.
+    values : (K, ..., W)
+        Each key's values, any number of curves on the middle axes (joints, morph targets).
+    times : (T,)
+        Where to evaluate: before the first key and after the last the end keys hold, and at a
+        key's own time its value is returned as it is.
+    interpolation : "LINEAR", "STEP" or "CUBICSPLINE"
+        LINEAR: ``(1 - t) v_k + t v_k+1`` with t the share of the way from key k to key k + 1, or
+        for rotations (unit quaternions x, y, z, w, as LINEAR and STEP keys must be) spherical
+        linear interpolation the shorter way round, ``sin((1 - t) a) / sin(a) v_k +
+        s sin(t a) / sin(a) v_k+1`` with a the arccosine of ``|v_k . v_k+1|`` and s its sign.
+        STEP: ``v_k`` until key k + 1. CUBICSPLINE: the Hermite spline ``(2t^3 - 3t^2 + 1) v_k +
+        d (t^3 - 2t^2 + t) b_k + (-2t^3 + 3t^2) v_k+1 + d (t^3 - t^2) a_k+1``, d the keys'
+        interval in seconds, `out_tangents` b and `in_tangents` a (K, ..., W) in units per
+        second.
+    rotation : bool
+        The values are quaternions; a CUBICSPLINE result is normalized (a spline through zero,
+        which the specification asks exporters never to write, gives the earlier key there).
+
+    Returns
+    -------
+    (T, ..., W) float64
+    """
+    if interpolation not in INTERPOLATIONS:
+        raise ValidationError(f"sample_keys: interpolation must be one of {', '.join(INTERPOLATIONS)}; got "
+                              f"{interpolation!r}")  # fmt: skip
+    if interpolation == "CUBICSPLINE" and (in_tangents is None or out_tangents is None):
+        raise ValidationError("sample_keys: CUBICSPLINE needs in_tangents and out_tangents")
+    keys = _Keys(np.asarray(key_times, dtype=np.float64), np.asarray(values, dtype=np.float64), interpolation,
+                 rotation, in_tangents, out_tangents)  # fmt: skip
+    return keys(np.asarray(times, dtype=np.float64))
+
+
+class _Keys:
+    """Keys that share times, with what every evaluation of them would recompute worked out once
+    (a pose is sampled every frame for every stream): for slerp, each interval's angle and its
+    far key turned to the near side."""
+
+    def __init__(self, times, values, interpolation, rotation, in_tangents=None, out_tangents=None):
+        self.times, self.values, self.interpolation, self.rotation = times, values, interpolation, rotation
+        self.last = len(times) - 2
+        self.tail = (1,) * (values.ndim - 1)
+        if interpolation == "CUBICSPLINE":
+            self.in_tangents = np.asarray(in_tangents, dtype=np.float64)
+            self.out_tangents = np.asarray(out_tangents, dtype=np.float64)
+        if len(times) > 1 and rotation and interpolation == "LINEAR":
+            near, far = values[:-1], values[1:]
+            dot = np.sum(near * far, axis=-1, keepdims=True)
+            self.far = np.where(dot < 0, -far, far)
+            # identical keys: an angle too small to matter, so that sin(t a) / sin(a) is t, not 0 / 0
+            self.angle = np.maximum(np.arccos(np.minimum(np.abs(dot), 1.0)), 1e-12)
+            self.sine = np.sin(self.angle)
+
+    def __call__(self, t: np.ndarray) -> np.ndarray:
+        times, values = self.times, self.values
+        if self.last < 0:
+            return np.broadcast_to(values[0], t.shape + values.shape[1:]).copy()
+        at = np.minimum(np.maximum(t, times[0]), times[-1])
+        k = np.minimum(times.searchsorted(at, side="right") - 1, self.last)
+        span = (times[k + 1] - times[k]).reshape(t.shape + self.tail)
+        u = (at - times[k]).reshape(span.shape) / span
+        if self.interpolation == "STEP":
+            return np.where(u >= 1, values[k + 1], values[k])  # u reaches 1 only at the last key
+        if self.interpolation == "LINEAR" and not self.rotation:
+            return (1 - u) * values[k] + u * values[k + 1]
+        if self.interpolation == "LINEAR":
+            angle, sine = self.angle[k], self.sine[k]
+            return np.sin((1 - u) * angle) / sine * values[k] + np.sin(u * angle) / sine * self.far[k]
+        u2 = u * u
+        u3 = u2 * u
+        before = values[k]
+        result = ((2 * u3 - 3 * u2 + 1) * before + span * (u3 - 2 * u2 + u) * self.out_tangents[k]
+                  + (-2 * u3 + 3 * u2) * values[k + 1] + span * (u3 - u2) * self.in_tangents[k + 1])  # fmt: skip
+        if not self.rotation:
+            return result
+        length = np.sqrt(np.sum(result * result, axis=-1, keepdims=True))
+        if not (length > 1e-12).all():
+            result = np.where(length > 1e-12, result, before)
+            length = np.sqrt(np.sum(result * result, axis=-1, keepdims=True))
+        return result / length
+
+
+def _key_times(value, *, field: str) -> np.ndarray:
+    times = readonly_float(value, field=field)
+    if times.ndim != 1 or len(times) == 0:
+        raise ValidationError(f"{field} must be a non-empty 1D array of seconds; got shape {times.shape}")
+    if not np.all(np.isfinite(times)) or times[0] < 0 or np.any(np.diff(times) <= 0):
+        raise ValidationError(f"{field} must be finite seconds >= 0 that increase strictly")
+    return times
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class Channel:
+    """One joint's rotation or translation keyed at its own times and joined as glTF 2.0 defines
+    (Appendix C; see :func:`sample_keys`): the parts a :class:`SkeletalClip` is made of when its
+    keys are not evenly spaced frames of every joint (glTF animations, hand-keyed clips).
+
+    Parameters
+    ----------
+    joint : str or int
+        The joint's name or index in the clip's skeleton.
+    path : {"rotation", "translation"}
+        What the channel moves: the joint's local rotation or translation.
+    times : (K,)
+        Key times in seconds, >= 0, strictly increasing; the clip holds the first key before it.
+    values : (K, 4) or (K, 3)
+        Rotations: quaternions x, y, z, w, for LINEAR and STEP unit ones (lengths within 1e-3 of
+        1 normalized, others refused), for CUBICSPLINE as given (the spline runs through the
+        values as they are and normalizes its result); translations: vectors.
+    interpolation : {"LINEAR", "STEP", "CUBICSPLINE"}
+    in_tangents, out_tangents : (K, 4) or (K, 3), optional
+        CUBICSPLINE only (and needed there): each key's incoming and outgoing derivative, in
+        units per second.
+    """
+
+    joint: str | int = attrs.field()
+    path: str = attrs.field()
+    times: np.ndarray = attrs.field(converter=lambda v: _key_times(v, field="Channel.times"))
+    values: np.ndarray = attrs.field()
+    interpolation: str = attrs.field(default="LINEAR")
+    in_tangents: np.ndarray | None = attrs.field(default=None)
+    out_tangents: np.ndarray | None = attrs.field(default=None)
+
+    def __attrs_post_init__(self):
+        if isinstance(self.joint, bool) or not isinstance(self.joint, (str, int, np.integer)):
+            raise ValidationError(f"Channel.joint must be a joint name or index; got {self.joint!r}")
+        if self.path not in _WIDTH:
+            raise ValidationError(f"Channel.path must be 'rotation' or 'translation'; got {self.path!r}")
+        if self.interpolation not in INTERPOLATIONS:
+            raise ValidationError(
+                f"Channel.interpolation must be one of {', '.join(INTERPOLATIONS)}; got {self.interpolation!r}"
+            )
+        shape = (len(self.times), _WIDTH[self.path])
+        cubic = self.interpolation == "CUBICSPLINE"
+        if cubic and shape[0] < 2:
+            raise ValidationError("Channel: a CUBICSPLINE channel needs at least 2 keys")
+        if self.path == "rotation" and not cubic:
+            values = unit_quaternions(self.values, field="Channel.values")
+        else:
+            values = _finite(self.values, field="Channel.values", shape_tail=(shape[1],))
+            if self.path == "rotation" and not np.all(np.linalg.norm(values, axis=-1) > 1e-12):
+                raise ValidationError("Channel.values holds a rotation of length zero")
+        if values.shape != shape:
+            raise ValidationError(f"Channel.values must have shape {shape} ({len(self.times)} keys of a {self.path}); "
+                                  f"got {values.shape}")  # fmt: skip
+        object.__setattr__(self, "values", values)
+        for name in ("in_tangents", "out_tangents"):
+            given = getattr(self, name)
+            if not cubic:
+                if given is not None:
+                    raise ValidationError(
+                        f"Channel.{name} are for CUBICSPLINE channels; this one is {self.interpolation}"
+                    )
+                continue
+            if given is None:
+                raise ValidationError(f"Channel.{name} are needed by a CUBICSPLINE channel")
+            tangents = _finite(given, field=f"Channel.{name}", shape_tail=(shape[1],))
+            if tangents.shape != shape:
+                raise ValidationError(f"Channel.{name} must have shape {shape}; got {tangents.shape}")
+            object.__setattr__(self, name, tangents)
+
+    @property
+    def duration(self) -> float:
+        """The time of the last key."""
+        return float(self.times[-1])
+
+    def sample(self, times) -> np.ndarray:
+        """Values (T, W) at `times` in seconds (rotations normalized)."""
+        return sample_keys(self.times, self.values, times, self.interpolation, rotation=self.path == "rotation",
+                           in_tangents=self.in_tangents, out_tangents=self.out_tangents)  # fmt: skip
+
+
+class _Track:
+    """Channels of several joints that share a path, key times and interpolation, sampled at once:
+    values (K, n, W) for the joints `joints` (n,)."""
+
+    def __init__(self, *, rotation, interpolation, times, joints, values, in_tangents=None, out_tangents=None):
+        self.rotation, self.joints, self.times = rotation, joints, times
+        self.keys = _Keys(times, values, interpolation, rotation, in_tangents, out_tangents)
+
+    def sample(self, t: np.ndarray) -> np.ndarray:
+        return self.keys(t)
+
+
+def _frame_count(duration: float, fps: float) -> int:
+    """Frames k / fps, k = 0 .. ceil(duration x fps), that reach `duration`: an end within a
+    thousandth of a frame past a frame (float32 key times round) counts as that frame."""
+    return math.ceil(duration * fps - 1e-3) + 1
+
+
+def _optional(converter):
+    return lambda value: None if value is None else converter(value)
 
 
 @attrs.frozen(kw_only=True, eq=False)
 class SkeletalClip:
-    """A skeletal clip: poses sampled at `fps`.
+    """A skeletal clip: each joint's local rotation and translation over time, given either as
+    frames (every joint at `fps`) or as channels (each joint's keys at their own times).
+
+    Sampling (:meth:`sample`) gives at any time what the clip's keys define: between a frames
+    clip's frames, rotations slerped (the shorter way) and translations interpolated linearly
+    (how flockkit plays BVH takes between their frames); a clip of channels as glTF 2.0 defines
+    (LINEAR, STEP, CUBICSPLINE; :func:`sample_keys`). Keys are never resampled unless asked
+    (:meth:`resampled`).
 
     Parameters
     ----------
     skeleton : Skeleton
-    fps : float
-        Frames per second.
-    rotations : (T, J, 4)
-        Local joint rotations, unit quaternions (x, y, z, w); lengths within 1e-3 of 1 are
-        normalized, others refused.
-    translations : (T, 3) or (T, J, 3)
-        The root's translation (every other joint keeps its rest translation), or every joint's.
+    fps : float, optional
+        Frames per second: the rate of the frames given, or, for a clip of channels, of the evenly
+        spaced frames it is sampled at for the tools that work on frames (foot planting, motion
+        graphs; default the channels' key rate, the inverse of the median interval between keys).
+    rotations : (T, J, 4), optional
+        Frames: local joint rotations, unit quaternions (x, y, z, w); lengths within 1e-3 of 1
+        are normalized, others refused. For a clip of channels, computed: the clip sampled at
+        ``k / fps``, k = 0 .. ceil(duration x fps) (the last holding the end).
+    translations : (T, 3) or (T, J, 3), optional
+        Frames: the root's translation (every other joint keeps its rest translation), or every
+        joint's. Computed for a clip of channels, as `rotations`.
+    channels : sequence of Channel, optional
+        Instead of frames: at most one per joint and path; a joint a channel does not move keeps
+        its rest rotation or translation.
     events : sequence of Event, optional
         Tags on the timeline, at times within the clip.
     name : str
     """
 
     skeleton: Skeleton = attrs.field()
-    fps: float = attrs.field(converter=_fps)
-    rotations: np.ndarray = attrs.field(converter=lambda v: unit_quaternions(v, field="SkeletalClip.rotations"))
-    translations: np.ndarray = attrs.field()
+    fps: float | None = attrs.field(default=None, converter=_optional(_fps))
+    rotations: np.ndarray | None = attrs.field(
+        default=None, converter=_optional(lambda v: unit_quaternions(v, field="SkeletalClip.rotations"))
+    )
+    translations: np.ndarray | None = attrs.field(default=None)
+    channels: tuple = attrs.field(default=(), converter=tuple, repr=lambda c: f"<{len(c)} channels>")
     events: tuple = attrs.field(default=(), converter=tuple)
     name: str = attrs.field(default="clip")
+    _tracks: tuple = attrs.field(init=False, repr=False)
+    _plan: tuple = attrs.field(init=False, repr=False)
+    _duration: float = attrs.field(init=False, repr=False)
 
     def __attrs_post_init__(self):
         if not isinstance(self.skeleton, Skeleton):
             raise ValidationError(
                 f"SkeletalClip.skeleton must be a flockkit.Skeleton; got {type(self.skeleton).__name__}"
+            )
+        if self.channels:
+            if self.rotations is not None or self.translations is not None:
+                raise ValidationError(
+                    "SkeletalClip takes frames (fps, rotations, translations) or channels, not both: a clip of "
+                    "channels computes its frames from them"
+                )
+            self._from_channels()
+        else:
+            self._from_frames()
+        for k, event in enumerate(self.events):
+            if not isinstance(event, Event):
+                raise ValidationError(f"SkeletalClip.events[{k}] must be a flockkit.Event; got {type(event).__name__}")
+            if event.time > self.duration + 1e-9:
+                raise ValidationError(
+                    f"SkeletalClip.events[{k}] at {event.time} s is past the clip's end ({self.duration:.6g} s)"
+                )
+        object.__setattr__(self, "events", tuple(sorted(self.events, key=lambda e: e.time)))
+
+    def _from_frames(self) -> None:
+        if self.rotations is None or self.translations is None or self.fps is None:
+            missing = [n for n in ("fps", "rotations", "translations") if getattr(self, n) is None]
+            raise ValidationError(
+                f"SkeletalClip needs its frames (fps, rotations, translations) or channels; {', '.join(missing)} "
+                "missing"
             )
         j = self.skeleton.n_joints
         if self.rotations.ndim != 3 or self.rotations.shape[1] != j or len(self.rotations) == 0:
@@ -311,14 +576,82 @@ class SkeletalClip:
                 f"got {translations.shape}"
             )
         object.__setattr__(self, "translations", translations)
-        for k, event in enumerate(self.events):
-            if not isinstance(event, Event):
-                raise ValidationError(f"SkeletalClip.events[{k}] must be a flockkit.Event; got {type(event).__name__}")
-            if event.time > self.duration + 1e-9:
+        times = np.arange(frames) / self.fps
+        every = np.arange(j)
+        tracks = (
+            _Track(rotation=True, interpolation="LINEAR", times=times, joints=every, values=self.rotations),
+            _Track(rotation=False, interpolation="LINEAR", times=times, joints=every, values=translations),
+        )
+        self._set_tracks(tracks)
+        object.__setattr__(self, "_duration", (frames - 1) / self.fps)
+
+    def _from_channels(self) -> None:
+        groups: dict = {}
+        taken = set()
+        for k, channel in enumerate(self.channels):
+            if not isinstance(channel, Channel):
                 raise ValidationError(
-                    f"SkeletalClip.events[{k}] at {event.time} s is past the clip's end ({self.duration:.6g} s)"
+                    f"SkeletalClip.channels[{k}] must be a flockkit.Channel; got {type(channel).__name__}"
                 )
-        object.__setattr__(self, "events", tuple(sorted(self.events, key=lambda e: e.time)))
+            joint = self._joint(channel.joint, k)
+            if (joint, channel.path) in taken:
+                raise ValidationError(
+                    f"SkeletalClip.channels[{k}] moves the {channel.path} of joint {self.skeleton.names[joint]!r}, "
+                    "which an earlier channel moves"
+                )
+            taken.add((joint, channel.path))
+            key = (channel.path, channel.interpolation, channel.times.tobytes())
+            groups.setdefault(key, []).append((joint, channel))
+        tracks = []
+        for (path, interpolation, _), members in groups.items():
+            chosen = [c for _, c in members]
+            cubic = interpolation == "CUBICSPLINE"
+            stacked = {"values": np.stack([c.values for c in chosen], axis=1)}
+            if cubic:
+                stacked["in_tangents"] = np.stack([c.in_tangents for c in chosen], axis=1)
+                stacked["out_tangents"] = np.stack([c.out_tangents for c in chosen], axis=1)
+            tracks.append(_Track(rotation=path == "rotation", interpolation=interpolation, times=chosen[0].times,
+                                 joints=np.array([j for j, _ in members]), **stacked))  # fmt: skip
+        duration = max(c.duration for c in self.channels)
+        fps = self.fps
+        if fps is None:
+            steps = np.concatenate([np.diff(c.times) for c in self.channels])
+            fps = float(np.round(1.0 / np.median(steps), 3)) if len(steps) else DEFAULT_FPS
+        frames = _frame_count(duration, fps)
+        validate.allocation(frames * self.skeleton.n_joints * 14,
+                            f"SkeletalClip {self.name!r}: frames of {duration:g} s at {fps:g} fps")  # fmt: skip
+        object.__setattr__(self, "fps", fps)
+        self._set_tracks(tracks)
+        object.__setattr__(self, "_duration", duration)
+        pose = self._evaluate(np.arange(frames) / fps)
+        pose.rotations.setflags(write=False)
+        pose.translations.setflags(write=False)
+        object.__setattr__(self, "rotations", pose.rotations)
+        object.__setattr__(self, "translations", pose.translations)
+
+    def _set_tracks(self, tracks) -> None:
+        """The tracks, and per path (rotations, translations) the plan of sampling: the rest
+        values where some joint has no track (else None) and the tracks."""
+        plan = []
+        for steady, rotation in ((self.skeleton.rest.rotations, True), (self.skeleton.rest.translations, False)):
+            chosen = tuple(track for track in tracks if track.rotation == rotation)
+            covered = sum(len(track.joints) for track in chosen) == self.skeleton.n_joints
+            plan.append((None if covered else steady, chosen))
+        object.__setattr__(self, "_tracks", tuple(tracks))
+        object.__setattr__(self, "_plan", tuple(plan))
+
+    def _joint(self, joint, k: int) -> int:
+        if isinstance(joint, str):
+            try:
+                return self.skeleton.index(joint)
+            except ValidationError as exc:
+                raise ValidationError(f"SkeletalClip.channels[{k}]: {exc}") from None
+        if not 0 <= joint < self.skeleton.n_joints:
+            raise ValidationError(
+                f"SkeletalClip.channels[{k}].joint is {joint}; the skeleton's joints are 0 .. "
+                f"{self.skeleton.n_joints - 1}"
+            )
+        return int(joint)
 
     @property
     def _roots(self) -> np.ndarray:
@@ -326,29 +659,55 @@ class SkeletalClip:
 
     @property
     def n_frames(self) -> int:
+        """The number of frames (`rotations`, `translations`)."""
         return len(self.rotations)
 
     @property
     def duration(self) -> float:
-        """Seconds from the first frame to the last; a looping clip repeats with this period."""
-        return (self.n_frames - 1) / self.fps
+        """Seconds from 0 to the last key (a frames clip: its last frame); a looping clip repeats
+        with this period."""
+        return self._duration
+
+    @property
+    def key_times(self) -> np.ndarray:
+        """Every time a key of the clip lies at, sorted (a frames clip: its frames' times)."""
+        return np.unique(np.concatenate([track.times for track in self._tracks]))
+
+    def _evaluate(self, t: np.ndarray) -> Pose:
+        found = []
+        for (steady, tracks), width in zip(self._plan, (4, 3)):
+            if steady is None and len(tracks) == 1:  # one track moves every joint: its result is the array
+                found.append(tracks[0].sample(t))
+                continue
+            out = np.empty((len(t), self.skeleton.n_joints, width))
+            if steady is not None:
+                out[:] = steady
+            for track in tracks:
+                out[:, track.joints] = track.sample(t)
+            found.append(out)
+        return Pose._adopt(*found)
 
     def sample(self, times) -> Pose:
-        """Poses (len(times), J) at `times` in seconds, held before 0 and after the end: rotations
-        interpolated on the sphere (nlerp: between frames a few degrees apart it strays from
-        slerp by thousandths of a degree, at a fraction of the cost), translations linearly."""
+        """Poses (len(times), J) at `times` in seconds, as the clip's keys define them (see the
+        class): exact at every key, the first and last keys held before and after them."""
         t = np.atleast_1d(np.asarray(times, dtype=np.float64))
         if t.ndim != 1 or not np.all(np.isfinite(t)):
             raise ValidationError("SkeletalClip.sample needs finite times (a number or a 1D array)")
-        frame = np.clip(t * self.fps, 0, self.n_frames - 1)
-        k = np.minimum(frame.astype(np.int64), max(self.n_frames - 2, 0))
-        u = (frame - k)[:, None, None]
-        if self.n_frames == 1:
-            return Pose._adopt(np.repeat(self.rotations, len(t), axis=0), np.repeat(self.translations, len(t), axis=0))
-        rotations = rigid.nlerp(self.rotations[k], self.rotations[k + 1], u)
-        translations = self.translations[k] + u * (self.translations[k + 1] - self.translations[k])
-        return Pose._adopt(rotations, translations)
+        return self._evaluate(t)
+
+    def resampled(self, fps) -> SkeletalClip:
+        """This clip as frames at `fps`: its poses at ``k / fps``, k = 0 .. ceil(duration x fps)
+        (the last holding its end), slerped between from then on. Lossy wherever keys fall
+        between the new frames or are not LINEAR: for an export or a buffer that must hold
+        evenly spaced frames, not for playing the clip."""
+        fps = _fps(fps, "SkeletalClip.resampled: fps")
+        frames = _frame_count(self.duration, fps)
+        validate.allocation(frames * self.skeleton.n_joints * 14,
+                            f"clip {self.name!r} ({self.duration:g} s) resampled at {fps:g} fps")  # fmt: skip
+        pose = self._evaluate(np.arange(frames) / fps)
+        return SkeletalClip(skeleton=self.skeleton, fps=fps, rotations=pose.rotations, translations=pose.translations,
+                            events=self.events, name=self.name)  # fmt: skip
 
     def pose(self, frame: int) -> Pose:
-        """The stored pose of frame `frame` (J, ...)."""
+        """The pose of frame `frame` (J, ...)."""
         return Pose._adopt(self.rotations[frame], self.translations[frame])

@@ -1,6 +1,6 @@
 """Massive crowds (paper 003): skeletons and clips, shared streams of poses, the crowd runtime."""
 
-from ..skeleton import Event, Pose, SkeletalClip, Skeleton, stream_times
+from ..skeleton import Channel, Event, Pose, SkeletalClip, Skeleton, sample_keys, stream_times
 from .drive import Cue, Driver, Gait, StateMachine
 from .feet import driven_sliding, foot_sliding, ground_speed, plant_feet
 from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
@@ -9,6 +9,8 @@ from .runtime import INSTANCE, Crowd, CrowdEvent
 
 __all__ = [
     "SkeletalClip",
+    "Channel",
+    "sample_keys",
     "Event",
     "Pose",
     "Skeleton",

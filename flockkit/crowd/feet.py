@@ -90,7 +90,8 @@ def plant_feet(clip: SkeletalClip, legs, *, up: str = "y", forward: str = "z", s
     Parameters
     ----------
     clip : SkeletalClip
-        A loop played in place: its last frame is its first.
+        A loop played in place: its last frame is its first. The result is frames at `clip.fps`
+        (a clip of channels is planted on its frames, so keys between them are not kept).
     legs : sequence of (upper, middle, foot)
         Joint names per leg: `upper` and `middle` are the joints inverse kinematics turns (a hip
         and a knee, a shoulder and an elbow); `foot` is the joint that must stay put, below

@@ -18,7 +18,7 @@ from .. import validate
 from ..errors import ValidationError
 from ..mesh import AnimatedMesh
 from ..motion import Motion
-from ..skeleton import Pose, SkeletalClip, Skeleton
+from ..skeleton import Channel, Pose, SkeletalClip, Skeleton
 from . import bvh, gltf, obj, usd
 from .gltf import write_gltf
 from .tables import DEFAULT_MAX_GAP, fill_gaps, read_long, read_npy, read_wide, write_csv, write_json
@@ -118,11 +118,22 @@ def read_clips(path, *, fps=None, allow_outside: bool = False) -> dict[str, Skel
     """Every skeletal clip in a file: glTF (.gltf, .glb: every animation of each skin) or BVH
     (.bvh: the take, named after the file).
 
+    Clips keep the file's keys: a glTF clip is made of its channels (``flockkit.Channel``), each
+    with its own key times and interpolation (LINEAR, STEP, CUBICSPLINE), and samples as the
+    glTF 2.0 specification defines (Appendix C); a BVH clip is its frames, frame k at k / rate
+    (rate: the inverse of the Frame Time, rounded to 0.01 fps, since files round the frame time:
+    0.0083333 for 120 fps), each joint's rotation slerped and its translation interpolated
+    linearly between frames. Nothing is resampled; ``SkeletalClip.resampled`` does that where
+    evenly spaced frames are wanted.
+
     Parameters
     ----------
     path : path-like
     fps : float, optional
-        Resample to this rate; default each clip's own (glTF: its key rate; BVH: its frame time).
+        The rate of each clip's frames (``clip.rotations``, ``clip.translations``: what foot
+        planting and motion graphs read); sampling follows the keys whatever it is. Default each
+        clip's own: glTF its key rate (the inverse of the median interval between keys), BVH
+        its frame rate.
     allow_outside : bool
         Let a glTF file's external buffers lie outside its folder (see docs/security.md).
 
@@ -136,7 +147,8 @@ def read_clips(path, *, fps=None, allow_outside: bool = False) -> dict[str, Skel
     Raises
     ------
     FileNotFoundError, FileFormatError (a malformed or truncated file, naming it and where),
-    ValidationError (no skin, no animation, an unknown suffix, a bad `fps`).
+    ValidationError (no skin, no animation, an unknown suffix, a bad `fps`, frames larger than
+    the memory budget).
     """
     path = Path(path)
     if fps is not None:
@@ -152,7 +164,7 @@ def read_clips(path, *, fps=None, allow_outside: bool = False) -> dict[str, Skel
         # files round the frame time (.0083333 for 120 fps): the rate to 0.01 fps is what was meant
         rate = round(1.0 / frame_time, 2)
         clip = SkeletalClip(skeleton=skeleton, fps=rate, rotations=rotations, translations=translations, name=path.stem)
-        return {path.stem: _resampled(clip, fps, path)}
+        return {path.stem: _framed(clip, fps, path)}
     if suffix not in (".gltf", ".glb"):
         raise ValidationError(
             f"{path}: read_clips reads .gltf, .glb and .bvh files; got {suffix or 'a file without a suffix'!r}"
@@ -163,29 +175,26 @@ def read_clips(path, *, fps=None, allow_outside: bool = False) -> dict[str, Skel
         skeleton = Skeleton(
             names=names, parents=parents, rest=Pose(rotations=rotations, translations=translations), scales=scales
         )
-        for name, (rate, r, t) in clips.items():
+        for name, (rate, channels) in clips.items():
             key = f"{skin}/{name}" if len(skins) > 1 else name
-            found[key] = SkeletalClip(skeleton=skeleton, fps=rate, rotations=r, translations=t, name=key)
+            found[key] = SkeletalClip(skeleton=skeleton, fps=rate, channels=channels, name=key)
     if not found:
         raise ValidationError(f"{path}: no animation moves a skin's joints")
     return found
 
 
-def _resampled(clip: SkeletalClip, fps: float | None, source) -> SkeletalClip:
+def _framed(clip: SkeletalClip, fps: float | None, source) -> SkeletalClip:
+    """`clip` (frames) with its frames at `fps` instead, its keys kept: a clip of one channel per
+    joint and path on the old frames' times."""
     if fps is None or fps == clip.fps:
         return clip
-    validate.allocation((clip.duration * fps + 1) * clip.skeleton.n_joints * 7 * 3,
-                        f"{source}: clip {clip.name!r} ({clip.duration:g} s) resampled at {fps:g} fps")  # fmt: skip
-    times = np.arange(int(round(clip.duration * fps)) + 1) / fps
-    pose = clip.sample(times)
-    return SkeletalClip(
-        skeleton=clip.skeleton,
-        fps=fps,
-        rotations=pose.rotations,
-        translations=pose.translations,
-        events=clip.events,
-        name=clip.name,
-    )
+    validate.allocation((clip.duration * fps + 2) * clip.skeleton.n_joints * 7 * 2,
+                        f"{source}: clip {clip.name!r} ({clip.duration:g} s) with frames at {fps:g} fps")  # fmt: skip
+    times = clip.key_times
+    channels = [Channel(joint=j, path=path, times=times, values=values[:, j])
+                for j in range(clip.skeleton.n_joints)
+                for path, values in (("rotation", clip.rotations), ("translation", clip.translations))]  # fmt: skip
+    return SkeletalClip(skeleton=clip.skeleton, fps=fps, channels=channels, events=clip.events, name=clip.name)
 
 
 EXPORT_SUFFIXES = (".csv", ".json", ".usda", ".usdc", ".glb", ".gltf")

@@ -33,6 +33,7 @@ from .._atomic import atomic_path
 from .._version import __version__
 from ..errors import FileFormatError, ValidationError
 from ..motion import Motion
+from ..skeleton import Channel, sample_keys
 
 _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
@@ -534,6 +535,16 @@ class Document:
                       "must hold key times >= 0 that increase strictly")  # fmt: skip
         return times
 
+    def keys(self, animation: int, sampler: int, path: str) -> np.ndarray:
+        """The output of a sampler (its values, with tangents for CUBICSPLINE), rotations checked
+        for keys of length zero (which no interpolation can turn into a rotation)."""
+        output = self.accessor(self._list("animations")[animation]["samplers"][sampler]["output"])
+        if path == "rotation" and not np.all(np.linalg.norm(output, axis=1) > 1e-12):
+            cubic = self._list("animations")[animation]["samplers"][sampler].get("interpolation") == "CUBICSPLINE"
+            if not cubic or not np.all(np.linalg.norm(output[1::3], axis=1) > 1e-12):  # tangents may be zero
+                self.fail(f"animations[{animation}].samplers[{sampler}].output", "holds a rotation of length zero")
+        return output
+
     def clip_names(self) -> list[str]:
         """Animation names (unnamed ones as "animation K", repeated ones with " (K)" added)."""
         names = [a.get("name") or f"animation {k}" for k, a in enumerate(self._list("animations"))]
@@ -618,14 +629,11 @@ class Document:
                     continue
                 sampler = spec["samplers"][channel["sampler"]]
                 path, node = target["path"], target["node"]
-                values = _sample(self.key_times(animation, channel["sampler"]), self.accessor(sampler["output"]),
-                                 times, sampler.get("interpolation", "LINEAR"), path)  # fmt: skip
+                output = self.keys(animation, channel["sampler"], path)
+                values = _sample(self.key_times(animation, channel["sampler"]), output, times,
+                                 sampler.get("interpolation", "LINEAR"), path)  # fmt: skip
                 if path == "rotation":
-                    length = np.linalg.norm(values, axis=1, keepdims=True)
-                    if not np.all(length > 1e-12):
-                        self.fail(f"animations[{animation}].samplers[{channel['sampler']}].output",
-                                  "holds a rotation of length zero")  # fmt: skip
-                    rotation[:, column[node]] = values / length
+                    rotation[:, column[node]] = values
                 elif path == "weights":
                     weights[node] = values
                 else:
@@ -671,33 +679,23 @@ def _read_glb(data: bytes):
 
 
 def _sample(inputs, outputs, times, interpolation, path):
-    """Channel values at `times` (spec 3.11.3): LINEAR (spherical for rotations), STEP or
-    CUBICSPLINE; held before the first and after the last key."""
+    """Channel values at `times` (spec Appendix C, :func:`flockkit.skeleton.sample_keys`): LINEAR
+    (spherical for rotations, whose keys are normalized first), STEP or CUBICSPLINE; held before
+    the first and after the last key."""
     keys = len(inputs)
-    width = outputs.size // (keys * (3 if interpolation == "CUBICSPLINE" else 1))
-    outputs = outputs.reshape(keys, -1, width) if interpolation == "CUBICSPLINE" else outputs.reshape(keys, width)
-    if interpolation == "CUBICSPLINE":
+    cubic = interpolation == "CUBICSPLINE"
+    width = outputs.size // (keys * (3 if cubic else 1))
+    tangent_in = tangent_out = None
+    if cubic:
+        outputs = outputs.reshape(keys, 3, width)
         tangent_in, values, tangent_out = outputs[:, 0], outputs[:, 1], outputs[:, 2]
     else:
-        values = outputs
-    if keys == 1:
-        return np.repeat(values[:1], len(times), axis=0)
-    clipped = np.clip(times, inputs[0], inputs[-1])
-    k = np.clip(np.searchsorted(inputs, clipped, side="right") - 1, 0, keys - 2)
-    span = inputs[k + 1] - inputs[k]
-    u = ((clipped - inputs[k]) / span)[:, None]
-    if interpolation == "STEP":
-        result = np.where(u >= 1, values[k + 1], values[k])
-    elif interpolation == "CUBICSPLINE":
-        u2, u3 = u * u, u * u * u
-        dt = span[:, None]
-        result = ((2 * u3 - 3 * u2 + 1) * values[k] + (u3 - 2 * u2 + u) * dt * tangent_out[k]
-                  + (-2 * u3 + 3 * u2) * values[k + 1] + (u3 - u2) * dt * tangent_in[k + 1])  # fmt: skip
-    elif path == "rotation":
-        result = rigid.slerp(values[k], values[k + 1], u)
-    else:
-        result = (1 - u) * values[k] + u * values[k + 1]
-    return result
+        values = outputs.reshape(keys, width)
+    rotation = path == "rotation"
+    if rotation and not cubic:
+        values = values / np.linalg.norm(values, axis=1, keepdims=True)
+    return sample_keys(inputs, values, times, interpolation, rotation=rotation, in_tangents=tangent_in,
+                       out_tangents=tangent_out)  # fmt: skip
 
 
 def _frames(duration: float, fps: float, per_frame: float, what: str) -> int:
@@ -830,10 +828,12 @@ def _skinned(document, where, skin, s, primitive, points, joint_world):
 
 def skin_clips(path, fps, *, allow_outside: bool = False):
     """Per distinct skin, the skeleton (its joints and their ancestors, which carry the model's
-    placement, parents first) and every animation that moves it, sampled at `fps` (None: each
-    animation's key rate): yields (skin name, names, parents, rest translations (J, 3), rest
-    rotations (J, 4), scales (J, 3), {clip name: (fps, rotations (T, J, 4), translations
-    (T, J, 3))})."""
+    placement, parents first) and every animation that moves it, as the file keys it: yields
+    (skin name, names, parents, rest translations (J, 3), rest rotations (J, 4), scales (J, 3),
+    {clip name: (fps, [flockkit.Channel, ...])}), each channel one of the animation's rotation or
+    translation channels with its own key times and interpolation. `fps` is the rate of the
+    clips' evenly spaced frames (None: each animation's key rate). Scale channels must hold the
+    joints' rest scales (flockkit skeletons keep scales fixed)."""
     document = Document(path, allow_outside=allow_outside)
     skins = document._list("skins")
     if not skins:
@@ -862,27 +862,21 @@ def skin_clips(path, fps, *, allow_outside: bool = False):
                           "rotation and scale")  # fmt: skip
         clips = {}
         for a, name in enumerate(document.clip_names()):
-            channels = document._list("animations")[a]["channels"]
-            moving = [c["sampler"] for c in channels if c["target"].get("node") in index]
-            if not moving:
+            channels = _joint_channels(document, a, index, scale[0], f"{path}: clip {name!r}")
+            if not channels:
                 continue
-            inputs = [document.key_times(a, s) for s in moving]
-            duration = max(float(i[-1]) for i in inputs)
+            duration = max(c.duration for c in channels)
             rate = fps
             if rate is None:
-                steps = np.concatenate([np.diff(i) for i in inputs])
+                steps = np.concatenate([np.diff(c.times) for c in channels])
                 steps = steps[steps > 1e-6]
                 rate = float(np.round(1.0 / np.median(steps), 3)) if len(steps) else 30.0
                 if rate > MAX_KEY_RATE:
                     document.fail(f"animations[{a}]", f"has keys {1 / rate:.3g} s apart ({rate:g} a second); read it "
-                                  "with fps= to sample it at a rate of your choice")  # fmt: skip
-            validate.allocation((duration * rate + 1) * len(chosen) * 30,
+                                  "with fps= to give its frames a rate of your choice")  # fmt: skip
+            validate.allocation((duration * rate + 2) * len(chosen) * 30,
                                 f"{path}: clip {name!r} ({duration:g} s) at {rate:g} fps")  # fmt: skip
-            times = np.arange(int(round(duration * rate)) + 1) / rate
-            t, r, sc, _, _, _ = document.trs(a, times, chosen)
-            if not np.allclose(sc, scale[0], atol=1e-6):
-                raise ValidationError(f"{path}: clip {name!r} animates joint scales, which flockkit clips do not hold")
-            clips[name] = (rate, r, t)
+            clips[name] = (rate, channels)
         parent = np.array([index.get(int(document.parent[n]), -1) for n in chosen])
         yield (
             skin.get("name") if isinstance(skin.get("name"), str) and skin.get("name") else f"skin {s}",
@@ -893,6 +887,36 @@ def skin_clips(path, fps, *, allow_outside: bool = False):
             scale[0],
             clips,
         )
+
+
+def _joint_channels(document: Document, animation: int, index: dict, scales: np.ndarray, what: str) -> list:
+    """The rotation and translation channels of `animation` that move the nodes of `index` (node
+    -> joint), as flockkit Channels; LINEAR and STEP rotation keys normalized (the spec's slerp
+    assumes unit quaternions; float32 and normalized integers round them)."""
+    spec = document._list("animations")[animation]
+    found = []
+    for channel in spec["channels"]:
+        node, path = channel["target"].get("node"), channel["target"].get("path")
+        if node not in index or path == "weights":
+            continue
+        sampler = spec["samplers"][channel["sampler"]]
+        interpolation = sampler.get("interpolation", "LINEAR")
+        cubic = interpolation == "CUBICSPLINE"
+        output = document.keys(animation, channel["sampler"], path)
+        tangents = {"in_tangents": output[0::3], "out_tangents": output[2::3]} if cubic else {}
+        values = output[1::3] if cubic else output
+        if path == "scale":
+            still = np.allclose(values, scales[index[node]], atol=1e-6) and all(
+                np.allclose(t, 0, atol=1e-6) for t in tangents.values()
+            )
+            if not still:
+                raise ValidationError(f"{what} animates joint scales, which flockkit clips do not hold")
+            continue
+        if path == "rotation" and not cubic:
+            values = values / np.linalg.norm(values, axis=1, keepdims=True)
+        found.append(Channel(joint=index[node], path=path, times=document.key_times(animation, channel["sampler"]),
+                             values=values, interpolation=interpolation, **tangents))  # fmt: skip
+    return found
 
 
 # glTF is y up and flockkit (like USD here) z up: (x, y, z) -> (x, z, -y), a quarter turn about x

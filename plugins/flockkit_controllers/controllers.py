@@ -192,8 +192,9 @@ class Mask:
 class GraphWalk:
     """An endless stream that never plays the same loop twice: a random walk through a motion
     graph of `clip`, built by `builder` (default paper 002's ``windowed``, for motion in place)
-    over the joints' positions relative to the root, blended across each transition as
-    synthesize blends. The walk grows as later times are asked for, always the same under `seed`.
+    over the joints' positions relative to the root (the clip's frames at its `fps`), blended
+    across each transition as synthesize blends, and between frames slerped as a clip is between
+    keys. The walk grows as later times are asked for, always the same under `seed`.
     Events: the clip's, where the walk plays through them."""
 
     capabilities = SKELETAL
@@ -247,7 +248,7 @@ class GraphWalk:
         if len(f) == 0:
             return Pose._adopt(np.zeros((0, self.skeleton.n_joints, 4)), np.zeros((0, self.skeleton.n_joints, 3)))
         k = np.floor(f).astype(np.int64)
-        return Pose.blend(self._output(k), self._output(k + 1), f - k)
+        return Pose.interpolate(self._output(k), self._output(k + 1), f - k)
 
     def events(self, start: float, stop: float) -> list[Event]:
         if not self.clip.events or stop <= start:
