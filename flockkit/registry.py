@@ -469,6 +469,16 @@ def _lookup(kind: str, name: str) -> Component:
     raise UnknownPluginError(f"no {kind} named {name!r} is installed; installed {kind}s: {installed}.{hint}")
 
 
+def takes(kind: str, name: str, parameter: str) -> bool:
+    """Whether the factory of the `kind` component `name` takes the keyword `parameter` (True for
+    a factory taking any keyword, or one whose signature cannot be read: the call then says)."""
+    try:
+        parameters = inspect.signature(_lookup(kind, name).factory).parameters
+    except (TypeError, ValueError):
+        return True
+    return parameter in parameters or any(p.kind is p.VAR_KEYWORD for p in parameters.values())
+
+
 def get(kind: str, name: str, **params):
     """A configured component: ``factory(**params)`` of the `kind` component registered as `name`.
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
-import inspect
 import json
 import sys
 from pathlib import Path
@@ -145,20 +144,12 @@ def require_parameter(args, option: str, parameter: str, given_as: str) -> None:
     kind, name = KINDS_OF_OPTIONS[option], getattr(args, option)
     if name not in registry.available(kind):
         return  # flockkit.get names the unknown component and what is installed
-    taking = [c.name for c in registry.describe(kind) if _takes(c.factory, parameter)]
+    taking = [c.name for c in registry.describe(kind) if registry.takes(kind, c.name, parameter)]
     if name in taking:
         return
     instead = (f"choose one that does with --{option} (installed: {', '.join(taking)})" if taking
                else f"no installed {kind} takes it")  # fmt: skip
     raise ValidationError(f"{given_as}: {kind} {name!r} takes no {parameter}=; {instead}")
-
-
-def _takes(factory, parameter: str) -> bool:
-    try:
-        parameters = inspect.signature(factory).parameters
-    except (TypeError, ValueError):
-        return True  # a factory without a signature: let the call say
-    return parameter in parameters or any(p.kind is p.VAR_KEYWORD for p in parameters.values())
 
 
 def require_suffix(path: str, suffixes: tuple[str, ...], option: str) -> Path:
