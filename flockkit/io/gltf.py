@@ -220,7 +220,7 @@ class Document:
             if type(component) is not int or component not in _COMPONENTS:
                 self.fail(f"{where}.componentType", f"must be one of {sorted(_COMPONENTS)}; got {component!r:.60}")
             kind = accessor.get("type")
-            if kind not in _WIDTH:
+            if not isinstance(kind, str) or kind not in _WIDTH:
                 self.fail(f"{where}.type", f"must be one of {', '.join(_WIDTH)}; got {kind!r:.60}")
             count = self._int(accessor.get("count"), f"{where}.count", minimum=1)
             if not isinstance(accessor.get("normalized", False), bool):
@@ -372,7 +372,7 @@ class Document:
                     continue  # a target given by an extension (KHR_animation_pointer): not ours to move
                 node = self._index(target["node"], f"{here}.target.node", "nodes")
                 path = target.get("path")
-                if path not in _PATH_WIDTH:
+                if not isinstance(path, str) or path not in _PATH_WIDTH:
                     self.fail(f"{here}.target.path", f"must be one of {', '.join(_PATH_WIDTH)}; got {path!r:.60}")
                 if (node, path) in targeted:
                     self.fail(here, f"animates node {node}'s {path} a second time in one animation")
