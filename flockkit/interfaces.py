@@ -187,8 +187,10 @@ class BehaviorModel(Protocol):
     ``forward(initial, steps, rng)``
         Simulate `steps` >= 0 steps from `initial` and return a Motion of ``steps + 1`` frames
         whose first frame has exactly the positions of `initial` (and, where ``steps >= 1``,
-        its velocities, by the Motion velocity convention). Model arrays the model carries from
-        step to step (``State.extra``) are returned as Motion channels of the same names.
+        its velocities, by the Motion velocity convention: frame 1 is ``initial.positions +
+        dt * initial.velocities``, so the model's first random choice acts at frame 1). The
+        Motion's dt is the model's time step. Model arrays the model carries from step to step
+        (``State.extra``) are returned as Motion channels of the same names.
     ``backward(final, steps, rng)``
         Return ``steps + 1`` frames whose last frame has exactly the positions (and velocities)
         of `final`, plausibly leading up to it. Paper 004 does this by simulating forward with
@@ -197,7 +199,9 @@ class BehaviorModel(Protocol):
         Entry k is the log density, summed over agents, of the random choices (for boids: the
         wander impulses) that the model would have made at frame ``start + k`` to produce the
         motion; ``stop=None`` means the end. Frames at which no choice can be inferred contribute
-        0. The sum over all frames is log g_w. Evaluating a window equals slicing a full
+        0. The sum over all frames is log g_w. The motion is scored at its own time step,
+        ``motion.dt`` (a model that can only score the step it simulates raises ValidationError
+        for a motion of another dt). Evaluating a window equals slicing a full
         evaluation, so a sampler can re-score only the frames it changed.
 
     All three are deterministic given the Generator `rng`, never mutate their inputs, return

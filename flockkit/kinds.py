@@ -163,3 +163,10 @@ KINDS: Mapping[str, Kind] = _frozen(
         ),
     )
 )
+
+
+def page(kind: str, section: str | None = None) -> str:
+    """Where flockkit's documentation describes `kind` (and one `section` of that page), as error
+    messages cite it."""
+    where = f"the {kind} page of flockkit's documentation (kinds/{kind}/)"
+    return f'{where}, section "{section}"' if section else where

@@ -29,6 +29,7 @@ from . import hookspecs
 from .errors import FlockkitWarning, PluginError, UnknownPluginError, ValidationError
 from .interfaces import capabilities
 from .kinds import KINDS as _KINDS
+from .kinds import page
 
 __all__ = [
     "Component",
@@ -559,7 +560,7 @@ def require(kind: str, spec, field: str, what: str) -> None:
     if not getattr(capabilities_of(kind, spec), field):
         raise ValidationError(
             f"{what} need a {kind} declaring Capabilities({field}=True); {kind} {label(spec)} does not declare it "
-            f"(see docs/kinds/{kind}.md)"
+            f"(see {page(kind)})"
         )
 
 

@@ -19,9 +19,9 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from .. import _npzfile, rigid
-from .._arrays import readonly_int
+from .._arrays import check_finite, readonly_int
 from ..errors import FileFormatError, ValidationError
-from ..motion import DEFAULT_UP, Alignment, Motion, heading_axes
+from ..motion import DEFAULT_UP, Alignment, Motion, _check_rotation, heading_axes
 from ..validate import integer
 
 __all__ = ["MotionGraph", "Clip", "Transition", "Walk", "turns", "local_minima", "local_minima_of_cells"]
@@ -106,6 +106,35 @@ def _sequence(value, field: str) -> list:
         raise ValidationError(f"{field} must be a sequence; got {type(value).__name__}") from None
 
 
+def _float_array(value, field: str) -> np.ndarray:
+    try:
+        return np.array(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise ValidationError(f"{field} must be an array of numbers; got {type(value).__name__}") from None
+
+
+def _start_rotation(value) -> np.ndarray | None:
+    """A walk's start rotation: None, or a proper (D, D) rotation (a reflection or a scaling would
+    mirror or resize the source), read-only."""
+    if value is None:
+        return None
+    rotation = _float_array(value, "Walk.rotation")
+    _check_rotation(rotation, "Walk.rotation")
+    rotation.flags.writeable = False
+    return rotation
+
+
+def _start_translation(value) -> np.ndarray | None:
+    if value is None:
+        return None
+    translation = _float_array(value, "Walk.translation")
+    if translation.shape not in ((2,), (3,)):
+        raise ValidationError(f"Walk.translation must have shape (D,) with D in {{2, 3}}; got {translation.shape}")
+    check_finite(translation, field="Walk.translation")
+    translation.flags.writeable = False
+    return translation
+
+
 def _edge(value) -> tuple[str, int]:
     kind, index = value if isinstance(value, (tuple, list)) and len(value) == 2 else (None, None)
     if (
@@ -145,14 +174,19 @@ class Walk:
 
     start: int = attrs.field(converter=lambda v: integer(v, "Walk.start", minimum=0))
     edges: tuple = attrs.field(converter=lambda edges: tuple(_edge(e) for e in _sequence(edges, "Walk.edges")))
-    rotation: np.ndarray = attrs.field(default=None)
-    translation: np.ndarray = attrs.field(default=None)
+    rotation: np.ndarray = attrs.field(default=None, converter=lambda v: _start_rotation(v))
+    translation: np.ndarray = attrs.field(default=None, converter=lambda v: _start_translation(v))
     _is_transition: np.ndarray = attrs.field(init=False, repr=False, eq=False)
     _index: np.ndarray = attrs.field(init=False, repr=False, eq=False)
 
     def __attrs_post_init__(self):
         if self.start < 0:
             raise ValidationError(f"Walk.start must be a node index >= 0; got {self.start}")
+        if self.rotation is not None and self.translation is not None and len(self.translation) != len(self.rotation):
+            raise ValidationError(
+                f"Walk.translation must have one entry per dimension of Walk.rotation ({len(self.rotation)}); "
+                f"got {len(self.translation)}"
+            )
         object.__setattr__(
             self, "_is_transition", np.array([kind == "transition" for kind, _ in self.edges], dtype=bool)
         )

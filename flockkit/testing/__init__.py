@@ -173,7 +173,7 @@ def _run(check, kind: str, name: str, component) -> None:
     except Exception as exc:  # noqa: BLE001 - every failure is reported the same way
         raise AssertionError(
             f"{check.__name__} failed for {kind} {name!r}: {type(exc).__name__}: {said(exc)}\n"
-            f"  to fix: {advice(check, kind)}"
+            f"  to fix: {advice(check, kind, exc)}"
         ) from exc
 
 

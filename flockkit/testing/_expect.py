@@ -6,15 +6,22 @@ import contextlib
 import signal
 import threading
 import traceback
+from pathlib import Path
 
 from ..errors import ValidationError
 from ..interfaces import capabilities
+from ..kinds import page
 
 # partner name -> the kind of component it is
 PARTNER_KINDS = {"metric": "metric", "behavior": "behavior", "graph": None}
 # the built-in partners used where none is given (convenience defaults, as for flockkit.build_graph)
 _DEFAULT_NAMES = {"metric": "icp-hungarian", "behavior": "boids"}
 KIT_DT = 0.1  # seconds per frame of every motion the kit makes, and of a behavior partner
+
+
+def agents(n: int) -> str:
+    """ "1 agent", "12 agents": a count of agents as a message says it."""
+    return f"{n} agent" if n == 1 else f"{n} agents"
 
 
 def expect_validation_error(call, description: str) -> None:
@@ -58,14 +65,44 @@ def fixed_by(advice: str):
     return mark
 
 
-def advice(check, kind: str) -> str:
-    """How to fix a failure of `check`: its own advice, else the property its docstring states."""
+def advice(check, kind: str, failure: BaseException | None = None) -> str:
+    """How to fix a failure of `check`: when the component raised a ValidationError on the kit's
+    valid input (its own, or one flockkit raised building a value it returned), what that error
+    says and where it was raised; else the check's own advice, else the property its docstring
+    states."""
+    refused = _validation_error_in(failure)
+    if refused is not None:
+        return (
+            f"the {kind} raised ValidationError at {_raised_at(refused)} on an input the kit holds valid. If it "
+            f"builds a flockkit value there (a Motion, a Segmentation, an Alignment, a Walk), give that value "
+            f"what the message asks for; if it refuses the input, accept it: see {page(kind)}"
+        )
     own = getattr(check, "fix", None)
     if own:
         return own
     promise = " ".join((check.__doc__ or "").split()) or check.__name__
-    where = f'docs/kinds/{kind}.md, "What the kit checks"'
-    return f"make the {kind} meet this ({check.__name__}): {promise} The contract: {where}"
+    return f"make the {kind} meet this ({check.__name__}): {promise} The contract: {page(kind, 'What the kit checks')}"
+
+
+def _validation_error_in(failure: BaseException | None) -> ValidationError | None:
+    """The ValidationError a failure came from, following its causes."""
+    seen = set()
+    while failure is not None and id(failure) not in seen:
+        if isinstance(failure, ValidationError):
+            return failure
+        seen.add(id(failure))
+        failure = failure.__cause__ or failure.__context__
+    return None
+
+
+def _raised_at(exc: BaseException) -> str:
+    """The last line outside flockkit's own package that led to `exc`: the component's call."""
+    import flockkit
+
+    package = str(Path(flockkit.__file__).parent)
+    frames = [f for f in traceback.extract_tb(exc.__traceback__) if not f.filename.startswith((package, "<"))]
+    frame = frames[-1] if frames else traceback.extract_tb(exc.__traceback__)[-1]
+    return f"{Path(frame.filename).name}:{frame.lineno}"
 
 
 def skip_reason(check, declared) -> str | None:

@@ -11,8 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import ValidationError
 from ..motion import Motion, State, random_flock
-from ._expect import applies_when, dims_of, expect_validation_error, fixed_by, on_input
+from ._expect import agents, applies_when, dims_of, expect_validation_error, fixed_by, on_input
 
 STEPS = 12
 SEED = 20031
@@ -38,7 +39,7 @@ def _flock(model) -> State:
 def _each(name, model):
     """(flock, context) for every fixed flock; the context names the flock in failures."""
     for state in _flocks(model):
-        yield state, on_input(name, model, state.dims, f"a flock of {state.n_agents}")
+        yield state, on_input(name, model, state.dims, f"a flock of {agents(state.n_agents)}")
 
 
 def _forward(model, state, steps=STEPS, seed=0) -> Motion:
@@ -53,11 +54,18 @@ def _check_motion(name, motion, state, steps, operation):
     assert isinstance(motion, Motion), f"{name}.{operation} returned {type(motion).__name__}, not a flockkit.Motion"
     expected = (steps + 1, state.n_agents, state.dims)
     assert motion.positions.shape == expected, (
-        f"{name}.{operation}(state of {state.n_agents} agents in {state.dims}D, steps={steps}) returned positions "
+        f"{name}.{operation}(state of {agents(state.n_agents)} in {state.dims}D, steps={steps}) returned positions "
         f"of shape {motion.positions.shape}; expected {expected}"
     )
     assert motion.positions.dtype == np.float64, f"{name}.{operation} positions have dtype {motion.positions.dtype}"
     assert np.all(np.isfinite(motion.positions)), f"{name}.{operation} returned non-finite positions"
+
+
+def _shaken(motion, rng) -> Motion:
+    """`motion` with positional noise of a quarter of its median step."""
+    step = np.linalg.norm(np.diff(motion.positions, axis=0), axis=-1)
+    noise = rng.normal(0.0, 0.25 * float(np.median(step)), motion.positions.shape)
+    return Motion(positions=motion.positions + noise, dt=motion.dt, channels=motion.channels)
 
 
 def _close(a, b, scale=1.0) -> bool:
@@ -178,12 +186,42 @@ def check_log_plausibility_finite(name, model):
     for state, context in _each(name, model):
         with context:
             motion = _forward(model, state)
-            values = np.asarray(model.log_plausibility(motion))
+            values = model.log_plausibility(motion)
+            assert isinstance(values, np.ndarray), (
+                f"{name}.log_plausibility returned {type(values).__name__}, not a numpy array"
+            )
             assert values.shape == (motion.n_frames,), (
                 f"{name}.log_plausibility returned shape {values.shape}; expected ({motion.n_frames},)"
             )
             assert values.dtype == np.float64, f"{name}.log_plausibility returned dtype {values.dtype}"
             assert np.all(np.isfinite(values)), f"{name}.log_plausibility is not finite on a forward motion: {values}"
+
+
+@fixed_by(
+    "score a motion at its own time step, motion.dt (velocities are (x[t+1] - x[t]) / motion.dt), or, "
+    "if the model can only score the step it simulates, raise flockkit.errors.ValidationError when "
+    "motion.dt differs from it (a model whose plausibility reads positions alone, never how fast they "
+    "change, lists this check in expected_failed_checks)"
+)
+def check_log_plausibility_at_motion_dt(name, model):
+    """log_plausibility scores a motion at its own dt: the same positions (a forward motion with
+    noise) labelled with twice the time step (half the speeds) score differently on some flock,
+    or are refused with a ValidationError."""
+    scored, dt = [], None
+    for state, context in _each(name, model):
+        with context:
+            motion = _shaken(_forward(model, state), np.random.default_rng(SEED))
+            dt = motion.dt
+            slower = Motion(positions=motion.positions, dt=2 * motion.dt, channels=motion.channels)
+            try:
+                relabelled = np.asarray(model.log_plausibility(slower), dtype=np.float64)
+            except ValidationError:
+                return
+            scored.append(np.allclose(np.asarray(model.log_plausibility(motion)), relabelled, rtol=1e-9, atol=0.0))
+    assert not all(scored), (
+        f"{name}.log_plausibility gives the same values for each noisy forward motion at dt = {dt:g} s as for its "
+        f"positions at dt = {2 * dt:g} s: it reads a time step of its own instead of motion.dt"
+    )
 
 
 @fixed_by(
@@ -217,9 +255,7 @@ def check_log_plausibility_prefers_forward(name, model):
     clean, noisy = [], []
     for index, state in enumerate(_flocks(model)):
         motion = _forward(model, state, steps=30, seed=index)
-        step = np.linalg.norm(np.diff(motion.positions, axis=0), axis=-1)
-        noise = rng.normal(0.0, 0.25 * float(np.median(step)), motion.positions.shape)
-        shaken = Motion(positions=motion.positions + noise, dt=motion.dt, channels=motion.channels)
+        shaken = _shaken(motion, rng)
         clean.append(float(np.sum(model.log_plausibility(motion))))
         noisy.append(float(np.sum(model.log_plausibility(shaken))))
     assert np.mean(clean) > np.mean(noisy), (
@@ -423,6 +459,7 @@ CHECKS = (
     check_inputs_unchanged,
     check_rejects_negative_steps,
     check_log_plausibility_finite,
+    check_log_plausibility_at_motion_dt,
     check_degenerate_flocks,
     check_log_plausibility_prefers_forward,
     check_log_plausibility_window,

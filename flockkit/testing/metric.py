@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..motion import Alignment, Configuration, random_flock
-from ._expect import applies_when, dims_of, expect_validation_error, fixed_by, on_input
+from ._expect import agents, applies_when, dims_of, expect_validation_error, fixed_by, on_input
 
 SEED = 4205
 _SIZES = {2: (1, 6, 15), 3: (5, 12)}  # agents per configuration, per dimension
@@ -54,7 +54,7 @@ def _each(name, metric, items):
     """(item, context) where the context names the configurations' size in failures."""
     for item in items:
         first = item[0] if isinstance(item, tuple) else item
-        yield item, on_input(name, metric, first.dims, f"configurations of {first.n_agents} agents")
+        yield item, on_input(name, metric, first.dims, f"configurations of {agents(first.n_agents)}")
 
 
 def _scale(config: Configuration) -> float:
@@ -70,7 +70,7 @@ def check_compare_returns_alignment(name, metric):
                 f"{name}.compare returned {type(found).__name__}, not a flockkit.Alignment"
             )
             assert found.assignment.shape == (a.n_agents,) and found.rotation.shape == (a.dims, a.dims), (
-                f"{name}.compare returned an alignment for {found.assignment.shape[0]} agents in "
+                f"{name}.compare returned an alignment for {agents(found.assignment.shape[0])} in "
                 f"{found.rotation.shape[0]}D; expected {a.n_agents} in {a.dims}D"
             )
 
@@ -321,7 +321,7 @@ def check_rejects_mismatched_sizes(name, metric):
     for other in (o.configuration() for o in others):
         expect_validation_error(
             lambda other=other: metric.compare(base, other),
-            f"{name}.compare of {base.n_agents} agents in {d}D with {other.n_agents} in {other.dims}D",
+            f"{name}.compare of {agents(base.n_agents)} in {d}D with {other.n_agents} in {other.dims}D",
         )
 
 

@@ -170,6 +170,21 @@ class NonFinitePlausibility(RandomVelocity):
         return np.where(np.arange(start, start + len(values)) == 1, -np.inf, values)
 
 
+class ReturnsAList(RandomVelocity):
+    """Its plausibility comes back as a Python list of floats, not an array."""
+
+    def log_plausibility(self, motion, start=0, stop=None):
+        return [float(v) for v in super().log_plausibility(motion, start, stop)]
+
+
+class ScoresAtItsOwnDt(RandomVelocity):
+    """Infers velocities with the model's dt, whatever motion.dt says."""
+
+    def log_plausibility(self, motion, start=0, stop=None):
+        stepped = flockkit.Motion(positions=motion.positions, dt=self.dt, channels=motion.channels)
+        return super().log_plausibility(stepped, start, stop)
+
+
 class PrefersNoise(RandomVelocity):
     def log_plausibility(self, motion, start=0, stop=None):
         return -super().log_plausibility(motion, start, stop)
@@ -268,6 +283,7 @@ BROKEN = {
     "check_inputs_unchanged": MutatesInput,
     "check_rejects_negative_steps": AcceptsNegativeSteps,
     "check_log_plausibility_finite": NonFinitePlausibility,
+    "check_log_plausibility_at_motion_dt": ScoresAtItsOwnDt,
     "check_degenerate_flocks": CrowdingByDistance,
     "check_log_plausibility_prefers_forward": PrefersNoise,
     "check_log_plausibility_window": WindowIgnored,

@@ -138,7 +138,9 @@ def test_a_declared_reach_of_zero_is_checked_not_skipped():
     assert "check_plausibility_reach" not in skipped_checks("behavior", ClaimsReachZero())
     with pytest.raises(AssertionError, match="check_plausibility_reach failed.*plausibility_reach=0"):
         check_plugin("behavior", ClaimsReachZero(), name="reach-zero")
-    assert "check_plausibility_reach" in check_plugin("behavior", ReachZero()).passed
+    position_only = {"check_log_plausibility_at_motion_dt": "it scores positions, not how fast they change"}
+    report = check_plugin("behavior", ReachZero(), expected_failed_checks=position_only)
+    assert "check_plausibility_reach" in report.passed
 
 
 @pytest.mark.parametrize("kind, check_name", CASES)
@@ -197,3 +199,23 @@ def test_a_failure_without_a_message_says_where_it_was_raised():
 
     with pytest.raises(AssertionError, match=r"check_forward_shape failed .*: \(no message\) at .*test_kit_fails"):
         check_plugin("behavior", Silent(), name="silent")
+
+
+def test_a_plausibility_returned_as_a_list_fails_its_check():
+    from .fakes import ReturnsAList
+
+    with pytest.raises(AssertionError, match="returned list, not a numpy array"):
+        check_named("behavior", "check_log_plausibility_finite")("listy", ReturnsAList())
+
+
+def test_a_value_flockkit_refuses_gets_that_errors_advice_and_the_plugins_line():
+    class LabelsOutOfRange(IcaKmeans):
+        def segment(self, motion, rng):
+            found = super().segment(motion, rng)
+            return flockkit.Segmentation(labels=found.labels + 5, n_parts=found.n_parts)  # the refused value
+
+    with pytest.raises(AssertionError) as info:
+        check_plugin("segmenter", LabelsOutOfRange(), name="out-of-range")
+    fix = str(info.value).splitlines()[-1]
+    assert "Segmentation.labels must lie in" in str(info.value)
+    assert "raised ValidationError at test_kit_fails_on_broken_fakes.py:" in fix and "kinds/segmenter/" in fix

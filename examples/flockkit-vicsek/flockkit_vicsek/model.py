@@ -50,6 +50,8 @@ class Vicsek:
 
     def log_plausibility(self, motion, start=0, stop=None):
         start, stop = validate.window(motion, start, stop, owner="vicsek")
+        if not math.isclose(motion.dt, self.dt, rel_tol=1e-9):  # its steps are speed x dt long
+            raise flockkit.errors.ValidationError(f"vicsek: motion.dt is {motion.dt} s; this model steps {self.dt} s")
         x, values = motion.positions, np.zeros(stop - start)
         log_norm = 0.5 * math.log(2 * math.pi * self.noise**2)
         for t in range(max(start, 1), min(stop, motion.n_frames - 1)):
