@@ -158,7 +158,7 @@ KINDS: Mapping[str, Kind] = _frozen(
             fields={"clip_player"},
             factory_parameters={"clip_player": ("clip", "rate")},
             kit="flockkit.testing.controller",
-            receives=(),
+            receives=("flockkit.skeleton.SkeletalClip", "flockkit.skeleton.Channel"),
             returns=("flockkit.skeleton.Pose", "flockkit.skeleton.Event", "flockkit.skeleton.Skeleton"),
         ),
     )

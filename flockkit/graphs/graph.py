@@ -398,13 +398,16 @@ class MotionGraph:
         return edges + [("transition", i) for i, t in enumerate(self.transitions) if t.source == node]
 
     def edge_target(self, edge: tuple[str, int]) -> int:
+        """The node a walk reaches by taking `edge` (``("clip", k)`` or ``("transition", k)``)."""
         kind, index = edge
         return (self.clips if kind == "clip" else self.transitions)[index].target
 
     def allowed_edges(self, node: int, frames_since_transition: int) -> list[tuple[str, int]]:
         """Edges a walk may take at `node`: a transition only once `frames_since_transition`
         frames of clips since the last one cover the longest blend of the graph, so that the last
-        one's blend has played out whichever it was, and blends never overlap."""
+        one's blend has played out whichever it was, and blends never overlap. At a walk's start
+        no transition has been taken: pass ``math.inf`` (any transition may be taken); after a
+        transition, 0; after a clip, add the clip's frames after its first."""
         longest = int(self.tables.transition_blend.max())
         return [edge for edge in self.out_edges(node) if edge[0] == "clip" or frames_since_transition >= longest]
 

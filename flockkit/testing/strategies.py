@@ -25,7 +25,7 @@ from ..mesh import AnimatedMesh
 from ..motion import Alignment, Configuration, Motion, State
 from ..scene.features import Features
 from ..scene.segmentation import Segmentation
-from ..skeleton import Event, Pose, SkeletalClip, Skeleton
+from ..skeleton import INTERPOLATIONS, Channel, Event, Pose, SkeletalClip, Skeleton
 
 __all__ = [
     "configurations",
@@ -51,6 +51,7 @@ __all__ = [
     "skeletons",
     "events",
     "skeletal_clips",
+    "channels",
     "pose_times",
     "time_windows",
     "animated_meshes",
@@ -520,32 +521,93 @@ def events(*, max_time=10.0, names=("step", "cheer")):
     return st.builds(Event, time=st.floats(0.0, max_time), name=st.sampled_from(names))
 
 
-def skeletal_clips(*, min_joints=1, max_joints=6, min_frames=2, max_frames=30, fps=30.0):
-    """Skeletal clips over a drawn skeleton: T in [min_frames, max_frames] frames at `fps`, unit
-    rotations per frame and joint, translations of the roots alone (T, 3) or of every joint
-    (T, J, 3), and up to three events within the clip's duration (its ends included)."""
+def skeletal_clips(*, min_joints=1, max_joints=6, min_frames=2, max_frames=30, fps=30.0, keys=("frames", "channels")):
+    """Skeletal clips over a drawn skeleton, each keyed one of the ways in `keys`:
+
+    - ``"frames"``: T in [min_frames, max_frames] frames at `fps`, unit rotations per frame and
+      joint, translations of the roots alone (T, 3) or of every joint (T, J, 3);
+    - ``"channels"``: :func:`channels` of some joints (rotations and translations, LINEAR, STEP
+      or CUBICSPLINE, keys at uneven times; between min_frames and max_frames keys each), the
+      clip sampled at `fps` for the tools that work on frames;
+
+    and up to three events within the clip's duration (its ends included)."""
     _check_range("min_joints", min_joints, "max_joints", max_joints)
     _check_range("min_frames", min_frames, "max_frames", max_frames)
     _check_positive("fps", fps)
+    keys = tuple(keys)
+    if not keys or not set(keys) <= {"frames", "channels"}:
+        raise InvalidArgument(f"keys must hold 'frames' and/or 'channels'; got {keys!r}")
 
     @st.composite
     def draw_clip(draw):
         skeleton = draw(skeletons(min_joints=min_joints, max_joints=max_joints))
-        t = draw(st.integers(min_frames, max_frames))
-        duration = (t - 1) / fps
+        if draw(st.sampled_from(keys)) == "channels":
+            keyed = draw(channels(skeleton, min_keys=min_frames, max_keys=max_frames, max_time=(max_frames - 1) / fps))
+            content = {"channels": keyed}
+            duration = max(float(c.times[-1]) for c in keyed)
+        else:
+            t = draw(st.integers(min_frames, max_frames))
+            shape = draw(st.sampled_from([(t, 3), (t, skeleton.n_joints, 3)]))
+            content = {
+                "rotations": draw(_unit_quaternions((t, skeleton.n_joints))),
+                "translations": draw(_vectors(shape, 10.0)),
+            }
+            duration = (t - 1) / fps
         times = st.one_of(st.sampled_from([0.0, duration]), st.floats(0.0, duration))
         tags = st.builds(Event, time=times, name=st.sampled_from(["step", "cheer"]))
-        shape = draw(st.sampled_from([(t, 3), (t, skeleton.n_joints, 3)]))
         return SkeletalClip(
             skeleton=skeleton,
             fps=float(fps),
-            rotations=draw(_unit_quaternions((t, skeleton.n_joints))),
-            translations=draw(_vectors(shape, 10.0)),
             events=draw(st.lists(tags, max_size=3)),
             name=draw(st.sampled_from(["walk", "idle", "run"])),
+            **content,
         )
 
     return draw_clip()
+
+
+def channels(skeleton, *, min_keys=2, max_keys=12, max_time=2.0, interpolations=INTERPOLATIONS):
+    """Lists of :class:`flockkit.Channel` for `skeleton`: at least one, at most one per joint and
+    path, the joints named or indexed; keys at strictly increasing, uneven times in [0, max_time]
+    (the first at 0 or later), K in [min_keys, max_keys] per channel; unit quaternions for LINEAR
+    and STEP rotations, any for CUBICSPLINE (with in and out tangents, as glTF keys them)."""
+    if not isinstance(skeleton, Skeleton):
+        raise InvalidArgument(f"skeleton must be a flockkit.Skeleton; got {type(skeleton).__name__}")
+    _check_range("min_keys", min_keys, "max_keys", max_keys)
+    _check_positive("max_time", max_time)
+    interpolations = tuple(interpolations)
+    if not interpolations or not set(interpolations) <= set(INTERPOLATIONS):
+        raise InvalidArgument(f"interpolations must be among {INTERPOLATIONS}; got {interpolations!r}")
+
+    @st.composite
+    def draw_channel(draw, joint, path):
+        k = draw(st.integers(min_keys, max_keys))
+        gaps = draw(hnp.arrays("float64", k, elements=st.floats(0.05, 1.0)))
+        first = draw(st.sampled_from([0.0, 0.1]))
+        times = first + (max_time - first) * np.cumsum(gaps) / np.sum(gaps)
+        times = np.concatenate([[first], times[:-1]]) if k > 1 else np.array([first])
+        interpolation = draw(st.sampled_from(interpolations))
+        width = 4 if path == "rotation" else 3
+        if path == "rotation" and interpolation != "CUBICSPLINE":
+            values = draw(_unit_quaternions((k,)))
+        else:
+            values = draw(_vectors((k, width), 2.0 if path == "rotation" else 10.0))
+            if path == "rotation":
+                values[:, 3] += 3.0  # away from the zero quaternion the spline would normalize
+        tangents = {}
+        if interpolation == "CUBICSPLINE":
+            bound = 1.0 if path == "rotation" else 5.0  # rotations: the spline stays far from zero
+            tangents = {side: draw(_vectors((k, width), bound)) for side in ("in_tangents", "out_tangents")}
+        label = draw(st.sampled_from([joint, skeleton.names[joint]]))
+        return Channel(joint=label, path=path, times=times, values=values, interpolation=interpolation, **tangents)
+
+    @st.composite
+    def draw_channels(draw):
+        slots = [(j, path) for j in range(skeleton.n_joints) for path in ("rotation", "translation")]
+        chosen = draw(st.lists(st.sampled_from(slots), min_size=1, max_size=min(len(slots), 6), unique=True))
+        return [draw(draw_channel(j, path)) for j, path in chosen]
+
+    return draw_channels()
 
 
 def segmentations(*, min_points=1, max_points=20, max_parts=None):

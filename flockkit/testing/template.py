@@ -192,21 +192,16 @@ A flockkit plugin: the $kind `$name`, which $summary.
 `$package/__init__.py` registers it with `@flockkit.hookimpl`; the entry point in
 `pyproject.toml` is how flockkit finds it.
 
-## Install
+## Install and test
 
 ```bash
-pip install -e .
-```
-
-Then `flockkit plugins --kind $kind` lists `$name`, `flockkit.get("$kind", "$name")` makes one,
-and every flockkit function that takes a $kind takes the name `"$name"`.
-
-## Test
-
-```bash
-pip install pytest hypothesis
+pip install -e ".[test]"
 pytest
 ```
+
+The first line installs the plugin with what its tests need (pytest, hypothesis). Then
+`flockkit plugins --kind $kind` lists `$name`, `flockkit.get("$kind", "$name")` makes one,
+and every flockkit function that takes a $kind takes the name `"$name"`.
 
 `tests/test_conformance.py` runs flockkit's conformance kit: one test per check of the $kind
 kind, the checks of optional operations it does not declare reported as skipped with the reason.
@@ -218,7 +213,7 @@ holds property tests whose inputs hypothesis draws (`flockkit.testing.strategies
 $change
 
 The contract of a $kind, and the optional operations it can declare in its `capabilities`
-(`flockkit.Capabilities`), are on flockkit's page for the kind (`docs/kinds/$kind.md`). Keep the
+(`flockkit.Capabilities`), are on the $kind page of flockkit's documentation (`kinds/$kind/`). Keep the
 conformance test as it is: when a check fails, its message ends with a "to fix" line. To rename
 the plugin, change `NAME` in `$package/$kind.py`, the entry point and the package in
 `pyproject.toml`, the package's folder and the tests' imports together.

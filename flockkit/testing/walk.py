@@ -3,7 +3,9 @@
 Each check is ``check_<property>(name, strategy, *, graph=None)``; they walk the partner `graph`,
 by default the kit's own (``flockkit.testing.inputs.graph``: a group circling the origin, its
 transitions exact), which needs no plugin, and the smallest graph there is
-(``inputs.loop_graph``: one clip, one transition back). A walk that runs past WALK_SECONDS fails.
+(``inputs.loop_graph``: one clip, one transition back). A walk call that runs past
+WALK_SECONDS (60 s of wall-clock time; a walk of these small graphs takes well under a second)
+fails, so that a walk that loops for ever is reported instead of hanging the suite.
 """
 
 from __future__ import annotations

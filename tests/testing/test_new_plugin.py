@@ -85,6 +85,9 @@ sys.exit(main(["plugins", "--kind", kind]))
 """
 
 
+INSTALL = 'pip install -e ".[test]"'
+
+
 @pytest.mark.parametrize("kind", list(KINDS))
 def test_the_distribution_installs_and_passes_its_own_tests(kind, fresh_python, tmp_path):
     name = f"made-{kind}"  # one name per kind: every distribution ends up in the one environment
@@ -146,7 +149,7 @@ def test_the_distribution_has_its_parts(tmp_path):
     assert '[project.entry-points.flockkit]\npatches = "flockkit_patches"' in pyproject
     assert 'dependencies = ["flockkit"]' in pyproject
     readme = (folder / "README.md").read_text()
-    assert "pip install -e ." in readme and "pytest" in readme and "## What to change" in readme
+    assert INSTALL in readme and "pytest" in readme and "## What to change" in readme
     for source in folder.rglob("*.py"):  # public API only: no built-in plugin package
         text = source.read_text()
         assert "flockkit_" not in text.replace("flockkit_patches", "").replace("flockkit_register_", ""), source
@@ -180,6 +183,9 @@ def test_the_command_writes_the_folder_named_after_the_plugin(command, tmp_path,
     assert code == 0, err
     assert (tmp_path / "flockkit-wander" / "flockkit_wander" / "walk.py").is_file()
     assert "flockkit-wander" in out
+    # one way to install a new plugin: what the command prints, the README it writes and the docs say
+    assert INSTALL in out and INSTALL in (tmp_path / "flockkit-wander" / "README.md").read_text()
+    assert INSTALL in (Path(__file__).parents[2] / "docs" / "plugins.md").read_text()
     code, _, err = command("objective", "spacing", tmp_path / "deeper" / "spacing")
     assert code == 0, err
     assert (tmp_path / "deeper" / "spacing" / "pyproject.toml").is_file()

@@ -31,6 +31,8 @@ DRAWN_BY = {
     "Pose": "poses",
     "Event": "events",
     "Skeleton": "skeletons",
+    "SkeletalClip": "skeletal_clips",
+    "Channel": "channels",
 }
 
 
@@ -168,6 +170,38 @@ def test_skeletal_clips_are_valid(clip):
     assert np.allclose(np.linalg.norm(clip.rotations, axis=-1), 1.0)
     assert clip.translations.shape == (clip.n_frames, clip.skeleton.n_joints, 3)
     assert all(0 <= e.time <= clip.duration for e in clip.events)
+
+
+@settings(max_examples=40, deadline=None)
+@given(fst.skeletal_clips(keys=["channels"]), st.lists(st.floats(-0.5, 3.0), min_size=1, max_size=6))
+def test_channel_clips_sample_as_the_gltf_spec_defines(clip, times):
+    """Every joint a drawn channel moves is, at any time, what an evaluation written from glTF 2.0
+    Appendix C alone (tests/core/animation_spec.py) gives; the others keep their rest pose."""
+    from tests.core.animation_spec import channel_value
+
+    pose = clip.sample(times)
+    moved = {}
+    for channel in clip.channels:
+        joint = channel.joint if isinstance(channel.joint, int) else clip.skeleton.names.index(channel.joint)
+        moved[joint, channel.path] = {
+            "times": channel.times, "values": channel.values, "path": channel.path,
+            "interpolation": channel.interpolation, "in_tangents": channel.in_tangents,
+            "out_tangents": channel.out_tangents,
+        }  # fmt: skip
+    rest = clip.skeleton.rest
+    for k, t in enumerate(times):
+        for j in range(clip.skeleton.n_joints):
+            played = (
+                ("rotation", pose.rotations, rest.rotations),
+                ("translation", pose.translations, rest.translations),
+            )
+            for path, got, still in played:
+                want = channel_value(moved[j, path], t) if (j, path) in moved else still[j]
+                if path == "rotation":
+                    want = want / np.linalg.norm(want)
+                    assert min(np.abs(got[k, j] - want).max(), np.abs(got[k, j] + want).max()) < 1e-9
+                else:
+                    assert np.abs(got[k, j] - want).max() < 1e-9 * (1 + np.abs(want).max())
 
 
 @settings(max_examples=30, deadline=None)
@@ -325,6 +359,9 @@ def test_capabilities_declare_only_what_the_kind_reads(kind, data):
         (fst.events, {"names": ()}),
         (fst.skeletal_clips, {"fps": 0}),
         (fst.skeletal_clips, {"min_frames": 0}),
+        (fst.skeletal_clips, {"keys": ["bones"]}),
+        (fst.channels, {"skeleton": "not a skeleton"}),
+        (fst.channels, {"skeleton": inputs.walker().skeleton, "interpolations": ["CUBIC"]}),
         (fst.segmentations, {"max_parts": 0}),
         (fst.animated_meshes, {"max_vertices": 2}),
         (fst.animated_meshes, {"max_faces": 0}),
