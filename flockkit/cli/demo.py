@@ -244,7 +244,8 @@ def _crowd(tour: _Tour) -> dict:
     return {
         "agents": crowd.n_agents,
         "streams": len(streams),
-        "memory (bytes, Equation 5)": [pool.memory(), equation_5(pool.bones, pool.history)],
+        "memory (bytes, Equation 5)": [pool.memory_parts()["store"], equation_5(pool.bones, pool.history)],
+        "memory (bytes, all the pool holds)": pool.memory(),
         "cheer stream running (at the cheer, at the end)": [running["at the cheer"], pool.is_running(2)],
         "distinct offsets among the cheering half (at the start, at 3.5 s)": [
             int(len(np.unique(offsets[0]))),

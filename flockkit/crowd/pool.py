@@ -236,8 +236,20 @@ class StreamPool:
         return bool(self.running[k])
 
     def memory(self) -> int:
-        """Bytes of pose storage: the store (Equation 5 with U = 0)."""
-        return int(self.store.size) * 4
+        """Bytes of every array the pool holds: the store (Equation 5 with U = 0), the prefetched
+        poses (48 * PREFETCH_FRAMES * sum_A Bones_A: 45% more than the store at paper 003's
+        scale) and the bookkeeping (lookup table, heads, clocks, ref counts)."""
+        return sum(self.memory_parts().values())
+
+    def memory_parts(self) -> dict:
+        """`memory` by part, in bytes: ``store`` (the ring buffers, what Equation 5 counts),
+        ``prefetch`` (PREFETCH_FRAMES poses ahead per stream) and ``bookkeeping``."""
+        ahead = sum(int(a.nbytes) for a in self._ahead.values())
+        tables = [self.lookup, self.history, self.bones, self.head, self.filled, self.clock, self.running,
+                  self.users, self._place, self._first, self._count, self._stops, *self._group.values(),
+                  *self._scales]  # fmt: skip
+        store = int(self.store.size) * 4  # float32, in whatever namespace holds it
+        return {"store": store, "prefetch": ahead, "bookkeeping": sum(int(a.nbytes) for a in tables)}
 
     def gather(self, streams: np.ndarray, offsets: np.ndarray, bones: int):
         """Entries (n, bones, 12) of `streams` (all of `bones` joints) `offsets` frames behind their
@@ -404,5 +416,6 @@ class UniquePool:
         return entries_pose(self.store[k, :j].copy())
 
     def memory(self) -> int:
-        """Bytes: 48 U MaxBones (Equation 5's first term)."""
-        return int(self.store.nbytes)
+        """Bytes of every array the pool holds: its store, 48 U MaxBones (Equation 5's first
+        term), and the slots' clocks."""
+        return int(self.store.nbytes) + int(self.clock.nbytes)

@@ -142,7 +142,7 @@ def record(source, seconds: float, *, agents=None, cluster=None, on_frame=None) 
     )
 
 
-ENGINE_FORMAT_VERSION = 1
+ENGINE_FORMAT_VERSION = 2
 
 
 def write_engine_buffers(source, path, seconds: float, *, on_frame=None) -> None:
@@ -155,9 +155,14 @@ def write_engine_buffers(source, path, seconds: float, *, on_frame=None) -> None
       ``bones`` (S,). Entry layout: 12 float32 per joint, rotation x, y, z, w, translation x, y,
       z, scale x, y, z, two reserved.
     - ``heads`` (F, S) int64: each stream's head slot after frame f (an agent part at offset k
-      reads slot (head - k) mod history); ``written`` (F, S) int64: where in ``entries`` frame f's
-      new head pose of stream s starts (-1: the stream did not run), ``entries`` float32 the new
-      head poses, to copy into the store at ``lookup[s, heads[f, s]]`` before drawing frame f.
+      reads slot (head - k) mod history; at an offset between k and k + 1, a dilating part, it
+      reads both slots and slerps rotations, lerps the rest, that far between them);
+      ``written`` (F, S) int64: where in ``entries`` frame f's new head pose of stream s starts
+      (-1: the stream did not run), ``entries`` float32 the new head poses, to copy into the
+      store at ``lookup[s, heads[f, s]]`` before drawing frame f; ``started`` (F, S) int64: where
+      in ``entries`` the first pose of a stream started during frame f before its update starts
+      (-1: none), to copy into the slot before the head, ``lookup[s, (heads[f, s] - 1) mod
+      history]``.
     - ``instance_<field>`` (F, N, C) for each field of ``flockkit.crowd.INSTANCE`` (stream,
       offset, target, target_offset, blend_start, blend_time, kind, target_kind, mask) and
       ``time`` (F,): α = clamp((time - blend_start) / blend_time, 0, 1) where blend_time > 0.
@@ -167,14 +172,31 @@ def write_engine_buffers(source, path, seconds: float, *, on_frame=None) -> None
     from .. import _npzfile
     from .runtime import INSTANCE
 
-    crowd, driver, frames = _run(source, seconds, on_frame, "write_engine_buffers")
+    heads, written, started, entries, instances, times, roots = [], [], [], [], [], [], []
+    size = 0
+    first: dict = {}  # stream -> its first pose, of streams that started in this frame's on_frame
+
+    def watch(crowd, frame):
+        running, clock = pool.running.copy(), pool.clock.copy()
+        if on_frame is not None:
+            on_frame(crowd, frame)
+        first.clear()
+        for s in np.flatnonzero(pool.running & (~running | (pool.clock < clock))):
+            row = int(pool.lookup[s, pool.head[s]])
+            first[int(s)] = pool.store[row : row + int(pool.bones[s]) * 12].copy()
+
+    crowd, driver, frames = _run(source, seconds, watch, "write_engine_buffers")
     if crowd.pool.xp is not np:
         raise ValidationError("write_engine_buffers reads the store with numpy: use a pool without xp")
     pool = crowd.pool
     store = pool.store.copy()
-    heads, written, entries, instances, times, roots = [], [], [], [], [], []
-    size = 0
     for _ in frames:
+        begins = np.full(len(pool.streams), -1, dtype=np.int64)
+        for s, entry in first.items():
+            begins[s] = size
+            entries.append(entry)
+            size += len(entry)
+        started.append(begins)
         starts = np.full(len(pool.streams), -1, dtype=np.int64)
         for s in np.flatnonzero(pool.running):
             row, width = int(pool.lookup[s, pool.head[s]]), int(pool.bones[s]) * 12
@@ -195,6 +217,7 @@ def write_engine_buffers(source, path, seconds: float, *, on_frame=None) -> None
         "bones": pool.bones,
         "heads": np.array(heads),
         "written": np.array(written),
+        "started": np.array(started),
         "entries": np.concatenate(entries) if entries else np.zeros(0, np.float32),
         "time": np.array(times),
         **{f"instance_{name}": np.ascontiguousarray(instances[name]) for name in INSTANCE.names},

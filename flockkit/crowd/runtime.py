@@ -15,7 +15,7 @@ import numpy as np
 from .. import validate
 from ..errors import ValidationError
 from ..skeleton import Event, Pose
-from .pool import StreamPool, UniquePool, blend_entries, entries_pose
+from .pool import StreamPool, UniquePool, blend_entries, entries_pose, namespace
 
 __all__ = ["Crowd", "CrowdEvent", "INSTANCE", "NONE", "STREAMED", "UNIQUE", "DILATION_RATE", "MAX_DILATION_RATE"]
 
@@ -33,11 +33,12 @@ INSTANCE = np.dtype(
         ("mask", "<u2"),  # the agent's visible clusters, bit c for cluster c
     ]
 )
-# The default time dilation moves an offset a quarter frame per frame (changeRate 0.25): parts
-# play at three quarters speed while they spread out, slow enough not to look frozen.
+# The default time dilation's changeRate when no time_to_dilate is given: the farthest part moves
+# a quarter frame per frame, playing at three quarters speed while the crowd spreads out.
 DILATION_RATE = 0.25
-# A part that dilates plays at (1 - changeRate) speed: at most this rate, it never falls below half
-# speed (a rate of 1 would freeze it, above 1 play it backwards).
+# A part that dilates plays at (1 - its rate) speed, and a Stopped stream holds only the frames it
+# has written since it started: at most this changeRate, no part falls below half speed (a rate
+# of 1 would freeze it at the stream's first frame, above 1 play it backwards).
 MAX_DILATION_RATE = 0.5
 
 
@@ -56,6 +57,29 @@ def _merge(xp, first, first_rows: np.ndarray, second, second_rows: np.ndarray):
     and one take: no integer-array assignment, which the array API standard lacks)."""
     order = np.argsort(np.concatenate([first_rows, second_rows]), kind="stable")
     return xp.take(xp.concat([first, second], axis=0), xp.asarray(order), axis=0)
+
+
+def interpolate_entries(a, b, weight):
+    """Store entries `a` (n, J, 12) moved `weight` (n,) of the way to `b`, as a clip moves between
+    two keys (``Pose.interpolate``): rotations slerped (the shorter way round, at a steady angular
+    speed), translations and scales linearly; weight 0 gives `a`. Array API calls only, so a
+    store on a GPU reads between frames through the same code."""
+    xp = namespace(a)
+    w = xp.reshape(xp.astype(weight, a.dtype), (-1, 1, 1))
+    qa, qb = a[..., 0:4], b[..., 0:4]
+    qb = xp.where(xp.vecdot(qa, qb)[..., None] < 0, -qb, qb)
+    # the angle from the chord and its complement: exact for the small angles between neighbouring
+    # frames in float32, where the arccosine of their dot product is not
+    d, s = qa - qb, qa + qb
+    angle = 2 * xp.atan2(xp.sqrt(xp.vecdot(d, d)), xp.sqrt(xp.vecdot(s, s)))[..., None]
+    sine = xp.sin(angle)
+    tiny = sine < 1e-6  # (nearly) one rotation: the linear weights are its limit
+    safe = xp.where(tiny, xp.ones_like(sine), sine)
+    wa = xp.where(tiny, 1 - w, xp.sin((1 - w) * angle) / safe)
+    wb = xp.where(tiny, w + xp.zeros_like(sine), xp.sin(w * angle) / safe)
+    q = wa * qa + wb * qb
+    q = q / xp.sqrt(xp.vecdot(q, q))[..., None]
+    return xp.concat([q, a[..., 4:] + w * (b[..., 4:] - a[..., 4:])], axis=-1)
 
 
 def _agent_ids(agents, n_agents: int) -> np.ndarray:
@@ -172,14 +196,21 @@ class Crowd:
 
         Into a Running stream, each part blends to a random offset within the history written.
         Into a Stopped stream (which starts now), every part starts at offset 0, the head, and
-        time dilation (Listing 2) moves each offset to a random target in [0, M_new] at
-        changeRate = (M_new - M) / (time_to_dilate * fps) frames per frame, M = 0. With
-        `time_to_dilate`, M_new is as far as parts get in that time at MAX_DILATION_RATE (they
-        never drop below half speed), at most history - 1; without, M_new = history - 1 at
-        DILATION_RATE. `time_to_dilate` given for a Running stream applies the same from offset 0.
-        `offsets` (one per agent, or one for all) chooses the target offsets in a Running stream
-        instead. A part already blending first lands on its blend's target. Refused calls change
-        nothing.
+        time dilation (Listing 2) moves each offset to a random whole-frame target in [0, M_new],
+        M_new = history - 1 (the whole ring buffer), at changeRate = (M_new - M) /
+        (time_to_dilate * fps) frames per frame, M = 0. Offsets move by fractions of a frame and
+        parts read between the two frames either side (``poses``), so a dilating part shows a
+        new pose every frame, at (1 - its rate) speed. Two departures from the listing, both so
+        that parts keep moving and spread at once: changeRate is at most MAX_DILATION_RATE (a
+        Stopped stream holds only the frames written since it started, and a part must not drop
+        below half speed), so a spread that would need more takes M_new / (MAX_DILATION_RATE *
+        fps) seconds instead of `time_to_dilate`; and each part moves at changeRate * target /
+        M_new, so every part arrives together at the end instead of the parts with far targets
+        moving in step at changeRate until they arrive. Without `time_to_dilate`, changeRate is
+        DILATION_RATE. `time_to_dilate` given for a Running stream applies the same from offset
+        0. `offsets` (one per agent, or one for all) chooses the target offsets in a Running
+        stream instead. A part already blending first lands on its blend's target. Refused calls
+        change nothing.
         """
         ids, c = self._parts(agents, cluster)
         (k,) = self.pool.check_streams(stream)
@@ -212,14 +243,14 @@ class Crowd:
             self._dilate_to[ids, c] = np.nan
         else:
             offsets = np.zeros(len(ids), dtype=np.float32)
+            spread = history - 1  # M_new
             if time_to_dilate is None:
-                spread, rate = history - 1, DILATION_RATE
-            else:  # as far as parts get in time_to_dilate without dropping below half speed
-                frames = time_to_dilate * self.pool.fps
-                spread = min(history - 1, int(MAX_DILATION_RATE * frames))
-                rate = spread / frames
-            self._dilate_to[ids, c] = self.rng.integers(0, spread + 1, size=len(ids))
-            self._rate[ids, c] = rate
+                rate = DILATION_RATE
+            else:
+                rate = min(spread / (time_to_dilate * self.pool.fps), MAX_DILATION_RATE)
+            targets = self.rng.integers(0, spread + 1, size=len(ids))
+            self._dilate_to[ids, c] = targets
+            self._rate[ids, c] = rate * targets / max(spread, 1)
         self._start_blend(ids, c, STREAMED, k, offsets, blend_time)
 
     def matching_offsets(self, agents, cluster, stream) -> np.ndarray:
@@ -324,10 +355,13 @@ class Crowd:
             a, c = agents[which], clusters[which]
             if not len(a):
                 continue
-            step = buffer[field][a, c] + self._rate[a, c]
-            moved = np.minimum(np.minimum(step, goal[which]), self.pool.filled[buffer[stream][a, c]] - 1)
+            step, target = buffer[field][a, c] + self._rate[a, c], goal[which]
+            # float32 steps that sum to the target can fall short of it by rounding: within a
+            # thousandth of a frame is there
+            step = np.where(step >= target - 1e-3, target, step)
+            moved = np.minimum(step, self.pool.filled[buffer[stream][a, c]] - 1)
             buffer[field][a, c] = moved
-            arrived = moved >= goal[which]
+            arrived = moved >= target
             self._dilate_to[a[arrived], c[arrived]] = np.nan
             goal[np.flatnonzero(which)[arrived]] = np.nan
         finished = blending & (
@@ -385,13 +419,26 @@ class Crowd:
 
     def _read(self, kind, index, offset, bones):
         """Entries (n, bones, 12) of parts reading (kind, stream or slot, offset), in the pool's
-        array namespace; an offset between frames (while dilating) reads the nearest one, as a
-        shader reading whole frames does."""
+        array namespace. An offset between two frames (a part dilating) reads that far between
+        them, slerped as a clip is between keys (`interpolate_entries`), so that a dilating part
+        moves every frame rather than holding a frame while its offset catches up."""
+        xp = self.pool.xp
         streamed = np.flatnonzero(kind == STREAMED)
-        taken = self.pool.gather(index[streamed], np.rint(offset[streamed]).astype(np.int64), bones)
+        streams, behind = index[streamed], np.asarray(offset[streamed], dtype=np.float64)
+        whole = np.floor(behind)
+        taken = self.pool.gather(streams, whole.astype(np.int64), bones)
+        between = np.flatnonzero(behind > whole)
+        if len(between):
+            older = self.pool.gather(streams[between], whole[between].astype(np.int64) + 1, bones)
+            newer = xp.take(taken, xp.asarray(between), axis=0)
+            moved = interpolate_entries(newer, older, xp.asarray((behind - whole)[between], dtype=xp.float32))
+            if xp is np:
+                taken[between] = moved
+            else:
+                steady = np.flatnonzero(behind <= whole)
+                taken = _merge(xp, xp.take(taken, xp.asarray(steady), axis=0), steady, moved, between)
         if len(streamed) == len(kind):
             return taken
-        xp = self.pool.xp
         unique = np.flatnonzero(kind == UNIQUE)
         slots = xp.asarray(self.unique.store[index[unique], :bones]) if len(unique) else taken[:0]
         return _merge(xp, taken, streamed, slots, unique)

@@ -1,10 +1,15 @@
 """The stream pool and the crowd runtime (paper 003, sections 4.1-4.5)."""
 
+import gc
+import tracemalloc
+
 import numpy as np
 import pytest
 
 import flockkit
 from flockkit.crowd import Crowd, Stream, StreamPool, UniquePool, equation_4, equation_5
+from flockkit.crowd.pool import PREFETCH_FRAMES
+from flockkit.crowd.runtime import MAX_DILATION_RATE
 from flockkit.errors import ValidationError
 from flockkit.testing import inputs
 
@@ -54,27 +59,112 @@ def test_offset_k_reads_the_pose_written_k_frames_ago():
         pool.read(4, 0)
 
 
-def test_a_stopped_stream_starts_at_offset_0_and_dilation_reaches_its_targets_on_time():
-    pool, crowd = make_crowd()
-    assert not pool.is_running(2)
-    movers = np.arange(0, 20)
-    crowd.transition_to_streamed(movers, "body", 2, blend_time=0.2, time_to_dilate=1.0)
-    assert pool.is_running(2)
-    np.testing.assert_array_equal(crowd.offsets("body")[movers], 0)  # the first frame reads the head
-    targets = crowd.dilation_targets("body")[movers]
-    # M_new: as far as a part gets in 1 s without dropping below half speed, 15 frames (history 30)
-    assert np.all((targets >= 0) & (targets <= 15)) and len(np.unique(targets)) > 5
-    rate = 15 / (1.0 * FPS)  # (M_new - M) / (timeToDilate * animFrameRate), M = 0
+def dilating_crowd(history, n_agents=2000, seed=0):
+    """A crowd on a Running walk, with a Stopped stream of `history` frames to dilate into."""
+    pool = StreamPool(
+        [
+            Stream(controller=player(), history=20),
+            Stream(controller=player(rate=0.7, start=0.3), history=history, default="Stopped"),
+        ],
+        fps=FPS,
+    )
+    return pool, Crowd(pool, n_agents=n_agents, clusters={"body": 0}, seed=seed)
+
+
+@pytest.mark.parametrize(
+    ("history", "time_to_dilate", "change_rate"),
+    [
+        (30, 2.0, 29 / 60),  # Listing 2's changeRate, (M_new - M) / (timeToDilate x fps), M_new = 29
+        (60, 1.0, MAX_DILATION_RATE),  # Listing 2 would ask 59 / 30 = 1.97 frames per frame: capped
+    ],
+)
+def test_dilation_spreads_parts_over_the_whole_history(history, time_to_dilate, change_rate):
+    pool, crowd = dilating_crowd(history)
+    movers = np.arange(crowd.n_agents)
+    crowd.transition_to_streamed(movers, "body", 1, blend_time=0.2, time_to_dilate=time_to_dilate)
+    assert pool.is_running(1)
+    np.testing.assert_array_equal(crowd.offsets("body"), 0)  # the first frame reads the head
+    targets = crowd.dilation_targets("body")
+    assert targets.min() == 0 and targets.max() == history - 1  # M_new = history - 1
+    duration = (history - 1) / change_rate  # frames until the farthest target is reached
     trace = []
-    for _ in range(int(FPS * 1.0)):
+    for _ in range(int(np.ceil(duration)) + 1):
         crowd.update()
-        trace.append(crowd.offsets("body")[movers])
+        trace.append(crowd.offsets("body"))
     trace = np.array(trace)
-    assert np.all(np.diff(trace, axis=0) <= rate + 1e-5)  # never faster than the change rate
-    np.testing.assert_allclose(trace[-1], targets, atol=rate)  # there after time_to_dilate, within one frame's change
-    crowd.update()
-    np.testing.assert_array_equal(crowd.offsets("body")[movers], targets)
-    assert np.all(np.isnan(crowd.dilation_targets("body")[movers]))
+    steps = np.diff(np.vstack([np.zeros(len(movers)), trace]), axis=0)
+    assert steps.min() >= 0 and steps.max() <= change_rate + 1e-5  # never faster than changeRate
+    # each part moves at changeRate x target / M_new: all arrive together, spread all the way
+    expected = np.minimum(np.arange(1, len(trace) + 1)[:, None] / duration, 1) * targets
+    np.testing.assert_allclose(trace, expected, atol=1e-3)
+    np.testing.assert_array_equal(trace[-1], targets)
+    assert np.all(np.isnan(crowd.dilation_targets("body")))
+    used = len(np.unique(trace[-1])) / history  # share of the history's frames some part reads
+    reach = trace[-1].max() / (history - 1)
+    print(f"history {history}, time_to_dilate {time_to_dilate} s: {used:.0%} of the history's frames read, "
+          f"farthest offset {reach:.0%} of it, after {duration / FPS:.2f} s")  # fmt: skip
+    assert used >= 0.9 and reach >= 0.9
+    assert crowd.synchrony("body") < 2 / history  # about 1 / history of pairs read one frame
+
+
+def spinner(seconds=2.0):
+    """A clip whose second joint turns about z at a steady speed, a full turn per loop: any two
+    moments of it differ, by an angle proportional to the time between them."""
+    skeleton = flockkit.Skeleton(names=["root", "spinner"], parents=[-1, 0])
+    angles = np.linspace(0, 2 * np.pi, int(seconds * FPS) + 1)
+    rotations = np.zeros((len(angles), 2, 4))
+    rotations[:, 0, 3] = 1
+    rotations[:, 1, 2], rotations[:, 1, 3] = np.sin(angles / 2), np.cos(angles / 2)
+    translations = np.zeros((len(angles), 3))
+    return flockkit.SkeletalClip(skeleton=skeleton, fps=FPS, rotations=rotations, translations=translations)
+
+
+@pytest.mark.parametrize(("history", "time_to_dilate"), [(30, 2.0), (60, 1.0), (60, None)])
+def test_no_part_holds_a_pose_while_it_dilates(history, time_to_dilate):
+    """Every frame of a dilation shows each part a new pose, at least (1 - MAX_DILATION_RATE) of a
+    stream frame's motion on: offsets move by fractions of a frame and parts read between frames.
+    Measured on a joint that turns steadily (a swinging limb is still for a moment at each end of
+    its swing, whatever reads it)."""
+    clip = spinner()
+    slower = Stream(controller=player(clip, rate=0.7), history=history, default="Stopped")
+    pool = StreamPool([Stream(controller=player(clip), history=20), slower], fps=FPS)
+    crowd = Crowd(pool, n_agents=300, clusters={"body": 0}, seed=0)
+    crowd.transition_to_streamed(np.arange(300), "body", 1, blend_time=1 / FPS, time_to_dilate=time_to_dilate)
+    per_frame = 0.7 * 2 * np.pi / (2.0 * FPS)  # the stream's turn per frame
+    before = crowd.poses(cluster="body").rotations[:, 1].astype(np.float64)
+    turns, between = [], 0
+    while not np.all(np.isnan(crowd.dilation_targets("body"))):
+        crowd.update()
+        assert np.all(np.isnan(crowd.alphas("body")))  # the blend took one frame: dilation alone
+        now = crowd.poses(cluster="body").rotations[:, 1].astype(np.float64)
+        turns.append(2 * np.arccos(np.minimum(np.abs(np.sum(now * before, axis=-1)), 1)))
+        offsets = crowd.offsets("body")
+        between += int(np.sum(offsets != np.floor(offsets)))
+        before = now
+    turns = np.array(turns) / per_frame  # stream frames played per crowd frame
+    print(f"{turns.size} (frame, part) pairs while dilating, {between} read between frames: "
+          f"{np.mean(turns < 1e-3):.1%} held their pose; slowest {turns.min():.3f} stream frames a frame")  # fmt: skip
+    assert between > turns.size / 2
+    assert turns.min() >= (1 - MAX_DILATION_RATE) - 1e-3  # never slower than half speed, never still
+
+
+def test_a_part_between_two_frames_reads_the_slerp_between_them():
+    pool, crowd = dilating_crowd(40, n_agents=50)
+    crowd.transition_to_streamed(np.arange(50), "body", 1, blend_time=0.1, time_to_dilate=2.0)
+    for _ in range(9):  # the blends are over: parts read their offsets alone
+        crowd.update()
+    offsets = crowd.offsets("body")
+    between = np.flatnonzero(offsets != np.floor(offsets))
+    assert len(between) > 30
+    read = crowd.poses(between, "body")
+    for part, got in zip(between, read):
+        k, u = int(np.floor(offsets[part])), offsets[part] - np.floor(offsets[part])
+        newer, older = pool.read(1, k), pool.read(1, k + 1)  # a frame behind the newer one
+        cast = lambda p: flockkit.Pose(rotations=p.rotations.astype(np.float64), translations=p.translations)  # noqa: E731
+        expected = flockkit.Pose.interpolate(cast(newer), cast(older), u)
+        dots = np.abs(np.sum(got.rotations * expected.rotations, axis=-1))
+        np.testing.assert_allclose(dots, 1, atol=1e-6)
+        np.testing.assert_allclose(got.translations, expected.translations, atol=1e-6)
 
 
 def test_blends_run_from_source_to_target_over_the_blend_time():
@@ -142,19 +232,57 @@ def test_a_stream_stops_when_its_last_user_leaves_and_restarts_cleanly():
     np.testing.assert_array_equal(pool.read(2, 0).rotations, controller.pose([0.0]).rotations[0].astype(np.float32))
 
 
+def held_bytes(pool) -> int:
+    """Bytes of the distinct buffers of every numpy array reachable from the pool's attributes
+    (views counted once, through the array that owns the memory), its streams excepted (the
+    caller's controllers and clips)."""
+    owners, stack = {}, [v for k, v in vars(pool).items() if k != "streams"]
+    while stack:
+        value = stack.pop()
+        if isinstance(value, np.ndarray):
+            while isinstance(value.base, np.ndarray):
+                value = value.base
+            owners[id(value)] = value
+        elif isinstance(value, dict):
+            stack.extend(value.values())
+        elif isinstance(value, (list, tuple)):
+            stack.extend(value)
+    return sum(a.nbytes for a in owners.values())
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2])
-def test_memory_equals_equation_5_for_mixed_skeletons_and_histories(seed):
+def test_memory_counts_every_array_and_its_store_is_equation_5(seed):
     rng = np.random.default_rng(seed)
     clips = {j: inputs.random_clip(j, frames=10, seed=j) for j in (82, 25, 24)}
     bones = rng.choice([82, 25, 24], size=30)
     histories = rng.integers(20, 121, size=30)
-    pool = StreamPool(
-        [Stream(controller=player(clips[b]), history=int(h), default="Stopped") for b, h in zip(bones, histories)]
-    )
-    assert pool.memory() == equation_5(bones, histories)
-    assert pool.memory() == 48 * int(np.sum(bones * histories))
+    streams = [
+        Stream(controller=player(clips[b]), history=int(h), default="Stopped" if k % 2 else "Running")
+        for k, (b, h) in enumerate(zip(bones, histories))
+    ]
+    gc.collect()
+    tracing = tracemalloc.is_tracing()
+    if not tracing:
+        tracemalloc.start()
+    try:
+        before = tracemalloc.get_traced_memory()[0]
+        pool = StreamPool(streams)
+        gc.collect()
+        traced = tracemalloc.get_traced_memory()[0] - before  # what building the pool left allocated
+    finally:
+        if not tracing:
+            tracemalloc.stop()
+    parts = pool.memory_parts()
+    assert parts["store"] == equation_5(bones, histories) == 48 * int(np.sum(bones * histories))
+    assert parts["prefetch"] == 48 * PREFETCH_FRAMES * int(np.sum(bones))
+    assert pool.memory() == sum(parts.values()) == held_bytes(pool)
+    # the rest of what building left behind is Python objects (dicts, array headers, events)
+    assert pool.memory() <= traced <= pool.memory() + 64 * 1024
+    extra = parts["prefetch"] / parts["store"]
+    print(f"pool {pool.memory()} bytes, traced {traced}: Equation 5 {parts['store']}, prefetch {parts['prefetch']} "
+          f"(+{extra:.0%}), bookkeeping {parts['bookkeeping']}")  # fmt: skip
     unique = UniquePool(7, max_bones=82)
-    assert unique.memory() + pool.memory() == equation_5(bones, histories, unique=7)
+    assert unique.memory() == equation_5(bones, histories, unique=7) - parts["store"] + 7 * 8  # and its clocks
     assert equation_4(bones, histories, transitions=4096) > equation_5(bones, histories)
 
 

@@ -229,13 +229,25 @@ def test_engine_buffers_replayed_by_a_small_shader_give_the_crowds_poses(tmp_pat
     store = files["store"].copy()
     joints = WALKER.skeleton.n_joints
 
-    def read(frame, kind, stream, offset):
-        assert np.all(kind == 1)
-        slots = (files["heads"][frame, stream] - np.rint(offset).astype(int)) % files["history"][stream]
-        rows = files["lookup"][stream, slots]
+    def slot(frame, stream, behind):
+        rows = files["lookup"][stream, (files["heads"][frame, stream] - behind) % files["history"][stream]]
         return np.stack([store[r : r + joints * 12].reshape(joints, 12) for r in rows])
 
+    def read(frame, kind, stream, offset):
+        """An offset between two frames (dilating) reads that far between them, slerped."""
+        assert np.all(kind == 1)
+        whole = np.floor(offset).astype(int)
+        newer, older = slot(frame, stream, whole), slot(frame, stream, whole + 1)
+        u = (offset - whole)[:, None, None]
+        rotations = flockkit.rigid.slerp(newer[..., :4].astype(float), older[..., :4].astype(float), u)
+        mixed = np.concatenate([rotations, newer[..., 4:] + u * (older[..., 4:] - newer[..., 4:])], axis=-1)
+        return np.where(u > 0, mixed, newer).astype(np.float32)
+
     for frame in range(30):
+        for s in np.flatnonzero(files["started"][frame] >= 0):  # a stream that started before its update
+            before = (files["heads"][frame, s] - 1) % files["history"][s]
+            start, row = files["started"][frame, s], files["lookup"][s, before]
+            store[row : row + joints * 12] = files["entries"][start : start + joints * 12]
         for s in np.flatnonzero(files["written"][frame] >= 0):
             start, row = files["written"][frame, s], files["lookup"][s, files["heads"][frame, s]]
             store[row : row + joints * 12] = files["entries"][start : start + joints * 12]
