@@ -1,19 +1,30 @@
-"""The crowd runtime at the paper's evaluation scale (paper 003, section 5).
+"""The crowd runtime at the paper's evaluation scale (paper 003, section 5), beside a direct
+evaluation of every part's own clip.
 
-    python bench/crowd.py [--agents 65000] [--streams 1024] [--frames 120] [--data ../shared/data]
+    python bench/crowd.py [--agents 65000] [--streams 1024] [--frames 120] [--clips stream|skeleton]
+    python bench/crowd.py --quick      # 8 000 agents, 128 streams, 30 frames, 512 transitions
 
 65 000 agents x 4 part clusters (body: 82 joints; flag: 25; scarf and hat: 24), 1 024 streams
 (half human, a quarter each flag and scarf; half of each Stopped by default) with histories of 20
-to 120 frames, random clips of those skeleton sizes. After the crowd starts, 4 096 body parts
-transition at once into Stopped streams (a goal is scored: celebrations), blending over 0.5 s
-with time dilation. It prints milliseconds per `update` (mean and worst over the frames) and per
-`instance_buffer`, milliseconds to sample the blended poses of the 4 096 transitioning parts
-(local, and world by forward kinematics), the pool's memory against Equations 4-6, and, in the
-same run, a naive per-agent evaluation (each agent part evaluating its own controller, timed on a
-sample of parts and scaled to the crowd). Targets (2 cores): update + instance_buffer <= 5 ms
-per frame; blended poses of 4 096 parts <= 3 ms; >= 100x faster than the naive evaluation;
-memory equal to Equation 5. First it times read_clips on the shared data's clips (the
-2 752-frame BVH should take well under a second).
+to 120 frames, each playing its own random clip of 90 frames at a rate of 0.8 to 1.2 (the paper
+has about 1 024 animations; ``--clips skeleton``: one clip per skeleton size for every stream).
+After the crowd starts, 4 096 body parts transition at once into Stopped streams (a goal is
+scored: celebrations), blending over 0.5 s with time dilation. It prints milliseconds per
+`update` (mean and worst over the frames) and per `instance_buffer`, milliseconds to sample the
+blended poses of the 4 096 transitioning parts (local, and world by forward kinematics), and the
+pool's memory (everything it holds, its store against Equations 4-6).
+
+Then, on sampled frames of the same run (best of 3 each), every agent part's local pose two
+ways: flockkit's `update` + `poses()` (shared streams read at each part's offset, the
+transitioning parts blended), and the strongest baseline we know without shared streams, a
+vectorized numpy direct evaluation (`Direct`): every part samples its own clip at its own time,
+all the parts of one skeleton size by one gather from a float32 table of their clips' keys
+(slerped between frames as the clips define), and the parts in transition blend the two clips'
+poses. The script checks the two equal (parts read between two stream frames while dilating
+differ by the slerp between those frames against the clip at the exact time, and it prints by
+how much). Targets (2 cores): update + instance_buffer <= 5 ms per frame; blended poses of
+4 096 parts <= 3 ms; the pool's store equal to Equation 5. First it times read_clips on the
+shared data's clips (the 2 752-frame BVH should take well under a second).
 """
 
 from __future__ import annotations
@@ -26,27 +37,39 @@ import numpy as np
 from timing import timed  # bench/timing.py: the scripts run from bench/
 
 import flockkit
-from flockkit.crowd import Crowd, Stream, StreamPool, equation_4, equation_5
+from flockkit.crowd import Crowd, Pose, Stream, StreamPool, equation_4, equation_5
+from flockkit.crowd.runtime import STREAMED
 from flockkit.testing import inputs
 
 SKELETONS = {"body": 82, "flag": 25, "scarf": 24, "hat": 24}
 
 
-def build(n_agents: int, n_streams: int, seed: int = 0):
+def build(n_agents: int, n_streams: int, seed: int = 0, clips: str = "stream"):
+    """The crowd's pool and clusters. `clips`: "stream", every stream its own clip (the paper's
+    evaluation has about 1 024 animations), or "skeleton", one clip per skeleton size that every
+    stream of that size plays at its own rate (0.8 to 1.2)."""
     rng = np.random.default_rng(seed)
-    clips = {j: inputs.random_clip(j, frames=90, seed=j) for j in sorted(set(SKELETONS.values()))}
+    shared = {j: inputs.random_clip(j, frames=90, seed=j) for j in sorted(set(SKELETONS.values()))}
     bones = np.concatenate(
         [np.full(n_streams // 2, 82), np.full(n_streams // 4, 25), np.full(n_streams - 3 * n_streams // 4, 24)]
     )
     histories = rng.integers(20, 121, size=n_streams)
     stopped = rng.random(n_streams) < 0.5
+
+    def clip_of(k: int, joints: int):
+        if clips == "skeleton":
+            return shared[joints]
+        other = inputs.random_clip(joints, frames=90, seed=1000 + k)  # its motion on the shared skeleton
+        return flockkit.SkeletalClip(skeleton=shared[joints].skeleton, fps=other.fps, rotations=other.rotations,
+                                     translations=other.translations[:, 0], name=f"random{joints}-{k}")  # fmt: skip
+
     streams = [
         Stream(
-            controller=flockkit.get("controller", "clip", clip=clips[int(b)], rate=float(rng.uniform(0.8, 1.2))),
+            controller=flockkit.get("controller", "clip", clip=clip_of(k, int(b)), rate=float(rng.uniform(0.8, 1.2))),
             history=int(h),
             default="Stopped" if s else "Running",
         )
-        for b, h, s in zip(bones, histories, stopped)
+        for k, (b, h, s) in enumerate(zip(bones, histories, stopped))
     ]
     pool = StreamPool(streams, fps=30.0)
     clusters = {}
@@ -56,6 +79,206 @@ def build(n_agents: int, n_streams: int, seed: int = 0):
         chosen = rng.choice(candidates, size=n_agents)
         clusters[name] = np.where(rng.random(n_agents) < shares[name], chosen, -1)
     return pool, clusters, bones, histories, stopped
+
+
+# Parts the direct evaluation samples per call: its temporaries then stay in cache (1 024 parts a
+# call took 0.70 of the time one call for all took, on 44 000 parts of 24 to 82 joints).
+CHUNK = 1024
+
+
+class KeyTable:
+    """The frames clips of one skeleton size, every clip's keys in one float32 table (the store's
+    precision), each interval's slerp angle and its far key turned to the near side worked out
+    once: ``clip.sample`` (rotations slerped between frames, translations lerped) for parts of
+    any of these clips at once, by one gather, with no search for the interval (frames are
+    evenly spaced). Equal to ``clip.sample`` within float32."""
+
+    def __init__(self, clips):
+        rows = {name: [] for name in ("rotations", "far", "angle", "inverse_sine", "translations", "step")}
+        self.base, self.last, self.fps, self.end = [], [], [], []
+        for clip in clips:
+            q, t = clip.rotations, clip.translations
+            dot = np.sum(q[:-1] * q[1:], axis=-1, keepdims=True)
+            angle = np.maximum(np.arccos(np.minimum(np.abs(dot), 1.0)), 1e-12)  # as the clip's own keys
+            pad = lambda a: np.concatenate([a, a[-1:]])  # noqa: E731 - a row per frame, the last unused
+            rows["rotations"].append(q)
+            rows["far"].append(pad(np.where(dot < 0, -q[1:], q[1:])))
+            rows["angle"].append(pad(angle))
+            rows["inverse_sine"].append(pad(1 / np.sin(angle)))
+            rows["translations"].append(t)
+            rows["step"].append(pad(t[1:] - t[:-1]))
+            self.base.append(sum(len(r) for r in rows["rotations"][:-1]))
+            self.last.append(len(q) - 2)
+            self.fps.append(clip.fps)
+            self.end.append(clip.duration)
+        for name, parts in rows.items():
+            setattr(self, name, np.concatenate(parts).astype(np.float32))
+        self.base, self.last = np.array(self.base), np.array(self.last)
+        self.fps, self.end = np.array(self.fps), np.array(self.end)
+
+    def sample(self, clip: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rotations (n, J, 4) and translations (n, J, 3) float32 of clips `clip` (n,), indices
+        into the clips given, at clip times `u` (n,)."""
+        x = np.clip(u, 0, self.end[clip]) * self.fps[clip]
+        k = np.minimum(np.floor(x).astype(np.int64), self.last[clip])
+        t = (x - k).astype(np.float32)[:, None, None]
+        row = self.base[clip] + k
+        angle, inverse = self.angle[row], self.inverse_sine[row]
+        rotations = np.sin((1 - t) * angle) * inverse * self.rotations[row]
+        rotations += np.sin(t * angle) * inverse * self.far[row]
+        return rotations, self.translations[row] + t * self.step[row]
+
+
+class Direct:
+    """Every agent part evaluating its own clip at its own time, vectorized with numpy: the
+    baseline for `Crowd.poses`. Each part is at a time on its clip (a direct system keeps one
+    clock per part; here it is read from the crowd's instance buffer, so that both sides show
+    the same poses); the parts of one skeleton size are sampled together, CHUNK at a time,
+    between keys as their clips define (`KeyTable`: float32, as the crowd's store); parts in
+    transition evaluate their second clip too and blend by α (Equation 2, nlerp, as Listing 3
+    lerps). Streams must play ``clip`` controllers of frames clips."""
+
+    def __init__(self, pool: StreamPool):
+        controllers = [s.controller for s in pool.streams]
+        clips, which = [], {}
+        for c in controllers:
+            if c.clip.channels or c.clip.n_frames < 2:
+                raise SystemExit("the direct evaluation here samples clips of frames (two or more)")
+            if id(c.clip) not in which:
+                which[id(c.clip)] = len(clips)
+                clips.append(c.clip)
+        sizes = sorted({c.skeleton.n_joints for c in clips})
+        self.tables = {j: KeyTable([c for c in clips if c.skeleton.n_joints == j]) for j in sizes}
+        place, counts = {}, {}
+        for c in clips:  # each clip's index in its size's table
+            place[id(c)] = counts.get(c.skeleton.n_joints, 0)
+            counts[c.skeleton.n_joints] = place[id(c)] + 1
+        self.clip_of = np.array([place[id(c.clip)] for c in controllers])
+        self.rate = np.array([c.rate for c in controllers])
+        self.start = np.array([c.start for c in controllers])
+        self.period = np.array([c.clip.duration if c.loop else 0.0 for c in controllers])
+        self.fps = pool.fps
+
+    def times(self, clock: np.ndarray, stream: np.ndarray, offset: np.ndarray) -> np.ndarray:
+        """Each part's time on its clip: the stream's frame (clock - 1 - offset) at its rate."""
+        u = self.start[stream] + self.rate[stream] * (clock[stream] - 1 - offset) / self.fps
+        period = self.period[stream]
+        return np.where(period > 0, np.mod(u, np.where(period > 0, period, 1.0)), u)
+
+    def sample(self, stream: np.ndarray, u: np.ndarray, joints: int) -> tuple[np.ndarray, np.ndarray]:
+        """Each part's clip at its time `u`: rotations (n, joints, 4), translations (n, joints, 3)."""
+        rotations = np.empty((len(u), joints, 4), np.float32)
+        translations = np.empty((len(u), joints, 3), np.float32)
+        table, clip = self.tables[joints], self.clip_of[stream]
+        for begin in range(0, len(u), CHUNK):
+            part = slice(begin, begin + CHUNK)
+            rotations[part], translations[part] = table.sample(clip[part], u[part])
+        return rotations, translations
+
+    def poses(self, clock: np.ndarray, time: float, parts: dict, joints: int) -> Pose:
+        """Local poses (n, joints) float32 of the parts described by `parts` (arrays: stream,
+        offset, target, target_offset, blend_start, blend_time) at the crowd's `time`."""
+        rotations, translations = self.sample(parts["stream"], self.times(clock, parts["stream"], parts["offset"]),
+                                              joints)  # fmt: skip
+        blending = np.flatnonzero(parts["blend_time"] > 0)
+        if len(blending):
+            target = parts["target"][blending]
+            b, moved = self.sample(target, self.times(clock, target, parts["target_offset"][blending]), joints)
+            alpha = np.clip((time - parts["blend_start"][blending]) / parts["blend_time"][blending], 0, 1)
+            alpha = alpha.astype(np.float32)[:, None, None]
+            a = rotations[blending]
+            b *= np.where(np.vecdot(a, b)[..., None] < 0, -1, 1).astype(np.float32)  # the shorter way
+            mixed = a + alpha * (b - a)
+            rotations[blending] = mixed / np.sqrt(np.vecdot(mixed, mixed))[..., None]
+            shift = translations[blending]
+            translations[blending] = shift + alpha * (moved - shift)
+        return Pose._adopt(rotations, translations)
+
+
+def part_state(crowd: Crowd, agents: np.ndarray, cluster: str) -> dict:
+    """What a direct evaluation keeps per part of `agents` in `cluster`, from the instance buffer."""
+    record = crowd.instance_buffer()[agents, crowd.cluster_index(cluster)]
+    if np.any(record["kind"] != STREAMED) or np.any((record["blend_time"] > 0) & (record["target_kind"] != STREAMED)):
+        raise SystemExit("the direct evaluation covers parts on shared streams only")
+    ints, floats = ("stream", "target"), ("offset", "target_offset", "blend_start", "blend_time")
+    return {**{n: record[n].astype(np.int64) for n in ints}, **{n: record[n].astype(np.float64) for n in floats}}
+
+
+class Gaps:
+    """How far `Crowd.poses` is from the direct evaluation, per part (the largest joint rotation
+    angle in radians and translation difference), kept apart for parts at whole stream frames
+    (equal up to the float32 store), parts read between two frames (a slerp between the stream's
+    frames against the clip at the exact time) and, of those, parts whose two frames straddle
+    the loop seam of a clip whose end is not its start (the slerp crosses the jump)."""
+
+    KINDS = ("whole", "between", "seam")
+
+    def __init__(self):
+        self.angles = {kind: [] for kind in self.KINDS}
+        self.shifts = {kind: [] for kind in self.KINDS}
+
+    def add(self, crowd: Pose, direct: Pose, between: np.ndarray, seam: np.ndarray) -> None:
+        a, b = crowd.rotations.astype(np.float64), direct.rotations
+        b = np.where(np.sum(a * b, axis=-1, keepdims=True) < 0, -b, b)
+        angle = 2 * np.arctan2(np.linalg.norm(a - b, axis=-1), np.linalg.norm(a + b, axis=-1)).max(axis=1)
+        shift = np.abs(crowd.translations - direct.translations).max(axis=(1, 2))
+        for kind, chosen in zip(self.KINDS, (~between, between & ~seam, between & seam)):
+            self.angles[kind].append(angle[chosen])
+            self.shifts[kind].append(shift[chosen])
+
+    def worst(self, kind: str) -> tuple:
+        angles, shifts = np.concatenate(self.angles[kind]), np.concatenate(self.shifts[kind])
+        if not len(angles):
+            return 0, 0.0, 0.0, 0.0, 0.0
+        return len(angles), angles.max(), shifts.max(), np.percentile(angles, 99), np.percentile(shifts, 99)
+
+    def check(self) -> None:
+        _, angle, shift, *_ = self.worst("whole")
+        if angle > 1e-5 or shift > 1e-5:  # a float32 store against float64 sampling
+            raise SystemExit(f"the direct evaluation and Crowd.poses differ: {angle:.3g} rad, {shift:.3g} units")
+
+    def report(self, what: str) -> str:
+        count, angle, shift, _, _ = self.worst("whole")
+        lines = [f"  the same poses: {count} {what} at whole stream frames within {angle:.1e} rad and {shift:.1e} "
+                 "units (the float32 store)"]  # fmt: skip
+        count, angle, shift, angle99, shift99 = self.worst("between")
+        lines.append(f"  {count} read between two frames (dilating): within {angle:.1e} rad and {shift:.1e} units, "
+                     f"99% within {angle99:.1e} rad and {shift99:.1e} (a slerp between the stream's frames "
+                     "against the clip at the exact time)")  # fmt: skip
+        count, angle, shift, *_ = self.worst("seam")
+        lines.append(f"  {count} between two frames that straddle a clip's loop seam: up to {angle:.2g} rad and "
+                     f"{shift:.2g} units (where a clip's end is not its start, the slerp crosses the jump, which a "
+                     "part at whole frames takes in one step)")  # fmt: skip
+        return "\n".join(lines)
+
+
+def reading_between(direct: Direct, clock: np.ndarray, state: dict) -> tuple[np.ndarray, np.ndarray]:
+    """Which parts read between two stream frames (source or blend target), and which of those
+    have the two frames on either side of a clip's loop seam."""
+    between, seam = np.zeros(len(state["stream"]), bool), np.zeros(len(state["stream"]), bool)
+    for stream, offset, used in (("stream", "offset", True), ("target", "target_offset", state["blend_time"] > 0)):
+        k, o = state[stream], state[offset]
+        here = used & (o % 1 > 0)
+        newer, older = direct.times(clock, k, np.floor(o)), direct.times(clock, k, np.floor(o) + 1)
+        between |= here
+        seam |= here & (newer < older)  # the older frame is later in the clip: the loop wrapped between
+    return between, seam
+
+
+def compare_poses(crowd: Crowd, direct: Direct, members: dict, joints: dict, gaps: Gaps) -> tuple[float, float]:
+    """Time `Crowd.poses` and the direct evaluation (best of 3 each) for every part of every
+    cluster (`members`: cluster -> agents having it) at the crowd's current frame, and add how
+    far apart they are to `gaps`. Returns (crowd ms, direct ms)."""
+    states = {name: part_state(crowd, agents, name) for name, agents in members.items()}
+    clock, now = crowd.pool.clock.copy(), crowd.time
+    ours = ms(lambda: [crowd.poses(agents, name) for name, agents in members.items()], repeat=3)
+    theirs = ms(lambda: [direct.poses(clock, now, states[n], joints[n]) for n in members], repeat=3)
+    for name, agents in members.items():
+        state = states[name]
+        between, seam = reading_between(direct, clock, state)
+        gaps.add(crowd.poses(agents, name), direct.poses(clock, now, state, joints[name]), between, seam)
+    gaps.check()
+    return ours, theirs
 
 
 def ms(function, repeat=5) -> float:
@@ -72,7 +295,7 @@ def gpu(args, movers, celebrations):
         print("GPU: CuPy is not installed; the sampling and blending ran on the CPU only")
         return
     try:
-        pool, clusters, *_ = build(args.agents, args.streams)
+        pool, clusters, *_ = build(args.agents, args.streams, clips=args.clips)
         pool = StreamPool(pool.streams, fps=pool.fps, xp=cupy)
         crowd = Crowd(pool, n_agents=args.agents, clusters=clusters, seed=1)
         for k, group in enumerate(np.array_split(movers, 16)):
@@ -96,8 +319,14 @@ def main():
     parser.add_argument("--streams", type=int, default=1024)
     parser.add_argument("--frames", type=int, default=120)
     parser.add_argument("--transitions", type=int, default=4096)
+    parser.add_argument("--samples", type=int, default=8, help="frames on which every part's pose is timed both ways")
+    parser.add_argument("--quick", action="store_true", help="8 000 agents, 128 streams, 30 frames, 512 transitions")
+    parser.add_argument("--clips", choices=("stream", "skeleton"), default="stream",
+                        help="a clip per stream, or one per skeleton size at each stream's rate")  # fmt: skip
     parser.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
     args = parser.parse_args()
+    if args.quick:
+        args.agents, args.streams, args.frames, args.transitions = 8000, 128, 30, 512
     for name in ("cmu-mocap-bvh/01_01.bvh", "fox-gltf/Fox.glb", "robot-expressive-gltf/RobotExpressive.glb"):
         path = Path(args.data) / name
         if path.is_file():
@@ -106,12 +335,15 @@ def main():
             frames = sum(c.n_frames for c in clips.values())
             print(f"read_clips({name}): {len(clips)} clips, {frames} frames in {time.perf_counter() - begin:.3f} s")
     start = time.perf_counter()
-    pool, clusters, bones, histories, stopped = build(args.agents, args.streams)
+    pool, clusters, bones, histories, stopped = build(args.agents, args.streams, clips=args.clips)
     crowd = Crowd(pool, n_agents=args.agents, clusters=clusters, seed=1)
     setup = time.perf_counter() - start
-    parts = sum(int(np.sum(c >= 0)) for c in clusters.values())
+    members = {name: np.flatnonzero(streams >= 0) for name, streams in clusters.items()}
+    parts = sum(len(m) for m in members.values())
+    distinct = len({id(s.controller.clip) for s in pool.streams})
     print(f"{args.agents} agents, {parts} agent parts in {len(SKELETONS)} clusters, {args.streams} streams "
-          f"({int(stopped.sum())} Stopped by default), histories 20..120; set up in {setup:.1f} s")  # fmt: skip
+          f"({int(stopped.sum())} Stopped by default) playing {distinct} clips of 90 frames, histories 20..120; "
+          f"set up in {setup:.1f} s")  # fmt: skip
     for _ in range(40):  # past the streams' first refills
         crowd.update()
     rng = np.random.default_rng(2)
@@ -121,15 +353,28 @@ def main():
     for k, group in enumerate(np.array_split(movers, 16)):  # 16 celebration streams start at once
         crowd.transition_to_streamed(group, "body", int(celebrations[k]), blend_time=0.5, time_to_dilate=2.0)
     transition = (time.perf_counter() - begin) * 1000
-    updates = []
-    for _ in range(args.frames):
+    direct = Direct(pool)
+    compare_poses(crowd, direct, members, SKELETONS, Gaps())  # warm-up, not counted: the allocator's first blocks
+    sampled = set(np.linspace(1, args.frames - 1, min(args.samples, args.frames)).astype(int).tolist())
+    updates, ours, theirs, rows, gaps = [], [], [], [], Gaps()
+    for frame in range(args.frames):
         begin = time.perf_counter()
         crowd.update()
         updates.append((time.perf_counter() - begin) * 1000)
-        if len(updates) == 5:  # mid-blend: sample the 4 096 blending parts
+        if frame == 4:  # mid-blend: sample the transitioning parts
             blended = ms(lambda: crowd.poses(movers, "body"))
             blended_world = ms(lambda: crowd.poses(movers, "body", space="world"), repeat=3)
             assert np.all(crowd.alphas("body")[movers] > 0)
+        if frame in sampled:
+            mine, other = compare_poses(crowd, direct, members, SKELETONS, gaps)
+            ours.append(mine)
+            theirs.append(other)
+            record = crowd.instance_buffer()
+            blending = int(np.sum(record["blend_time"] > 0))
+            fractional = (record["offset"] % 1 > 0) | ((record["blend_time"] > 0) & (record["target_offset"] % 1 > 0))
+            dilating = int(np.sum(fractional))
+            rows.append(f"  frame {frame:>4}: {blending:>5} parts blending, {dilating:>5} between two frames; "
+                        f"poses() {mine:7.1f} ms, direct {other:7.1f} ms")  # fmt: skip
     buffer = ms(lambda: crowd.instance_buffer())
     copied = ms(lambda: crowd.instance_buffer().copy())
     updates = np.array(updates)
@@ -140,23 +385,28 @@ def main():
           f"{crowd.instance_buffer().nbytes / 2**20:.1f} MB)")  # fmt: skip
     print(f"blended poses of {args.transitions} parts: local {blended:.2f} ms (target <= 3 ms), "
           f"world (forward kinematics) {blended_world:.2f} ms")  # fmt: skip
+    memory = pool.memory_parts()
     total_new = equation_5(bones, histories)
     total_prev = equation_4(bones, histories, transitions=args.transitions)
-    print(f"memory: pool {pool.memory() / 2**20:.1f} MB; Equation 5 {total_new / 2**20:.1f} MB "
-          f"({'equal' if pool.memory() == total_new else 'NOT EQUAL'}); Equation 4 (every stream padded to 82 "
-          f"joints and 120 frames, {args.transitions} transition slots) {total_prev / 2**20:.1f} MB; "
-          f"difference (Equation 6) {(total_prev - total_new) / 2**20:.1f} MB")  # fmt: skip
+    print(f"memory: pool {pool.memory() / 2**20:.1f} MiB = store {memory['store'] / 2**20:.1f} + prefetch "
+          f"{memory['prefetch'] / 2**20:.1f} (+{memory['prefetch'] / memory['store']:.0%}) + bookkeeping "
+          f"{memory['bookkeeping'] / 2**20:.1f}; Equation 5 {total_new / 2**20:.1f} MiB "
+          f"({'equal to the store' if memory['store'] == total_new else 'NOT the store'}); Equation 4 (every stream "
+          f"padded to 82 joints and 120 frames, {args.transitions} transition slots) {total_prev / 2**20:.1f} MiB; "
+          f"difference (Equation 6) {(total_prev - total_new) / 2**20:.1f} MiB")  # fmt: skip
     gpu(args, movers, celebrations)
-    # naive: each agent part evaluates its own controller every frame
-    sample = [pool.streams[int(s)].controller for s in clusters["body"][:1500]]
-    begin = time.perf_counter()
-    for k, controller in enumerate(sample):
-        controller.pose([k / 30.0])
-    per_part = (time.perf_counter() - begin) / len(sample) * 1000
-    naive = per_part * parts
-    ours = updates.mean() + buffer
-    print(f"naive per-agent evaluation: {per_part * 1000:.1f} us per part (measured on {len(sample)} parts) x "
-          f"{parts} parts = {naive:.0f} ms per frame; flockkit {ours:.2f} ms: {naive / ours:.0f}x faster")  # fmt: skip
+    ours, theirs = np.array(ours), np.array(theirs)
+    produced = ours.mean() + updates.mean()
+    print(f"every agent part's local pose, per frame ({parts} parts; best of 3 on each of {len(ours)} frames):")
+    print("\n".join(rows))
+    print("  mean over those frames:")
+    print(f"  flockkit update (mean of every frame) + poses(): {updates.mean():.2f} + {ours.mean():.1f} = "
+          f"{produced:.1f} ms (poses() worst {ours.max():.1f} ms)")  # fmt: skip
+    print(f"  direct numpy evaluation of each part's own clip: {theirs.mean():.1f} ms (worst {theirs.max():.1f} ms); "
+          f"direct / flockkit = {theirs.mean() / produced:.2f}")  # fmt: skip
+    print(gaps.report("part-frames"))
+    print(f"  flockkit update alone (the instance buffer a skinning shader reads, no per-part pose): "
+          f"{updates.mean():.2f} ms")  # fmt: skip
 
 
 if __name__ == "__main__":

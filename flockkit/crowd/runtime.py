@@ -66,20 +66,23 @@ def interpolate_entries(a, b, weight):
     store on a GPU reads between frames through the same code."""
     xp = namespace(a)
     w = xp.reshape(xp.astype(weight, a.dtype), (-1, 1, 1))
+    out = b - a  # every field lerped, then the rotations replaced by the slerp
+    out *= w
+    out += a
     qa, qb = a[..., 0:4], b[..., 0:4]
-    qb = xp.where(xp.vecdot(qa, qb)[..., None] < 0, -qb, qb)
-    # the angle from the chord and its complement: exact for the small angles between neighbouring
-    # frames in float32, where the arccosine of their dot product is not
-    d, s = qa - qb, qa + qb
-    angle = 2 * xp.atan2(xp.sqrt(xp.vecdot(d, d)), xp.sqrt(xp.vecdot(s, s)))[..., None]
+    dot = xp.vecdot(qa, qb)[..., None]
+    sign = xp.where(dot < 0, -xp.ones_like(dot), xp.ones_like(dot))  # -b is b's rotation, nearer
+    # float32 leaves the angle of nearly equal keys uncertain by ~3e-4 rad, but the weights below
+    # depend on it only at second order, and they are scaled to give a unit result
+    angle = xp.acos(xp.minimum(dot * sign, xp.ones_like(dot)))
     sine = xp.sin(angle)
-    tiny = sine < 1e-6  # (nearly) one rotation: the linear weights are its limit
+    tiny = sine < 1e-4  # (nearly) one rotation: the linear weights, the slerp's limit
     safe = xp.where(tiny, xp.ones_like(sine), sine)
     wa = xp.where(tiny, 1 - w, xp.sin((1 - w) * angle) / safe)
-    wb = xp.where(tiny, w + xp.zeros_like(sine), xp.sin(w * angle) / safe)
-    q = wa * qa + wb * qb
-    q = q / xp.sqrt(xp.vecdot(q, q))[..., None]
-    return xp.concat([q, a[..., 4:] + w * (b[..., 4:] - a[..., 4:])], axis=-1)
+    wb = xp.where(tiny, w, xp.sin(w * angle) / safe) * sign
+    length = xp.sqrt(wa * wa + wb * wb + 2 * wa * wb * dot)  # of wa qa + wb qb, from the weights alone
+    out[..., 0:4] = (wa / length) * qa + (wb / length) * qb
+    return out
 
 
 def _agent_ids(agents, n_agents: int) -> np.ndarray:
@@ -471,11 +474,14 @@ class Crowd:
         xp = self.pool.xp
         steady = np.flatnonzero(record["blend_time"] <= 0)
         r = record[blending]
-        source = read(r["kind"], r["stream"], r["offset"])
         target = read(r["target_kind"], r["target"], r["target_offset"])
         then = self.time - lag / self.pool.fps
-        alpha = np.clip((then - r["blend_start"]) / r["blend_time"], 0, 1).astype(np.float32)
-        mixed = blend_entries(source, target, xp.asarray(alpha))
+        alpha = xp.asarray(np.clip((then - r["blend_start"]) / r["blend_time"], 0, 1).astype(np.float32))
+        if xp is np:  # every source at once, the blending rows mixed in place: no merge of two reads
+            out = read(record["kind"], record["stream"], record["offset"])
+            out[blending] = blend_entries(out[blending], target, alpha)
+            return out
+        mixed = blend_entries(read(r["kind"], r["stream"], r["offset"]), target, alpha)
         if not len(steady):
             return mixed
         s = record[steady]
