@@ -97,9 +97,7 @@ def _validation_error_in(failure: BaseException | None) -> ValidationError | Non
 
 def _raised_at(exc: BaseException) -> str:
     """The last line outside flockkit's own package that led to `exc`: the component's call."""
-    import flockkit
-
-    package = str(Path(flockkit.__file__).parent)
+    package = str(Path(__file__).resolve().parents[1])  # flockkit's own folder
     frames = [f for f in traceback.extract_tb(exc.__traceback__) if not f.filename.startswith((package, "<"))]
     frame = frames[-1] if frames else traceback.extract_tb(exc.__traceback__)[-1]
     return f"{Path(frame.filename).name}:{frame.lineno}"
