@@ -9,21 +9,72 @@ nothing in the faces says they are one point, so anything that moves vertices by
 neighbours (seam smoothing) or by part would pull them apart and crack the surface.
 :func:`weld_map` finds them by position: vertices that stay within a tolerance of each other in
 every frame, relative to the object's size (:func:`object_size`).
+
+Up axes and units: a mesh says which of its axes is up (`up_axis`) and how many metres one of its
+units is (`meters_per_unit`), as its file states them (glTF: y up, metres; a USD stage: its
+upAxis and metersPerUnit; an OBJ sequence: y up by convention and no unit) or as the caller
+states them where the file is wrong or silent (the Fox of the glTF samples is modelled in
+centimetres). flockkit's own analysis and exports take z up and metres (``FLOCKKIT_UP_AXIS``,
+``FLOCKKIT_METERS_PER_UNIT``): :meth:`AnimatedMesh.to_flockkit_axes` converts a mesh once, before
+it is analysed or placed, with the one conversion every part of flockkit uses,
+:func:`conversion_matrix`. Nothing is converted or guessed silently: a unit that no one stated
+is refused, and a size no object plausibly has gets a hint (:func:`unit_hint`), never a change.
 """
 
 from __future__ import annotations
+
+import math
+import warnings
 
 import attrs
 import numpy as np
 
 from . import _npzfile, validate
 from ._arrays import readonly_int
-from .errors import FileFormatError, ValidationError
+from .errors import FileFormatError, FlockkitWarning, ValidationError
 from .motion import Motion
 
-__all__ = ["AnimatedMesh", "face_edges", "fan_triangles", "object_size", "weld_map", "WELD_TOLERANCE"]
+__all__ = [
+    "AnimatedMesh",
+    "face_edges",
+    "fan_triangles",
+    "object_size",
+    "weld_map",
+    "WELD_TOLERANCE",
+    "conversion_matrix",
+    "unit_hint",
+    "check_up_axis",
+    "check_meters_per_unit",
+    "UP_AXES",
+    "UNITS",
+    "FLOCKKIT_UP_AXIS",
+    "FLOCKKIT_METERS_PER_UNIT",
+]
 
-MESH_FORMAT_VERSION = 1
+# Version 2 adds the up axis and the unit; a version 1 file has neither and loads as flockkit's
+# convention (z up, metres), which is how flockkit used every mesh when it wrote those files.
+MESH_FORMAT_VERSION = 2
+MESH_FORMAT_VERSIONS = (1, 2)
+
+# flockkit's own axes, which its analysis (footprints on the ground plane, headings about +z,
+# feature arrows on the ground) and its exports (USD upAxis Z, metersPerUnit) take: z up, metres.
+FLOCKKIT_UP_AXIS = "z"
+FLOCKKIT_METERS_PER_UNIT = 1.0
+UP_AXES = ("x", "y", "z")
+# Units a caller may name instead of giving metres per unit (the SI prefixes and the inch and
+# foot of 1959, exactly).
+UNITS = {"km": 1000.0, "m": 1.0, "dm": 0.1, "cm": 0.01, "mm": 0.001, "in": 0.0254, "ft": 0.3048}
+# Sizes (metres) outside which an object (a plant, an animal, a person, a building) is more likely
+# in another unit than its file says: what earns a hint. Never applied.
+PLAUSIBLE_SIZE = (0.005, 50.0)
+# The quarter turn that brings each up axis onto +z, the others kept right-handed: y up turns
+# about +x, (x, y, z) -> (x, -z, y), as Blender's glTF and USD importers turn a y-up file (glTF's
+# +z forward becomes -y); x up turns about -y, (x, y, z) -> (-z, y, x).
+_UP_TURNS = {
+    "x": np.array([[0.0, 0.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]]),
+    "y": np.array([[1.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]]),
+    "z": np.eye(3),
+}
 # Vertices that stay within this fraction of the object's size of each other in every frame are
 # one point of the surface. Copies of a vertex in a file hold the same float32 position (every
 # copy in the Fox, RobotExpressive and MorphStressTest coincides exactly in every frame), so any
@@ -47,14 +98,76 @@ def faces_array(value, field: str = "AnimatedMesh.faces") -> np.ndarray:
     return array
 
 
+def check_up_axis(value, field: str) -> str:
+    """`value` as an up axis, "x", "y" or "z" (any case: USD writes "Y" and "Z"), or a
+    ValidationError naming `field`."""
+    if isinstance(value, str) and value.lower() in UP_AXES:
+        return value.lower()
+    axes = ", ".join(map(repr, UP_AXES))
+    raise ValidationError(f"{field} must be one of {axes} (the axis pointing up); got {value!r}")
+
+
+def check_meters_per_unit(value, field: str, *, optional: bool = False) -> float | None:
+    """`value` as metres per unit: a finite number above 0, or a unit's name in ``UNITS`` ("cm");
+    None (no unit stated) where `optional`. A ValidationError naming `field` otherwise."""
+    if value is None and optional:
+        return None
+    if isinstance(value, str):
+        if value in UNITS:
+            return UNITS[value]
+        names = ", ".join(map(repr, UNITS))
+        raise ValidationError(f"{field} must be metres per unit (a number above 0) or one of {names}; got {value!r}")
+    return validate.number(value, field, minimum=0, strict=True)
+
+
+def conversion_matrix(up_axis: str, meters_per_unit) -> np.ndarray:
+    """The matrix (3, 3) taking an asset's coordinates (up along `up_axis`, `meters_per_unit`
+    metres a unit, or a unit's name) to flockkit's (z up, metres): ``flockkit = M @ asset``, the
+    quarter turn that brings the up axis onto +z (y up: (x, y, z) -> (x, -z, y), as Blender
+    imports y-up files) times the unit. The one conversion between an asset's axes and
+    flockkit's: meshes are converted with it and crowds place characters with it."""
+    turn = _UP_TURNS[check_up_axis(up_axis, "up_axis")]
+    scale = check_meters_per_unit(meters_per_unit, "meters_per_unit")
+    return turn * scale
+
+
+def unit_hint(size: float, meters_per_unit: float, what: str) -> str | None:
+    """A hint where `what`, `size` units across at `meters_per_unit` metres a unit, has a size
+    no object plausibly has (outside PLAUSIBLE_SIZE metres): how large each named unit that gives
+    a plausible size would make it. None where the size is plausible. Only ever shown."""
+    meters = size * meters_per_unit
+    low, high = PLAUSIBLE_SIZE
+    if not math.isfinite(meters) or low <= meters <= high or size <= 0:
+        return None
+    others = [f"{name} ({factor:g} m a unit): {size * factor:.3g} m"
+              for name, factor in UNITS.items() if low <= size * factor <= high]  # fmt: skip
+    return (
+        f"{what} is {size:.4g} units across, {meters:.4g} m at {meters_per_unit:g} m a unit; if its file is in "
+        f"another unit, state it with meters_per_unit= (" + ("; ".join(others) or "no named unit fits") + ")"
+    )
+
+
+def _up_axis_field(value) -> str:
+    return check_up_axis(value, "AnimatedMesh.up_axis")
+
+
+def _unit_field(value) -> float | None:
+    return check_meters_per_unit(value, "AnimatedMesh.meters_per_unit", optional=True)
+
+
 @attrs.frozen(kw_only=True, eq=False)
 class AnimatedMesh:
     """An animated mesh: `motion` (T, V, 3) of its vertices, `faces` (F, 3 or 4) indexing them,
-    and a `name`."""
+    a `name`, and the axes its coordinates are in: `up_axis` ("x", "y" or "z") and
+    `meters_per_unit` (a number, or None where no one has stated the unit: an OBJ sequence's).
+    The defaults are flockkit's convention (z up, metres); ``flockkit.io.read_mesh_animation``
+    reports what each file says. :meth:`to_flockkit_axes` converts."""
 
     motion: Motion
     faces: np.ndarray = attrs.field(converter=faces_array)
     name: str = attrs.field(default="mesh", converter=str)
+    up_axis: str = attrs.field(default=FLOCKKIT_UP_AXIS, converter=_up_axis_field)
+    meters_per_unit: float | None = attrs.field(default=FLOCKKIT_METERS_PER_UNIT, converter=_unit_field)
 
     def __attrs_post_init__(self):
         if not isinstance(self.motion, Motion):
@@ -69,28 +182,82 @@ class AnimatedMesh:
         """Unique undirected edges (E, 2) of the faces, smaller index first."""
         return face_edges(self.faces)
 
+    @property
+    def in_flockkit_axes(self) -> bool:
+        """Whether the mesh is in flockkit's convention already (z up, metres)."""
+        return self.up_axis == FLOCKKIT_UP_AXIS and self.meters_per_unit == FLOCKKIT_METERS_PER_UNIT
+
+    def to_flockkit_axes(self, *, up_axis=None, meters_per_unit=None) -> AnimatedMesh:
+        """This mesh in flockkit's axes (z up, metres): every vertex times
+        :func:`conversion_matrix` of its `up_axis` and `meters_per_unit`, which the arguments
+        state instead where the mesh's are wrong (a glTF file is metres by its specification,
+        but the Fox of the glTF samples is modelled in centimetres: ``meters_per_unit=0.01``, or
+        "cm"). Faces, name and frame time are kept; heights are then along z, where the asset's
+        up axis pointed, and the asset's ground (its up coordinate 0) is z = 0.
+
+        A ValidationError where no unit is known (an OBJ sequence read without one, a value made
+        with None); a FlockkitWarning with :func:`unit_hint`'s hint where the converted mesh has
+        a size no object plausibly has (the Fox read as metres is 170 m across)."""
+        up = self.up_axis if up_axis is None else check_up_axis(up_axis, "to_flockkit_axes: up_axis")
+        unit = (
+            self.meters_per_unit
+            if meters_per_unit is None
+            else check_meters_per_unit(meters_per_unit, "to_flockkit_axes: meters_per_unit")
+        )
+        if unit is None:
+            raise ValidationError(
+                f"{self.name}: its unit is not known (an OBJ sequence states none): pass meters_per_unit= (metres "
+                f"per unit, or one of {', '.join(map(repr, UNITS))}) to to_flockkit_axes or to read_mesh_animation"
+                + _size_note(object_size(self))
+            )
+        hint = unit_hint(object_size(self), unit, self.name)
+        if hint is not None and meters_per_unit is None:
+            warnings.warn(hint, FlockkitWarning, stacklevel=2)
+        matrix = conversion_matrix(up, unit)
+        positions = self.motion.positions @ matrix.T
+        return AnimatedMesh(motion=Motion(positions=positions, dt=self.motion.dt), faces=self.faces, name=self.name,
+                            up_axis=FLOCKKIT_UP_AXIS, meters_per_unit=FLOCKKIT_METERS_PER_UNIT)  # fmt: skip
+
     def __eq__(self, other):
         if not isinstance(other, AnimatedMesh):
             return NotImplemented
-        return self.motion == other.motion and np.array_equal(self.faces, other.faces) and self.name == other.name
+        return (
+            self.motion == other.motion
+            and np.array_equal(self.faces, other.faces)
+            and self.name == other.name
+            and self.up_axis == other.up_axis
+            and self.meters_per_unit == other.meters_per_unit
+        )
 
     __hash__ = None
 
     def save(self, path) -> None:
-        """Write to one .npz of plain arrays with JSON metadata (atomic)."""
+        """Write to one .npz of plain arrays with JSON metadata (atomic): the frame time, name, up
+        axis and unit (null where unknown) beside the arrays."""
         arrays = {**self.motion._to_arrays(), "faces": self.faces}
-        _npzfile.write(path, kind="mesh", version=MESH_FORMAT_VERSION, arrays=arrays,
-                       metadata={"dt": self.motion.dt, "name": self.name})  # fmt: skip
+        metadata = {"dt": self.motion.dt, "name": self.name, "up_axis": self.up_axis,
+                    "meters_per_unit": self.meters_per_unit}  # fmt: skip
+        _npzfile.write(path, kind="mesh", version=MESH_FORMAT_VERSION, arrays=arrays, metadata=metadata)
 
     @classmethod
     def load(cls, path) -> AnimatedMesh:
-        """Read a file written by :meth:`save`; FileFormatError naming the file if it is not one."""
-        arrays, header = _npzfile.read(path, kind="mesh", versions=(MESH_FORMAT_VERSION,))
+        """Read a file written by :meth:`save`; FileFormatError naming the file and the field if it
+        is not one. A file of format version 1 (no axes) loads as z up, metres."""
+        arrays, header = _npzfile.read(path, kind="mesh", versions=MESH_FORMAT_VERSIONS)
         try:
+            axes = {}
+            if header["version"] >= 2:
+                axes = {"up_axis": header["up_axis"], "meters_per_unit": header["meters_per_unit"]}
             return cls(motion=Motion._from_arrays(arrays, header.get("dt")), faces=arrays["faces"],
-                       name=header.get("name", "mesh"))  # fmt: skip
+                       name=header.get("name", "mesh"), **axes)  # fmt: skip
         except (KeyError, ValidationError) as exc:
             raise FileFormatError(f"{path}: invalid animated mesh: {type(exc).__name__}: {exc}") from None
+
+
+def _size_note(size: float) -> str:
+    """What the named units would make an object `size` units across, for a message."""
+    sizes = ", ".join(f"{size * factor:.3g} m in {name}" for name, factor in UNITS.items() if name in ("m", "cm", "in"))
+    return f" (it is {size:.4g} units across: {sizes})"
 
 
 def face_edges(faces) -> np.ndarray:

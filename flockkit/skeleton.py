@@ -18,6 +18,7 @@ import numpy as np
 from . import rigid, validate
 from ._arrays import readonly_float, readonly_int
 from .errors import ValidationError
+from .mesh import FLOCKKIT_METERS_PER_UNIT, FLOCKKIT_UP_AXIS, check_meters_per_unit, check_up_axis
 
 __all__ = ["Pose", "Skeleton", "SkeletalClip", "Channel", "Event", "sample_keys", "stream_times", "INTERPOLATIONS"]
 
@@ -162,6 +163,13 @@ class Skeleton:
         translation keeps its rest translation.
     scales : (J, 3), optional
         Each joint's local scale (default 1): fixed, since clips do not animate scale.
+    up_axis : str
+        The axis ("x", "y" or "z") that points up in the skeleton's model space: z (flockkit's)
+        unless its file says otherwise (glTF and BVH: y).
+    meters_per_unit : float or None
+        Metres per unit of its translations: 1 unless its file says otherwise; None where no one
+        has stated it (a BVH file states no unit). A crowd places the skeleton in the world with
+        ``flockkit.mesh.conversion_matrix`` of these two.
 
     Attributes
     ----------
@@ -173,6 +181,11 @@ class Skeleton:
     parents: np.ndarray = attrs.field(converter=_parents)
     rest: Pose | None = attrs.field(default=None)
     scales: np.ndarray | None = attrs.field(default=None)
+    up_axis: str = attrs.field(default=FLOCKKIT_UP_AXIS, converter=lambda v: check_up_axis(v, "Skeleton.up_axis"))
+    meters_per_unit: float | None = attrs.field(
+        default=FLOCKKIT_METERS_PER_UNIT,
+        converter=lambda v: check_meters_per_unit(v, "Skeleton.meters_per_unit", optional=True),
+    )
     depth: np.ndarray = attrs.field(init=False, repr=False)
 
     def __attrs_post_init__(self):

@@ -12,18 +12,25 @@ so that feet do not slide.
 from __future__ import annotations
 
 import math
+import warnings
 
 import attrs
 import numpy as np
 
 from .. import rigid, validate
-from ..errors import ValidationError
+from ..errors import FlockkitWarning, ValidationError
+from ..mesh import conversion_matrix, unit_hint
 from ..motion import Motion
+from ..skeleton import Skeleton
 from .runtime import Crowd
 
-__all__ = ["Gait", "StateMachine", "Cue", "Driver", "character_frame", "AXES"]
+__all__ = ["Gait", "StateMachine", "Cue", "Driver", "character_frame", "character_axes", "AXES", "DEFAULT_FORWARD"]
 
 AXES = {"x": 0, "y": 1, "z": 2}
+# The forward axis of a character whose file does not say, by its up axis: glTF's +z for a y-up
+# character (glTF 2.0, section 3.4: "the front of a glTF asset faces +Z"), flockkit's +x (heading
+# 0) for a z-up one, and +y (the next axis round) for an x-up one.
+DEFAULT_FORWARD = {"x": "y", "y": "z", "z": "x"}
 
 # The controller that plays one clip: a convenience default, as flockkit.build_graph's builder is;
 # a crowd scene's [[streams]] entry, or driven_sliding's `controller`, names another (any
@@ -161,11 +168,48 @@ def _axis(name: str, field: str) -> int:
 
 def character_frame(up: str, forward: str) -> np.ndarray:
     """The rotation (3, 3) taking a character's axes (`up`, `forward`) to flockkit's world (z up,
-    facing +x at heading 0): its rows are forward, up x forward and up."""
-    u, f = np.eye(3)[_axis(up, "up")], np.eye(3)[_axis(forward, "forward")]
-    if u @ f:
+    facing +x at heading 0): ``flockkit.mesh.conversion_matrix(up, 1)``, which brings the up axis
+    onto +z, then the turn about +z that brings the forward axis onto +x. Its rows are forward,
+    up x forward and up."""
+    u, f = _axis(up, "up"), _axis(forward, "forward")
+    if u == f:
         raise ValidationError("up and forward must be different axes")
-    return np.stack([f, np.cross(u, f), u])
+    upright = conversion_matrix(up, 1.0)
+    ahead = upright[:, f]  # where the forward axis points once the character stands up: on the ground
+    facing = np.array([[ahead[0], ahead[1], 0.0], [-ahead[1], ahead[0], 0.0], [0.0, 0.0, 1.0]])
+    return facing @ upright
+
+
+def character_axes(skeleton: Skeleton, *, up=None, forward=None, scale=None, owner: str = "Driver") -> tuple:
+    """(up, forward, scale) for placing `skeleton` in the world: each as given, or by default
+    the skeleton's up axis, ``DEFAULT_FORWARD`` of it, and its metres per unit (flockkit's world
+    is in metres). A ValidationError naming `owner` where the skeleton's unit is not known (a
+    BVH file states none) and no scale is given; a FlockkitWarning with a hint
+    (``flockkit.mesh.unit_hint``) where the default scale makes the character a size no
+    character has (the Fox of the glTF samples, centimetres read as metres, is 61 m tall)."""
+    up = skeleton.up_axis if up is None else up
+    _axis(up, f"{owner} up")
+    forward = DEFAULT_FORWARD[up] if forward is None else forward
+    if scale is not None:
+        return up, forward, validate.number(scale, f"{owner} scale", minimum=0, strict=True)
+    height = _height(skeleton, up)
+    if skeleton.meters_per_unit is None:
+        sizes = ", ".join(f"{height * factor:.3g} m in {name}" for name, factor in (("cm", 0.01), ("in", 0.0254)))
+        raise ValidationError(
+            f"{owner}: the skeleton states no unit (a BVH file does not): state it with meters_per_unit (metres per "
+            f"unit, or a name such as 'cm' or 'in') when reading its clips or in a crowd file's [character], or give "
+            f"a scale; it stands {height:.4g} units tall ({sizes})"
+        )
+    hint = unit_hint(height, skeleton.meters_per_unit, "the character")
+    if hint is not None:
+        warnings.warn(f"{owner}: {hint}", FlockkitWarning, stacklevel=3)
+    return up, forward, skeleton.meters_per_unit
+
+
+def _height(skeleton: Skeleton, up: str) -> float:
+    """How far the skeleton's joints spread along `up` at rest, in its units."""
+    heights = skeleton.positions(skeleton.rest)[:, AXES[up]]
+    return float(heights.max() - heights.min())
 
 
 class Driver:
@@ -182,11 +226,16 @@ class Driver:
     machine : StateMachine
     cluster : str, optional
         The cluster the machine drives (default the crowd's first).
-    up, forward : str
-        The character's up and forward axes (glTF characters: "y", "z").
-    scale : float
-        World units per character unit (0.01 for a character modelled in centimetres on a
-        trajectory in metres).
+    up, forward : str, optional
+        The character's up and forward axes. Default: the skeleton's up axis (what its file
+        says: glTF and BVH "y") and ``DEFAULT_FORWARD`` of it (glTF's "z" for y up).
+    scale : float, optional
+        Metres (world units: flockkit's world is in metres) per character unit. Default the
+        skeleton's ``meters_per_unit`` (what its file says, or what ``read_clips`` was told: the
+        Fox of the glTF samples is modelled in centimetres, 0.01); a skeleton without a unit
+        (a BVH file's) needs it. Each root is then ``heading @ character_frame(up, forward) *
+        scale``: the character stands along +z at its true size, its forward along its
+        heading (``frame_to_world`` holds the part that does not turn).
     turn_time : float
         Seconds over which the facing follows the velocity (an exponential smoothing); an agent
         slower than `still` keeps its facing.
@@ -194,8 +243,8 @@ class Driver:
         Scene events; each must fall within the trajectories' time.
     """
 
-    def __init__(self, crowd: Crowd, motion: Motion, machine: StateMachine, *, cluster=None, up="y", forward="z",
-                 scale: float = 1.0, turn_time: float = 0.25, still: float = 1e-3, cues=()):  # fmt: skip
+    def __init__(self, crowd: Crowd, motion: Motion, machine: StateMachine, *, cluster=None, up=None, forward=None,
+                 scale=None, turn_time: float = 0.25, still: float = 1e-3, cues=()):  # fmt: skip
         if not isinstance(crowd, Crowd):
             raise ValidationError(f"Driver needs a flockkit.Crowd; got {type(crowd).__name__}")
         if not isinstance(motion, Motion):
@@ -209,10 +258,15 @@ class Driver:
         self.crowd, self.motion, self.machine = crowd, motion, machine
         self.cluster = crowd.clusters[0] if cluster is None else cluster
         machine.check(crowd, self.cluster)
-        self.scale = validate.number(scale, "Driver.scale", minimum=0, strict=True)
+        skeleton = crowd.skeletons[crowd.cluster_index(self.cluster)]
+        self.up, self.forward, self.scale = character_axes(skeleton, up=up, forward=forward, scale=scale,
+                                                           owner="Driver")  # fmt: skip
         self.turn_time = validate.number(turn_time, "Driver.turn_time", minimum=0)
         self.still = validate.number(still, "Driver.still", minimum=0)
-        self.frame_to_world = character_frame(up, forward) * self.scale
+        self.frame_to_world = character_frame(self.up, self.forward) * self.scale
+        # what an export records of the conversion: the character's axes as its file gave them
+        self.axes = {"up_axis": self.up, "forward_axis": self.forward, "meters_per_unit": self.scale,
+                     "skeleton_meters_per_unit": skeleton.meters_per_unit}  # fmt: skip
         n = crowd.n_agents
         positions = np.zeros((motion.n_frames, n, 3))
         positions[..., : motion.dims] = motion.positions[:, :n]

@@ -18,16 +18,19 @@ from scipy.spatial.transform import Rotation
 from .. import validate
 from ..errors import ValidationError
 from ..skeleton import Pose, SkeletalClip
-from .drive import CLIP_CONTROLLER, _axis
+from .drive import CLIP_CONTROLLER, DEFAULT_FORWARD, _axis, character_axes
 
 __all__ = ["ground_speed", "foot_sliding", "driven_sliding", "plant_feet"]
 
 
-def ground_speed(clip: SkeletalClip, feet, *, up: str = "y", forward: str = "z", scale: float = 1.0) -> float:
+def ground_speed(clip: SkeletalClip, feet, *, up=None, forward=None, scale=None) -> float:
     """How fast `clip` (played in place at rate 1) pushes its lowest foot backwards, in world units
-    per second (times `scale`): the speed at which an agent playing it does not slide. `feet` are
-    joint names; the median over the frames of the lowest foot's backward speed, each foot's
-    height counted from its own lowest (a paw's joint sits higher above the ground than a toe's)."""
+    per second (clip units times `scale`): the speed at which an agent playing it does not slide.
+    `feet` are joint names; the median over the frames of the lowest foot's backward speed, each
+    foot's height counted from its own lowest (a paw's joint sits higher above the ground than a
+    toe's), height along the character's `up` axis. `up`, `forward` and `scale` default as a
+    ``Driver`` places the character: the skeleton's up axis, its forward and its metres per unit."""
+    up, forward, scale = character_axes(clip.skeleton, up=up, forward=forward, scale=scale, owner="ground_speed")
     positions = clip.skeleton.positions(Pose._adopt(clip.rotations, clip.translations))
     index = [clip.skeleton.index(f) for f in feet]
     u, f = _axis(up, "up"), _axis(forward, "forward")
@@ -50,21 +53,21 @@ def foot_sliding(joints: np.ndarray, feet, *, dt: float) -> float:
     return float(speed[same].mean()) if same.any() else 0.0
 
 
-def driven_sliding(motion, walk: SkeletalClip, idle: SkeletalClip, feet, rates, *, scale: float = 1.0, up: str = "y",
-                   forward: str = "z", fps: float | None = None, idle_below: float = 0.2,
-                   controller=CLIP_CONTROLLER) -> float:  # fmt: skip
+def driven_sliding(motion, walk: SkeletalClip, idle: SkeletalClip, feet, rates, *, scale=None, up=None, forward=None,
+                   fps: float | None = None, idle_below: float = 0.2, controller=CLIP_CONTROLLER) -> float:  # fmt: skip
     """The foot sliding (``foot_sliding``, world units per second) of a crowd that follows
     `motion` (one agent each) idling below `idle_below` and walking above it on streams of
     `walk` at `rates`, each agent on the one whose ground speed is nearest its own (one rate:
     fixed-rate playback). A measure of how well a clip and its rates fit a group's speeds; at
     `fps` (default the motion's). `controller` plays a clip (a name or factory taking clip= and
-    rate=)."""
+    rate=). `scale`, `up` and `forward` as for ``Driver`` (by default the skeleton's)."""
     from ..registry import require, resolve
     from .drive import Driver, Gait, StateMachine
     from .pool import Stream, StreamPool
     from .runtime import Crowd
 
     fps = 1.0 / motion.dt if fps is None else fps
+    up, forward, scale = character_axes(walk.skeleton, up=up, forward=forward, scale=scale, owner="driven_sliding")
     natural = ground_speed(walk, feet, up=up, forward=forward, scale=scale)
     require("controller", controller, "clip_player", "driven_sliding's streams")
     streams = [Stream(controller=resolve("controller", controller, clip=clip, rate=r), history=40)
@@ -81,8 +84,8 @@ def driven_sliding(motion, walk: SkeletalClip, idle: SkeletalClip, feet, rates, 
     return foot_sliding(np.array(joints), [walk.skeleton.index(f) for f in feet], dt=1 / fps)
 
 
-def plant_feet(clip: SkeletalClip, legs, *, up: str = "y", forward: str = "z", speed: float | None = None,
-               contact: float = 0.25, ease: int = 2) -> SkeletalClip:  # fmt: skip
+def plant_feet(clip: SkeletalClip, legs, *, up=None, forward=None, speed: float | None = None, contact: float = 0.25,
+               ease: int = 2) -> SkeletalClip:  # fmt: skip
     """A copy of the looping locomotion `clip` whose feet, while they carry the body, move back in
     a straight line at one `speed`: played in place on a root moving forward at that speed (times
     the playback rate), they stay put.
@@ -96,8 +99,10 @@ def plant_feet(clip: SkeletalClip, legs, *, up: str = "y", forward: str = "z", s
         Joint names per leg: `upper` and `middle` are the joints inverse kinematics turns (a hip
         and a knee, a shoulder and an elbow); `foot` is the joint that must stay put, below
         `middle` (a paw, an ankle; joints between `middle` and `foot` keep their rotations).
-    up, forward : str
-        The character's up and forward axes (glTF: "y", "z").
+    up, forward : str, optional
+        The character's up and forward axes: heights are along `up`, feet move back along
+        `forward`. Default the skeleton's up axis (glTF and BVH: "y") and its
+        ``DEFAULT_FORWARD`` (glTF's "z" for y up).
     speed : float, optional
         Clip units per second. None: the clip's own, the distance its feet travel back while
         planted over the time they are planted (all feet together).
@@ -121,7 +126,10 @@ def plant_feet(clip: SkeletalClip, legs, *, up: str = "y", forward: str = "z", s
     ease = validate.integer(ease, "plant_feet ease", minimum=0)
     skeleton = clip.skeleton
     chains = _legs(skeleton, legs)
-    u, f = _axis(up, "up"), _axis(forward, "forward")
+    up = skeleton.up_axis if up is None else up
+    u = _axis(up, "up")
+    forward = DEFAULT_FORWARD[up] if forward is None else forward
+    f = _axis(forward, "forward")
     period = clip.n_frames - 1  # frames of one loop; frame `period` is frame 0 again
     world = skeleton.world(Pose._adopt(clip.rotations, clip.translations))
     positions = world[:period, :, :3, 3]

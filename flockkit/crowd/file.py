@@ -14,9 +14,10 @@
 
     [character]                  # where the clips come from, and how they sit in the world
     clips = "../shared/data/fox-gltf/Fox.glb"      # glTF or BVH, relative to this file
-    up = "y"
-    forward = "z"
-    scale = 0.01                 # world units per character unit
+    meters_per_unit = 0.01       # the clips' unit where the file's is wrong or missing (a number or
+                                 # "cm", "in", ...): the Fox is modelled in centimetres, BVH states none
+    up = "y"                     # optional: the character's up and forward axes (default the file's
+    forward = "z"                # up axis, y for glTF and BVH, and glTF's forward, z)
     feet = ["b_LeftFoot02_018", "b_RightFoot02_022"]   # for states that match speeds (default: the legs' feet)
     legs = [["b_LeftLeg01_015", "b_LeftLeg02_016", "b_LeftFoot02_018"],   # optional: (upper, middle,
             ["b_RightLeg01_019", "b_RightLeg02_020", "b_RightFoot02_022"]]  # foot) joints per leg
@@ -54,7 +55,7 @@ from ..io import read_clips
 from ..motion import Motion, random_flock
 from ..registry import get, require, require_dims, resolve
 from ..validate import allocation
-from .drive import CLIP_CONTROLLER, Cue, Driver, Gait, StateMachine
+from .drive import CLIP_CONTROLLER, Cue, Driver, Gait, StateMachine, character_axes
 from .feet import ground_speed, plant_feet
 from .pool import MAX_FPS, Stream, StreamPool
 from .runtime import Crowd
@@ -70,7 +71,8 @@ _KEYS = {"seconds", "fps", "seed", "record", "trajectories", "character", "strea
 @attrs.frozen(kw_only=True, eq=False)
 class CrowdScene:
     """What a crowd scene file describes: trajectories, streams, a state machine and cues, ready
-    to run (``driver()``) for `seconds`, keeping `record` agents for pictures and files."""
+    to run (``driver()``) for `seconds`, keeping `record` agents for pictures and files. `up`,
+    `forward` and `scale` (metres per character unit) place the characters (see ``Driver``)."""
 
     motion: Motion
     streams: tuple
@@ -150,10 +152,17 @@ def read_crowd_scene(path, *, allow_outside: bool = False) -> CrowdScene:
         fps = validate.number(data.get("fps", 30.0), "fps", minimum=1, maximum=MAX_FPS)
         sources = _table(data, "trajectories", {"simulate", "motion", "walk"}, set(), "[trajectories]")
         motion = _trajectories(path, sources, fps, seconds, inside)
-        keys = {"clips", "up", "forward", "scale", "feet", "legs", "plant"}
+        keys = {"clips", "up", "forward", "scale", "meters_per_unit", "feet", "legs", "plant"}
         character = _table(data, "character", keys, {"clips"}, "[character]")
-        clips = read_clips(inside(character["clips"], "character.clips"))
-        up, forward = character.get("up", "y"), character.get("forward", "z")
+        if "scale" in character and "meters_per_unit" in character:
+            raise ValidationError("[character] takes meters_per_unit (the clips' unit) or scale (an older name for "
+                                  "it), not both")  # fmt: skip
+        unit = character.get("meters_per_unit", character.get("scale"))
+        clips = read_clips(inside(character["clips"], "character.clips"), up_axis=character.get("up"),
+                           meters_per_unit=unit)  # fmt: skip
+        skeleton = next(iter(clips.values())).skeleton
+        up, forward, scale = character_axes(skeleton, up=character.get("up"), forward=character.get("forward"),
+                                            owner="[character]")  # fmt: skip
         if "legs" in character and "feet" not in character:
             character["feet"] = [leg[-1] for leg in character["legs"]]
         for name in character.get("plant", []):
@@ -164,7 +173,6 @@ def read_crowd_scene(path, *, allow_outside: bool = False) -> CrowdScene:
                     f"[character] plant: no clip {name!r}; the file has {', '.join(map(repr, clips))}"
                 )
             clips[name] = plant_feet(clips[name], character["legs"], up=up, forward=forward)
-        scale = float(character.get("scale", 1.0))
         streams, names, rates = [], {}, []
         for k, spec in enumerate(data["streams"]):
             where = f"[[streams]] {k}"

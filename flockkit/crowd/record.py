@@ -21,7 +21,9 @@ class CrowdRecording:
     for a crowd not driven by trajectories), `rotations` (F, N, J, 4) and `translations`
     (F, N, J, 3) the local joint poses of `cluster` (float32, as the store holds them), the
     `streams` (F, N) each agent reads or blends to (unique slots as 1000 + slot), whether it is
-    `blending` (F, N), at `fps`."""
+    `blending` (F, N), at `fps`; `axes` how the character was placed in the world, when driven
+    (``Driver.axes``: its up and forward axes and metres per unit, which the roots include),
+    recorded in exports."""
 
     skeleton: Skeleton
     fps: float
@@ -31,6 +33,7 @@ class CrowdRecording:
     translations: np.ndarray
     streams: np.ndarray
     blending: np.ndarray
+    axes: dict = attrs.field(factory=dict)
 
     @property
     def n_frames(self) -> int:
@@ -54,7 +57,10 @@ class CrowdRecording:
         root at each frame, holding a Skeleton (the joints as paths, rest and bind transforms)
         bound to a SkelAnimation with the agent's local joint rotations, translations and scales
         at each frame. Up axis z, `meters_per_unit`, frames per second the recording's; saved
-        atomically. usd-core (extra ``usd``) is needed."""
+        atomically. The roots place each character upright along +z at its true size (``Driver``
+        turns its up axis onto +z and scales it by its metres per unit), and the stage's
+        ``customLayerData["flockkit"]`` records that conversion (`axes`). usd-core (extra ``usd``)
+        is needed."""
         from ..io.usd import write_skeletons
 
         skeleton = self.skeleton
@@ -69,6 +75,7 @@ class CrowdRecording:
             translations=self.translations,
             fps=self.fps,
             meters_per_unit=meters_per_unit,
+            metadata={"character": dict(self.axes)} if self.axes else None,
         )
 
 
@@ -139,6 +146,7 @@ def record(source, seconds: float, *, agents=None, cluster=None, on_frame=None) 
         translations=np.array(translations),
         streams=np.array(streams),
         blending=np.array(blending),
+        axes=dict(driver.axes) if driver is not None else {},
     )
 
 
@@ -167,7 +175,9 @@ def write_engine_buffers(source, path, seconds: float, *, on_frame=None) -> None
       offset, target, target_offset, blend_start, blend_time, kind, target_kind, mask) and
       ``time`` (F,): α = clamp((time - blend_start) / blend_time, 0, 1) where blend_time > 0.
     - ``roots`` (F, N, 4, 4) float32 when driven: each agent's root (column vectors: a joint's
-      world matrix is root @ its model-space matrix).
+      world matrix is root @ its model-space matrix), which turns the character upright (+z) and
+      scales it to metres; the metadata's ``axes`` records the character's up and forward axes
+      and metres per unit it was placed with.
     """
     from .. import _npzfile
     from .runtime import INSTANCE
@@ -230,5 +240,6 @@ def write_engine_buffers(source, path, seconds: float, *, on_frame=None) -> None
         "streams": [s.name for s in pool.streams],
         "fps": pool.fps,
         "kinds": {"none": 0, "streamed": 1, "unique": 2},
+        "axes": dict(driver.axes) if driver is not None else None,
     }
     _npzfile.write(path, kind="crowd-engine-buffers", version=ENGINE_FORMAT_VERSION, arrays=arrays, metadata=layout)

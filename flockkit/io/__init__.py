@@ -16,7 +16,7 @@ import numpy as np
 
 from .. import validate
 from ..errors import ValidationError
-from ..mesh import AnimatedMesh
+from ..mesh import AnimatedMesh, check_meters_per_unit, check_up_axis
 from ..motion import Motion
 from ..skeleton import Channel, Pose, SkeletalClip, Skeleton
 from . import bvh, gltf, obj, usd
@@ -75,8 +75,11 @@ def _format(path: Path) -> str:
     return suffix
 
 
-def read_mesh_animation(path, *, clip=None, fps: float = 30.0, allow_outside: bool = False) -> AnimatedMesh:
-    """An animated mesh from `path`, sampled at `fps` frames a second.
+def read_mesh_animation(path, *, clip=None, fps: float = 30.0, allow_outside: bool = False, up_axis=None,
+                        meters_per_unit=None) -> AnimatedMesh:  # fmt: skip
+    """An animated mesh from `path`, sampled at `fps` frames a second, in the file's own axes,
+    which it reports (``AnimatedMesh.up_axis``, ``meters_per_unit``); convert it with
+    ``AnimatedMesh.to_flockkit_axes`` before placing it in a scene.
 
     - glTF 2.0 (.glb, .gltf with GLB, external or data-URI buffers): every mesh of the default
       scene, morph targets weighted and skinned meshes skinned (linear blend skinning), for the
@@ -89,22 +92,42 @@ def read_mesh_animation(path, *, clip=None, fps: float = 30.0, allow_outside: bo
 
     Faces are triangles or quads (larger polygons are split into a fan of triangles).
 
+    Axes: glTF is y up in metres (its specification, whatever scale an asset was modelled at);
+    a USD stage says its upAxis and metersPerUnit (USD's fallbacks, y and 0.01, where it does
+    not); an OBJ sequence says neither: y up by convention, and no unit (None). `up_axis` ("x",
+    "y", "z") and `meters_per_unit` (a number, or a name such as "cm") state them instead, where
+    the file is silent or wrong (the Fox of the glTF samples is modelled in centimetres).
+
     Files are read as untrusted (see docs/security.md): the files a glTF or USD file refers to
     must lie inside its folder, unless `allow_outside` is True; an OBJ folder's files must be
     regular files inside it. Sizes are checked against the memory budget
     (``flockkit.validate.memory_limit``) before anything is sampled.
     """
     fps = validate.number(fps, "read_mesh_animation: fps", minimum=0, strict=True)
+    stated = _stated_axes(up_axis, meters_per_unit, "read_mesh_animation")
     path = Path(path)
     suffix = _format(path)
     if suffix in GLTF_SUFFIXES:
         name, positions, faces, clip_name = gltf.mesh_animation(path, clip, fps, allow_outside=allow_outside)
         name = f"{name}:{clip_name}"
+        axes = {"up_axis": gltf.UP_AXIS, "meters_per_unit": gltf.METERS_PER_UNIT}
     elif suffix in USD_SUFFIXES:
-        (positions, faces), name = usd.read_meshes(path, fps, allow_outside=allow_outside), path.stem
+        positions, faces, up, unit = usd.read_meshes(path, fps, allow_outside=allow_outside)
+        name, axes = path.stem, {"up_axis": up, "meters_per_unit": unit}
     else:
         positions, faces, name = obj.read_sequence(str(path))
-    return AnimatedMesh(motion=_motion(positions, fps, path), faces=faces, name=name)
+        axes = {"up_axis": obj.UP_AXIS, "meters_per_unit": None}
+    return AnimatedMesh(motion=_motion(positions, fps, path), faces=faces, name=name, **{**axes, **stated})
+
+
+def _stated_axes(up_axis, meters_per_unit, owner: str) -> dict:
+    """The axes a caller states ({} where none), checked: they replace what a file says."""
+    stated = {}
+    if up_axis is not None:
+        stated["up_axis"] = check_up_axis(up_axis, f"{owner}: up_axis")
+    if meters_per_unit is not None:
+        stated["meters_per_unit"] = check_meters_per_unit(meters_per_unit, f"{owner}: meters_per_unit")
+    return stated
 
 
 def _motion(positions, fps, source) -> Motion:
@@ -114,9 +137,16 @@ def _motion(positions, fps, source) -> Motion:
         raise ValidationError(f"{source}: {exc}") from None
 
 
-def read_clips(path, *, fps=None, allow_outside: bool = False) -> dict[str, SkeletalClip]:
+def read_clips(path, *, fps=None, allow_outside: bool = False, up_axis=None,
+               meters_per_unit=None) -> dict[str, SkeletalClip]:  # fmt: skip
     """Every skeletal clip in a file: glTF (.gltf, .glb: every animation of each skin) or BVH
     (.bvh: the take, named after the file).
+
+    The skeleton reports the file's axes (``Skeleton.up_axis``, ``Skeleton.meters_per_unit``):
+    glTF is y up in metres (its specification); BVH is y up by convention and states no unit
+    (None), often centimetres or inches. `up_axis` and `meters_per_unit` (a number, or a name
+    such as "cm" or "in") state them instead. A crowd places each character with them (see
+    ``flockkit.crowd.Driver``).
 
     Clips keep the file's keys: a glTF clip is made of its channels (``flockkit.Channel``), each
     with its own key times and interpolation (LINEAR, STEP, CUBICSPLINE), and samples as the
@@ -136,6 +166,9 @@ def read_clips(path, *, fps=None, allow_outside: bool = False) -> dict[str, Skel
         its frame rate.
     allow_outside : bool
         Let a glTF file's external buffers lie outside its folder (see docs/security.md).
+    up_axis, meters_per_unit : optional
+        The skeleton's up axis ("x", "y", "z") and metres per unit, where the file's are wrong or
+        missing.
 
     Returns
     -------
@@ -153,6 +186,7 @@ def read_clips(path, *, fps=None, allow_outside: bool = False) -> dict[str, Skel
     path = Path(path)
     if fps is not None:
         fps = validate.number(fps, "read_clips: fps", minimum=0, strict=True)
+    stated = _stated_axes(up_axis, meters_per_unit, "read_clips")
     suffix = path.suffix.lower()
     if suffix == ".bvh":
         names, parents, offsets, frame_time, rotations, translations = bvh.read(path)
@@ -160,6 +194,7 @@ def read_clips(path, *, fps=None, allow_outside: bool = False) -> dict[str, Skel
             names=names,
             parents=parents,
             rest=Pose(rotations=np.tile([0.0, 0, 0, 1], (len(names), 1)), translations=offsets),
+            **{"up_axis": bvh.UP_AXIS, "meters_per_unit": None, **stated},
         )
         # files round the frame time (.0083333 for 120 fps): the rate to 0.01 fps is what was meant
         rate = round(1.0 / frame_time, 2)
@@ -173,8 +208,9 @@ def read_clips(path, *, fps=None, allow_outside: bool = False) -> dict[str, Skel
     found = {}
     for skin, names, parents, translations, rotations, scales, clips in skins:
         skeleton = Skeleton(
-            names=names, parents=parents, rest=Pose(rotations=rotations, translations=translations), scales=scales
-        )
+            names=names, parents=parents, rest=Pose(rotations=rotations, translations=translations), scales=scales,
+            **{"up_axis": gltf.UP_AXIS, "meters_per_unit": gltf.METERS_PER_UNIT, **stated},
+        )  # fmt: skip
         for name, (rate, channels) in clips.items():
             key = f"{skin}/{name}" if len(skins) > 1 else name
             found[key] = SkeletalClip(skeleton=skeleton, fps=rate, channels=channels, name=key)

@@ -16,6 +16,11 @@ import numpy as np
 from .. import _files, rigid, validate
 from ..errors import FileFormatError
 
+# BVH files say nothing of their axes or unit: y up is the format's convention (Biovision's,
+# Blender's importer's), and the unit is unstated (motion-capture exports use centimetres,
+# inches or other scales), so the reader reports no unit and its caller states one.
+UP_AXIS = "y"
+
 _AXES = {"X": (1.0, 0.0, 0.0), "Y": (0.0, 1.0, 0.0), "Z": (0.0, 0.0, 1.0)}
 _CHANNEL = re.compile(r"^([XYZ])(position|rotation)$", re.IGNORECASE)
 

@@ -32,8 +32,15 @@ from .. import _files, rigid, validate
 from .._atomic import atomic_path
 from .._version import __version__
 from ..errors import FileFormatError, ValidationError
+from ..mesh import conversion_matrix
 from ..motion import Motion
 from ..skeleton import Channel, sample_keys
+
+# glTF 2.0, section 3.4: "glTF uses a right-handed coordinate system ... +Y is up ... The units
+# for all linear distances are meters." What every glTF file says of itself, whatever scale its
+# asset was modelled at; a reader's caller states otherwise.
+UP_AXIS = "y"
+METERS_PER_UNIT = 1.0
 
 _COMPONENTS = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32, 5126: np.float32}
 _WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
@@ -919,8 +926,9 @@ def _joint_channels(document: Document, animation: int, index: dict, scales: np.
     return found
 
 
-# glTF is y up and flockkit (like USD here) z up: (x, y, z) -> (x, z, -y), a quarter turn about x
-_Y_UP = np.array([[1.0, 0.0, 0.0], [0.0, 0.0, 1.0], [0.0, -1.0, 0.0]])
+# flockkit's axes (z up, metres) to glTF's (y up, metres): (x, y, z) -> (x, z, -y), the inverse
+# of the conversion a glTF file is read into flockkit's axes with
+_Y_UP = conversion_matrix(UP_AXIS, METERS_PER_UNIT).T
 # the shared agent mesh: an arrow head 0.5 long and 0.3 wide pointing along +x (as the USD cone)
 _ARROW = np.array([[0.25, 0, 0], [-0.25, 0.15, 0], [-0.25, -0.075, 0.13], [-0.25, -0.075, -0.13]], dtype=np.float32)
 _ARROW_FACES = np.array([0, 1, 2, 0, 2, 3, 0, 3, 1, 1, 3, 2], dtype=np.uint16)

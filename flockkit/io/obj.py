@@ -18,6 +18,10 @@ from ..errors import FileFormatError
 
 __all__ = ["read_sequence"]
 
+# An OBJ file says nothing of its axes or unit: y up is the convention of the tools that write
+# sequences (Blender's and Maya's exporters by default); the unit is the caller's to state.
+UP_AXIS = "y"
+
 
 def _natural(path: str):
     return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", Path(path).name)]

@@ -23,7 +23,8 @@ from ..errors import FileFormatError, MissingDependencyError, ValidationError
 from ..mesh import fan_triangles
 from ..motion import Motion
 
-__all__ = ["USD_FPS", "write_usd", "write_meshes", "write_skeletons", "read_meshes", "time_range", "require_usd_core"]
+__all__ = ["USD_FPS", "write_usd", "write_meshes", "write_skeletons", "read_meshes", "stage_axes", "time_range",
+           "require_usd_core"]  # fmt: skip
 
 
 # The frame rate of the time line a USD export is written on, unless asked otherwise: 24, the
@@ -77,13 +78,15 @@ def write_usd(motion: Motion, path, *, fps: float | None = USD_FPS, meters_per_u
 
 
 def write_meshes(path, objects, *, dt: float, n_frames: int, fps: float | None = USD_FPS,
-                 meters_per_unit: float = 1.0) -> None:  # fmt: skip
+                 meters_per_unit: float = 1.0, metadata: dict | None = None) -> None:  # fmt: skip
     """A USD stage of objects under /Scene, each (name, positions (T, N, D), faces (F, K) or None,
-    custom data {key: int}): an animated UsdGeom.Mesh where it has faces, else UsdGeom.Points,
+    custom data {key: value}): an animated UsdGeom.Mesh where it has faces, else UsdGeom.Points,
     its points time-sampled at each of the `n_frames` frames `dt` apart (a 2D object lies in
-    z = 0). The stage as :func:`write_usd` makes it."""
+    z = 0). The stage as :func:`write_usd` makes it, `metadata` (JSON-like) in its root layer's
+    ``customLayerData["flockkit"]``."""
     _, Usd, UsdGeom, Vt = _modules()
-    with _stage(path, "/Scene", dt=dt, n_frames=n_frames, fps=fps, meters_per_unit=meters_per_unit) as (stage, times):
+    with _stage(path, "/Scene", dt=dt, n_frames=n_frames, fps=fps, meters_per_unit=meters_per_unit,
+                metadata=metadata) as (stage, times):  # fmt: skip
         for name, motion_positions, faces, custom in objects:
             prim = UsdGeom.Mesh.Define(stage, name) if faces is not None else UsdGeom.Points.Define(stage, name)
             if faces is not None:
@@ -102,19 +105,20 @@ def write_meshes(path, objects, *, dt: float, n_frames: int, fps: float | None =
 
 
 def write_skeletons(path, *, joints, bind, rest, scales, roots, rotations, translations, fps: float,
-                    meters_per_unit: float = 1.0) -> None:  # fmt: skip
+                    meters_per_unit: float = 1.0, metadata: dict | None = None) -> None:  # fmt: skip
     """A USD stage of agents under /Crowd: /Crowd/Agent_k a UsdSkel.Root whose transform is
     `roots` (F, N, 4, 4) at each frame, holding a Skeleton (`joints` as paths, `bind` model-space
     and `rest` local transforms (J, 4, 4)) bound to a SkelAnimation with the agent's local joint
     `rotations` (F, N, J, 4; x, y, z, w), `translations` (F, N, J, 3) and the fixed `scales`
-    (J, 3). The time line runs at `fps`."""
+    (J, 3). The time line runs at `fps`; `metadata` (JSON-like) goes in the root layer's
+    ``customLayerData["flockkit"]``."""
     Gf, _, _, Vt = _modules()
     from pxr import UsdSkel
 
     frames, agents = roots.shape[:2]
     scales = Vt.Vec3hArray.FromNumpy(np.asarray(scales).astype(np.float16))
-    with _stage(path, "/Crowd", dt=1.0 / fps, n_frames=frames, fps=fps,
-                meters_per_unit=meters_per_unit) as (stage, times):  # fmt: skip
+    with _stage(path, "/Crowd", dt=1.0 / fps, n_frames=frames, fps=fps, meters_per_unit=meters_per_unit,
+                metadata=metadata) as (stage, times):  # fmt: skip
         for agent in range(agents):
             root = UsdSkel.Root.Define(stage, f"/Crowd/Agent_{agent}")
             transform = root.AddTransformOp()
@@ -149,11 +153,13 @@ def _modules():
 
 
 @contextlib.contextmanager
-def _stage(path, root: str, *, dt: float, n_frames: int, fps: float | None = USD_FPS, meters_per_unit: float = 1.0):
+def _stage(path, root: str, *, dt: float, n_frames: int, fps: float | None = USD_FPS, meters_per_unit: float = 1.0,
+           metadata: dict | None = None):  # fmt: skip
     """A new USD stage, saved atomically to `path` on leaving: up axis z, metersPerUnit
     `meters_per_unit`, a time line at `fps` (timeCodesPerSecond = framesPerSecond; None: 1 / dt)
-    over `n_frames` frames `dt` apart, and an Xform `root` as its default prim. Yields (stage,
-    the time code of each frame)."""
+    over `n_frames` frames `dt` apart, an Xform `root` as its default prim, and `metadata` (what
+    flockkit did to the coordinates: plain strings, numbers, lists and dicts) as the root layer's
+    ``customLayerData["flockkit"]``. Yields (stage, the time code of each frame)."""
     _, Usd, UsdGeom, _ = _modules()
     fps = 1.0 / dt if fps is None else validate.number(fps, "USD fps", minimum=0, strict=True)
     meters_per_unit = validate.number(meters_per_unit, "USD meters_per_unit", minimum=0, strict=True)
@@ -167,8 +173,26 @@ def _stage(path, root: str, *, dt: float, n_frames: int, fps: float | None = USD
         stage.SetStartTimeCode(0)
         stage.SetEndTimeCode(float(times[-1]))
         stage.SetDefaultPrim(UsdGeom.Xform.Define(stage, root).GetPrim())
+        if metadata:
+            stage.GetRootLayer().customLayerData = {"flockkit": _plain(metadata)}
         yield stage, times
         stage.GetRootLayer().Save()
+
+
+def _plain(value):
+    """`value` (dicts of strings, numbers, flat lists of numbers or of strings, None) as USD
+    dictionary values: None left out (USD has no null), a list of numbers a double array (row
+    by row for a matrix), a list of strings a string array."""
+    _, _, _, Vt = _modules()
+    if isinstance(value, dict):
+        return {str(k): _plain(v) for k, v in value.items() if v is not None}
+    if isinstance(value, list | tuple | np.ndarray):
+        if all(isinstance(v, str) for v in value):
+            return Vt.StringArray(list(value))
+        return Vt.DoubleArray(np.asarray(value, dtype=np.float64).ravel().tolist())
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
 
 
 def _angular_velocities(velocities: np.ndarray, dt: float) -> np.ndarray:
@@ -249,13 +273,15 @@ def _clip_assets(layer, Sdf) -> list[str]:
     return [f for f in found if f]
 
 
-def read_meshes(path, fps: float, *, allow_outside: bool = False) -> tuple[np.ndarray, np.ndarray]:
-    """(positions (T, V, 3), faces (F, 3)) of every ``UsdGeom.Mesh`` of the stage at `path`, in
-    world space, sampled at `fps` over the stage's time range (polygons split into fans)."""
+def read_meshes(path, fps: float, *, allow_outside: bool = False) -> tuple[np.ndarray, np.ndarray, str, float]:
+    """(positions (T, V, 3), faces (F, 3), up axis, metres per unit) of every ``UsdGeom.Mesh`` of
+    the stage at `path`, in world space, sampled at `fps` over the stage's time range (polygons
+    split into fans), with the stage's axes (:func:`stage_axes`)."""
     from pxr import Usd, UsdGeom
 
     path = Path(path)
     stage = _open(path, allow_outside)
+    up_axis, meters_per_unit = stage_axes(stage, path)
     meshes = [UsdGeom.Mesh(p) for p in stage.Traverse() if p.IsA(UsdGeom.Mesh)]
     if not meshes:
         raise ValidationError(f"{path}: the stage has no UsdGeom.Mesh")
@@ -293,7 +319,23 @@ def read_meshes(path, fps: float, *, allow_outside: bool = False) -> tuple[np.nd
         positions.append(np.stack(frames))
         faces.append(fan_triangles(counts, indices) + count)
         count += positions[-1].shape[1]
-    return np.concatenate(positions, axis=1), np.concatenate(faces)
+    return np.concatenate(positions, axis=1), np.concatenate(faces), up_axis, meters_per_unit
+
+
+def stage_axes(stage, path) -> tuple[str, float]:
+    """(up axis "y" or "z", metres per unit) of an open stage: its upAxis and metersPerUnit
+    metadata, or where it has none USD's fallbacks (UsdGeom: y up unless the installation says
+    otherwise, and 0.01, centimetres). FileFormatError naming the file and the field for a value
+    USD does not allow (an axis other than Y or Z, a unit that is not a finite number above 0)."""
+    from pxr import UsdGeom
+
+    up = stage.GetMetadata("upAxis") if stage.HasAuthoredMetadata("upAxis") else UsdGeom.GetFallbackUpAxis()
+    if str(up) not in (UsdGeom.Tokens.y, UsdGeom.Tokens.z):
+        raise FileFormatError(f"{path}: upAxis must be Y or Z (UsdGeom); got {str(up)[:40]!r}")
+    unit = UsdGeom.GetStageMetersPerUnit(stage)
+    if isinstance(unit, bool) or not isinstance(unit, int | float) or not math.isfinite(unit) or unit <= 0:
+        raise FileFormatError(f"{path}: metersPerUnit must be a finite number above 0; got {str(unit)[:40]!r}")
+    return str(up).lower(), float(unit)
 
 
 def time_range(path, *, allow_outside: bool = False) -> float:

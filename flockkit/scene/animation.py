@@ -6,7 +6,7 @@ from __future__ import annotations
 import attrs
 import numpy as np
 
-from .. import _npzfile
+from .. import _npzfile, validate
 from ..errors import FileFormatError, ValidationError
 from ..graphs import MotionGraph, Walk, played_frames
 from ..io import USD_FPS
@@ -143,7 +143,15 @@ class SceneAnimation:
         """A USD stage (.usda/.usdc): each object under /Scene an animated UsdGeom.Mesh (a template
         with faces) or UsdGeom.Points, its points time-sampled every frame on a time line at `fps`
         (None: 1 / dt), up axis z, metersPerUnit `meters_per_unit`, as flockkit.io.write_usd
-        writes motions. Needs usd-core."""
+        writes motions. Needs usd-core.
+
+        Objects are written where the scene placed them, in flockkit's axes: z up, standing on
+        z = 0, turned about +z. Templates built from a mesh read in another convention (a glTF
+        file is y up) stand upright only if the mesh was converted before it was analysed
+        (``AnimatedMesh.to_flockkit_axes``). The stage's ``customLayerData["flockkit"]``
+        records the axes and each template's height and size in metres; a FlockkitWarning with
+        a hint (``flockkit.mesh.unit_hint``) comes where a template is a size no object
+        plausibly has (a mesh modelled in centimetres and never said to be)."""
         from pathlib import Path
 
         if Path(path).suffix.lower() not in (".usda", ".usdc", ".usd"):
@@ -253,8 +261,23 @@ def _load(path) -> SceneAnimation:
 def _export_usd(animation: SceneAnimation, path, *, fps, meters_per_unit) -> None:
     """Each object an animated UsdGeom.Mesh (a template with faces) or UsdGeom.Points under
     /Scene, on the stage flockkit.io writes motions on."""
-    from ..io.usd import write_meshes
+    import warnings
 
+    from ..errors import FlockkitWarning
+    from ..io.usd import write_meshes
+    from ..mesh import object_size, unit_hint
+
+    unit = validate.number(meters_per_unit, "SceneAnimation.export: meters_per_unit", minimum=0, strict=True)
+    heights, sizes = [], []
+    for k, template in enumerate(animation.templates):
+        source = template_view(template).source
+        heights.append(float(np.ptp(source.positions[..., 2])) * unit if source.dims == 3 else 0.0)
+        sizes.append(object_size(source) * unit)
+        hint = unit_hint(sizes[-1] / unit, unit, f"template {k}")
+        if hint is not None:
+            warnings.warn(f"SceneAnimation.export: {hint}", FlockkitWarning, stacklevel=3)
+    metadata = {"up_axis": "z", "meters_per_unit": unit, "placement": "on the ground z = 0, turned about +z",
+                "template_heights_m": heights, "template_sizes_m": sizes}  # fmt: skip
     width = len(str(animation.placement.n_objects))
     objects = []
     for i, motion in enumerate(animation.motions):
@@ -263,4 +286,4 @@ def _export_usd(animation: SceneAnimation, path, *, fps, meters_per_unit) -> Non
         objects.append((f"/Scene/Object{i:0{width}d}", motion.positions, faces,
                         {"flockkit:template": int(animation.placement.templates[i])}))  # fmt: skip
     write_meshes(path, objects, dt=animation.dt, n_frames=animation.n_frames, fps=fps,
-                 meters_per_unit=meters_per_unit)  # fmt: skip
+                 meters_per_unit=meters_per_unit, metadata=metadata)  # fmt: skip
