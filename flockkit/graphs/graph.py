@@ -5,6 +5,13 @@ A builder chooses transitions, pairs of source frames (leave at `start`, arrive 
 metric's Alignment; :meth:`MotionGraph.assemble` turns them into a graph: every transition frame
 is a node, consecutive nodes are joined by clips (frame ranges of the source), and dead ends are
 trimmed by keeping the largest strongly connected component.
+
+A source that loops (a walk, run or flapping cycle whose first frame follows its last: see
+:func:`loop_period`) gives a *looping* graph (``MotionGraph.period``): its last node's clip plays
+on across the loop to its first node, so a walk goes round the cycle without a transition, and
+blends run across the loop too. On a short cycle, time shifts (:func:`phase_shifts`: transitions
+to a frame a few frames on or back, the same motion sooner or later, hidden by their blend) let
+walks start at any phase and drift out of step with each other.
 """
 
 from __future__ import annotations
@@ -24,9 +31,22 @@ from ..errors import FileFormatError, ValidationError
 from ..motion import DEFAULT_UP, Alignment, Motion, _check_rotation, heading_axes
 from ..validate import integer
 
-__all__ = ["MotionGraph", "Clip", "Transition", "Walk", "turns", "local_minima", "local_minima_of_cells"]
+__all__ = [
+    "MotionGraph",
+    "Clip",
+    "Transition",
+    "Walk",
+    "turns",
+    "loop_period",
+    "phase_shifts",
+    "local_minima",
+    "local_minima_of_cells",
+]
 
-GRAPH_FORMAT_VERSION = 1
+# Files of graphs that loop are version 2 (they hold the period, which version 1 readers would
+# ignore and then misread the clips); other graphs are still written as version 1.
+GRAPH_FORMAT_VERSION = 2
+PLAIN_GRAPH_FORMAT_VERSION = 1
 
 
 @attrs.frozen(kw_only=True)
@@ -36,9 +56,12 @@ class Clip:
     Attributes
     ----------
     source, target : int
-        The nodes it joins: clip k of a MotionGraph joins node k to node k + 1.
+        The nodes it joins: clip k of a MotionGraph joins node k to node k + 1. On a looping graph
+        the last clip joins the last node to node 0.
     start, stop : int
         The source frames of those nodes (``graph.nodes[k]``, ``graph.nodes[k + 1]``), start < stop.
+        The last clip of a looping graph plays on across the loop: its stop is
+        ``graph.nodes[0] + graph.period``, and frame f of it is source frame ``f % period``.
     """
 
     source: int
@@ -245,13 +268,27 @@ class EdgeTables:
     rotation: np.ndarray
     translation: np.ndarray
     assignment: np.ndarray
+    clip_target: np.ndarray
+    shift: np.ndarray
+    out: tuple  # per node, the transitions leaving it, in order
+
+    def leaving(self, node: int) -> tuple:
+        """The transitions leaving `node`, in order."""
+        return self.out[node] if 0 <= node < len(self.out) else ()
 
     @classmethod
     def of(cls, graph) -> EdgeTables:
         t = graph.transitions
+        out = [[] for _ in graph.nodes]
+        for index, x in enumerate(t):
+            if 0 <= x.source < len(out):
+                out[x.source].append(index)
         return cls(
+            out=tuple(tuple(o) for o in out),
             clip_start=np.array([c.start for c in graph.clips], dtype=np.int64),
             clip_stop=np.array([c.stop for c in graph.clips], dtype=np.int64),
+            clip_target=np.array([c.target for c in graph.clips], dtype=np.int64),
+            shift=_shifts(graph),
             transition_source=np.array([x.source for x in t], dtype=np.int64),
             transition_target=np.array([x.target for x in t], dtype=np.int64),
             transition_start=np.array([x.start for x in t], dtype=np.int64),
@@ -273,12 +310,18 @@ class MotionGraph:
     nodes : ndarray of int, shape (K,)
         Source frame of each node, increasing.
     clips : tuple of Clip
-        Clip k joins node k to node k + 1.
+        Clip k joins node k to node k + 1 (on a looping graph, clip K - 1 joins node K - 1 to
+        node 0, across the loop).
     transitions : tuple of Transition
     params : mapping
         The builder's parameters, as JSON values (threshold chosen, candidate stride, ...).
     provenance : mapping
         Metric, builder, flockkit version and seed, as JSON values.
+    period : int, optional
+        For a source that loops, the frames of one cycle: source frame ``period + f`` is frame f
+        (``period`` is the number of frames, or one less where the last frame repeats the first).
+        Nodes lie within the first `period` frames, the last clip plays across the loop and
+        blends may run past the last frame, on from the first. None: the source does not loop.
     """
 
     motion: Motion
@@ -287,6 +330,7 @@ class MotionGraph:
     transitions: tuple = attrs.field(converter=tuple)
     params: Mapping = attrs.field(factory=dict, converter=lambda v: _frozen_json(v, "MotionGraph.params"))
     provenance: Mapping = attrs.field(factory=dict, converter=lambda v: _frozen_json(v, "MotionGraph.provenance"))
+    period: int | None = attrs.field(default=None, converter=lambda v: _period(v))
     _tables: EdgeTables = attrs.field(init=False, repr=False, eq=False)
 
     def __attrs_post_init__(self):
@@ -298,25 +342,50 @@ class MotionGraph:
         """The edges as arrays, for vectorized walking and playback."""
         return self._tables
 
+    @property
+    def loops(self) -> bool:
+        """Whether the source loops (``period`` is set): walks go round it along clips."""
+        return self.period is not None
+
+    @property
+    def shifts(self) -> np.ndarray:
+        """Per transition, the frames by which it shifts time if it is a *phase shift*, else 0.
+
+        A phase shift leads to a frame at most (blend + 1) / 3 frames on (> 0) or back (< 0),
+        counted around the loop on a looping graph, with no rotation, translation or exchange of
+        points: it plays the same motion a little sooner or later, and its smoothstep blend
+        (whose steepest step is 1.5 / (blend + 1) of the jump) hides the jump within half a
+        frame's step. Walks take them to drift in time (paper 002's asynchronous duplicates)."""
+        return self._tables.shift
+
     def _validate(self):
         k, frames = len(self.nodes), self.motion.n_frames
+        if self.period is not None and self.period > frames:
+            raise ValidationError(f"MotionGraph.period must be at most the source's {frames} frames; got {self.period}")
+        last = frames if self.period is None else self.period
         if (
             k < 1
             or self.nodes.ndim != 1
             or np.any(np.diff(self.nodes) <= 0)
             or self.nodes[0] < 0
-            or self.nodes[-1] >= frames
+            or self.nodes[-1] >= last
         ):
             raise ValidationError(
-                f"MotionGraph.nodes must be increasing source frames in 0..{frames - 1}; got {self.nodes}"
+                f"MotionGraph.nodes must be increasing source frames in 0..{last - 1}; got {self.nodes}"
             )
+        expected = _clips(self.nodes, self.period)
         for index, clip in enumerate(self.clips):
-            if (clip.source, clip.target, clip.start, clip.stop) != (index, index + 1, *self.nodes[index : index + 2]):
+            if index < len(expected) and clip != expected[index]:
+                e = expected[index]
                 raise ValidationError(
-                    f"MotionGraph.clips[{index}] must join node {index} to node {index + 1} by their frames"
+                    f"MotionGraph.clips[{index}] must join node {e.source} to node {e.target} by their frames "
+                    f"({e.start}..{e.stop})"
                 )
-        if len(self.clips) != k - 1:
-            raise ValidationError(f"MotionGraph needs {k - 1} clips for {k} nodes; got {len(self.clips)}")
+        if len(self.clips) != len(expected):
+            raise ValidationError(
+                f"MotionGraph needs {len(expected)} clips for {k} nodes{' (looping)' if self.loops else ''}; got "
+                f"{len(self.clips)}"
+            )
         if not self.transitions:
             raise ValidationError("a MotionGraph needs at least one transition; without one there is nothing to walk")
         n, d = self.motion.n_agents, self.motion.dims
@@ -330,7 +399,7 @@ class MotionGraph:
                 raise ValidationError(f"{field}.alignment is not for {n} agents in {d}D")
             if not 0 <= transition.blend < frames:
                 raise ValidationError(f"{field}.blend must be a frame count in 0..{frames - 1}; got {transition.blend}")
-            if transition.start + transition.blend > frames - 1:
+            if self.period is None and transition.start + transition.blend > frames - 1:
                 raise ValidationError(
                     f"{field} leaves frame {transition.start} with a blend of {transition.blend} frames, past the "
                     f"recording's last frame {frames - 1}: the motion it blends away from must go on that long"
@@ -346,6 +415,7 @@ class MotionGraph:
         *,
         params: Mapping | None = None,
         provenance: Mapping | None = None,
+        period: int | None = None,
     ) -> MotionGraph:
         """Build a graph from transitions ``(start_frame, end_frame, alignment, blend)``: nodes at
         every transition frame, clips between consecutive nodes, trimmed to the largest strongly
@@ -353,6 +423,10 @@ class MotionGraph:
         than the longest blend before the last kept frame, or leave less than their blend before the
         recording's end (the motion they blend away from runs out), are dropped (and the trimming
         repeated), so a walk can always continue and be played.
+
+        With `period` (a looping source, see :func:`loop_period`) nothing is trimmed: the clips go
+        round the loop, so every node reaches every other, and blends run on across it; the
+        transitions' frames must lie within the first `period` frames.
 
         Raises ValidationError if no transitions are given (a graph needs at least one loop).
         """
@@ -362,6 +436,23 @@ class MotionGraph:
                 "threshold; raise the threshold or record longer motion"
             )
         transitions = list(transitions)
+        if period is not None:
+            period = _period(period)
+            outside = [(int(s), int(e)) for s, e, _, _ in transitions if not (0 <= s < period and 0 <= e < period)]
+            if outside:
+                raise ValidationError(
+                    f"MotionGraph.assemble: transition {outside[0]} leaves or lands outside the loop's frames "
+                    f"0..{period - 1}"
+                )
+            nodes = np.unique([int(f) for s, e, _, _ in transitions for f in (s, e)])
+            renumber = {int(f): i for i, f in enumerate(nodes)}
+            looping = [
+                Transition(source=renumber[int(s)], target=renumber[int(e)], start=int(s), end=int(e), alignment=a,
+                           blend=int(b))
+                for s, e, a, b in transitions
+            ]  # fmt: skip
+            return cls(motion=motion, nodes=nodes, clips=_clips(nodes, period), transitions=looping, params=params,
+                       provenance=provenance, period=period)  # fmt: skip
         while True:
             nodes = _strongly_connected_frames(transitions)
             last = nodes[-1] if len(nodes) else -1
@@ -395,7 +486,7 @@ class MotionGraph:
     def out_edges(self, node: int) -> list[tuple[str, int]]:
         """Edges leaving `node`: ``("clip", k)`` and ``("transition", k)`` pairs, clips first."""
         edges = [("clip", node)] if node < len(self.clips) else []
-        return edges + [("transition", i) for i, t in enumerate(self.transitions) if t.source == node]
+        return edges + [("transition", i) for i in self._tables.leaving(node)]
 
     def edge_target(self, edge: tuple[str, int]) -> int:
         """The node a walk reaches by taking `edge` (``("clip", k)`` or ``("transition", k)``)."""
@@ -413,11 +504,15 @@ class MotionGraph:
 
     def kept_frames(self) -> int:
         """Source frames that some clip plays."""
+        if self.period is not None:
+            return self.period
         return int(self.nodes[-1] - self.nodes[0] + 1) if len(self.clips) else 1
 
     def stats(self) -> dict:
         """Plain numbers describing the graph; equal graphs give equal dicts."""
-        distances = np.array([t.alignment.distance for t in self.transitions if not t.is_turn])
+        distances = np.array(
+            [t.alignment.distance for t, shift in zip(self.transitions, self.shifts) if not t.is_turn and not shift]
+        )
         lengths = np.array([c.n_frames - 1 for c in self.clips], dtype=float)
         summary = (
             {"min": float(distances.min()), "median": float(np.median(distances)), "max": float(distances.max())}
@@ -430,6 +525,8 @@ class MotionGraph:
             "clips": len(self.clips),
             "transitions": len(self.transitions),
             "turns": sum(t.is_turn for t in self.transitions),
+            "phase_shifts": int(np.count_nonzero(self.shifts)),
+            "period": self.period,
             "source_frames": self.motion.n_frames,
             "frames_kept": self.kept_frames(),
             "fraction_kept": self.kept_frames() / self.motion.n_frames,
@@ -467,6 +564,7 @@ class MotionGraph:
             and self.transitions == other.transitions
             and _thaw(self.params) == _thaw(other.params)
             and _thaw(self.provenance) == _thaw(other.provenance)
+            and self.period == other.period
         )
 
     __hash__ = None
@@ -476,7 +574,9 @@ class MotionGraph:
     def _to_arrays(self) -> dict[str, np.ndarray]:
         """The graph's own arrays (its motion's are written separately)."""
         tables = self.tables
+        looping = {} if self.period is None else {"period": np.array(self.period, dtype=np.int64)}
         return {
+            **looping,
             "nodes": self.nodes,
             "transition_nodes": np.stack([tables.transition_source, tables.transition_target], axis=1).reshape(-1, 2),
             "transition_blend": tables.transition_blend,
@@ -496,6 +596,7 @@ class MotionGraph:
             raise FileFormatError(f"{source}: invalid motion graph: its transition arrays differ in length: {lengths}")
         try:
             nodes = arrays["nodes"]
+            period = int(arrays["period"]) if "period" in arrays else None
             transitions = [
                 Transition(
                     source=int(s),
@@ -507,8 +608,8 @@ class MotionGraph:
                 )
                 for (s, e), blend, dist, assign, rot, shift in zip(*(arrays[name] for name in names))
             ]
-            return cls(motion=motion, nodes=nodes, clips=_clips(nodes), transitions=transitions, params=params,
-                       provenance=provenance)  # fmt: skip
+            return cls(motion=motion, nodes=nodes, clips=_clips(nodes, period), transitions=transitions, params=params,
+                       provenance=provenance, period=period)  # fmt: skip
         except (KeyError, IndexError, TypeError, ValueError, OverflowError) as exc:
             raise FileFormatError(f"{source}: invalid motion graph: {type(exc).__name__}: {exc}") from None
 
@@ -529,12 +630,13 @@ class MotionGraph:
     def save(self, path) -> None:
         """Write the graph and its source motion to one .npz with JSON metadata (atomic)."""
         arrays, metadata = self._payload()
-        _npzfile.write(path, kind="graph", version=GRAPH_FORMAT_VERSION, arrays=arrays, metadata=metadata)
+        version = PLAIN_GRAPH_FORMAT_VERSION if self.period is None else GRAPH_FORMAT_VERSION
+        _npzfile.write(path, kind="graph", version=version, arrays=arrays, metadata=metadata)
 
     @classmethod
     def load(cls, path) -> MotionGraph:
         """Read a graph written by :meth:`save`; FileFormatError naming the file if it is not one."""
-        arrays, header = _npzfile.read(path, kind="graph", versions=(GRAPH_FORMAT_VERSION,))
+        arrays, header = _npzfile.read(path, kind="graph", versions=(PLAIN_GRAPH_FORMAT_VERSION, GRAPH_FORMAT_VERSION))
         return cls._from_payload(arrays, header, path)
 
 
@@ -560,6 +662,82 @@ def turns(motion: Motion, frames, *, angle: float, blend: int) -> list[tuple[int
             turned = Alignment(distance=0.0, assignment=identity, rotation=r, translation=center - r @ center)
             distance = turned.residual(configuration, configuration)
             found.append((frame, frame, attrs.evolve(turned, distance=distance), blend))
+    return found
+
+
+# A seam's step or change of velocity may exceed the recording's own largest by this share and
+# still count as one of its steps (loop_period; our choice: a glTF cycle's closing keyframes are
+# within a few percent, a recording that merely ends near its start is off by far more).
+LOOP_TOLERANCE = 0.25
+
+
+def loop_period(motion: Motion, *, tolerance: float = LOOP_TOLERANCE) -> int | None:
+    """The frames of one cycle if `motion` loops, else None.
+
+    A motion loops with period T (its frame count) when its first frame follows its last as any
+    frame follows the one before: the step across the seam, and the change of velocity on either
+    side of it, are at most (1 + `tolerance`) times the largest step and change of velocity within
+    the motion (every point's, in length units). It loops with period T - 1 when its last frame
+    repeats its first (as a cycle whose closing keyframe equals its opening one does): they are at
+    most `tolerance` times the largest step apart, and the motion runs on from frame T - 2 to
+    frame 0 as smoothly. Where both hold, the smoother seam wins. A motion that never moves, or has
+    fewer than 4 frames, does not loop."""
+    if not isinstance(motion, Motion):
+        raise ValidationError(f"loop_period needs a flockkit.Motion; got {type(motion).__name__}")
+    x = motion.positions
+    frames = len(x)
+    if frames < 4:
+        return None
+
+    def largest(a):
+        return float(np.linalg.norm(a, axis=-1).max())
+
+    step = largest(np.diff(x, axis=0))
+    if step == 0:
+        return None
+    change = largest(x[2:] - 2 * x[1:-1] + x[:-2])
+    allowed_change = (1 + tolerance) * change + 1e-9 * step
+
+    def seam(last: int) -> float:
+        """The larger change of velocity where frame `last` runs on to frame 0."""
+        return max(largest(x[0] - 2 * x[last] + x[last - 1]), largest(x[1] - 2 * x[0] + x[last]))
+
+    found = []
+    if largest(x[0] - x[-1]) <= (1 + tolerance) * step and seam(frames - 1) <= allowed_change:
+        found.append((seam(frames - 1), frames))
+    if frames >= 5 and largest(x[-1] - x[0]) <= tolerance * step and seam(frames - 2) <= allowed_change:
+        found.append((seam(frames - 2), frames - 1))
+    return min(found)[1] if found else None
+
+
+def phase_shifts(motion: Motion, frames, *, sizes, blend: int, period: int | None = None):
+    """Phase shifts leaving source `frames`, as ``(frame, frame + size, alignment, blend)`` for
+    :meth:`MotionGraph.assemble`: for each size in `sizes` (frames on, > 0, or back, < 0), a
+    transition to the same motion that much sooner or later (around the loop, with `period`),
+    blended over `blend` frames. Its alignment is the identity and its distance the mean squared
+    distance between the two configurations. Shifts a blend cannot hide (3 |size| > blend + 1,
+    see MotionGraph.shifts) are refused; on a source that does not loop, shifts whose frames or
+    blend would run past the recording are left out."""
+    sizes = [int(size) for size in sizes]
+    if any(size == 0 or 3 * abs(size) > blend + 1 for size in sizes):
+        raise ValidationError(
+            f"phase_shifts: every size must be non-zero and at most (blend + 1) / 3 = {(blend + 1) / 3:g} frames "
+            f"for its blend to hide it; got {sizes}"
+        )
+    x = motion.positions
+    identity = np.arange(motion.n_agents)
+    found = []
+    for frame in (int(f) for f in frames):
+        for size in sizes:
+            end = frame + size
+            if period is not None:
+                end %= period
+            elif not (0 <= end < motion.n_frames and frame + blend < motion.n_frames):
+                continue
+            distance = float(np.mean(np.sum((x[frame] - x[end]) ** 2, axis=1)))
+            alignment = Alignment(distance=distance, assignment=identity, rotation=np.eye(motion.dims),
+                                  translation=np.zeros(motion.dims))  # fmt: skip
+            found.append((frame, end, alignment, int(blend)))
     return found
 
 
@@ -596,9 +774,41 @@ def local_minima_of_cells(rows, cols, values, far) -> np.ndarray:
     return np.column_stack([rows[minima], cols[minima]])
 
 
-def _clips(nodes) -> list[Clip]:
-    """Clip k joins node k to node k + 1, playing the frames between them."""
-    return [Clip(source=i, target=i + 1, start=int(nodes[i]), stop=int(nodes[i + 1])) for i in range(len(nodes) - 1)]
+def _clips(nodes, period: int | None = None) -> list[Clip]:
+    """Clip k joins node k to node k + 1, playing the frames between them; with `period`, the
+    last joins the last node to the first across the loop."""
+    clips = [Clip(source=i, target=i + 1, start=int(nodes[i]), stop=int(nodes[i + 1])) for i in range(len(nodes) - 1)]
+    if period is not None and len(nodes):
+        clips.append(Clip(source=len(nodes) - 1, target=0, start=int(nodes[-1]), stop=int(nodes[0]) + period))
+    return clips
+
+
+def _period(value) -> int | None:
+    if value is None:
+        return None
+    return integer(value, "MotionGraph.period", minimum=2)
+
+
+def _shifts(graph) -> np.ndarray:
+    """MotionGraph.shifts of `graph` (see there)."""
+    t = graph.transitions
+    if not t:
+        return np.zeros(0, dtype=np.int64)
+    start, end = np.array([x.start for x in t]), np.array([x.end for x in t])
+    blend = np.array([x.blend for x in t])
+    shift = end - start
+    if graph.period is not None:  # around the loop: the nearer way
+        shift = (shift + graph.period // 2) % graph.period - graph.period // 2
+    d, n = graph.motion.dims, graph.motion.n_agents
+    plain = np.array(
+        [
+            np.array_equal(x.alignment.rotation, np.eye(d))
+            and not np.any(x.alignment.translation)
+            and np.array_equal(x.alignment.assignment, np.arange(n))
+            for x in t
+        ]
+    )
+    return np.where(plain & (shift != 0) & (3 * np.abs(shift) <= blend + 1), shift, 0).astype(np.int64)
 
 
 def _strongly_connected_frames(transitions) -> np.ndarray:

@@ -7,7 +7,9 @@ with alignment A (``config(s) ~= A.rotation @ config(e)[A.assignment] + A.transl
 the placement with A, so world positions continue, and maps the correspondence through
 ``A.assignment``, so every output agent keeps one identity: M' = A.assignment[M]. For the
 transition's `blend` frames the old motion (source frames s, s + 1, ...) is blended into the new
-one with a smoothstep weight, so there is no jump in position or velocity.
+one with a smoothstep weight, so there is no jump in position or velocity. On a looping graph
+(``MotionGraph.period``) frames run on across the loop: frame ``period + f`` is frame f, for the
+motion played and for the motion a blend leaves alike.
 
 All frames are placed at once (one flat gather and a rotation applied component by component);
 the only Python loop composes placements, one step per transition taken.
@@ -85,7 +87,8 @@ def _edges(graph: MotionGraph, walk: Walk):
     clip_index = np.where(is_transition, 0, index)
     transition_index = np.where(is_transition, index, 0)
     sources = np.where(is_transition, tables.transition_source[transition_index], clip_index)
-    targets = np.where(is_transition, tables.transition_target[transition_index], clip_index + 1)
+    clip_target = tables.clip_target[clip_index] if len(graph.clips) else clip_index + 1
+    targets = np.where(is_transition, tables.transition_target[transition_index], clip_target)
     reached = np.concatenate([[walk.start], targets[:-1]])
     if np.any(sources != reached):
         bad = int(np.argmax(sources != reached))
@@ -127,6 +130,11 @@ def _runs(starts, lengths) -> np.ndarray:
     return np.arange(lengths.sum()) + np.repeat(np.asarray(starts) - offsets, lengths)
 
 
+def _wrap(graph: MotionGraph, frames: np.ndarray) -> np.ndarray:
+    """Source frames of `graph` for frames counted on across its loop (as they are, if it has none)."""
+    return frames if graph.period is None else frames % graph.period
+
+
 def _blend_rows(blends, n_frames: int):
     """Over each blend that starts within `n_frames` output frames: the output rows, the source
     frames and segments of the motion blended out of, and the weight of the motion blended into
@@ -144,10 +152,11 @@ def played_positions(graph: MotionGraph, walk: Walk, n_frames: int | None = None
     source = graph.motion.positions
     (output_start, source_start, length), rotations, translations, mappings, blends = _plan(graph, walk)
     segment = np.repeat(np.arange(len(length)), length)[:n_frames]
-    positions = _place(source, _runs(source_start, length)[:n_frames], segment, rotations, translations, mappings)
+    frames = _wrap(graph, _runs(source_start, length)[:n_frames])
+    positions = _place(source, frames, segment, rotations, translations, mappings)
     if len(blends[0]):
         rows, old_frames, old_segments, weight = _blend_rows(blends, len(positions))
-        old = _place(source, old_frames, old_segments, rotations, translations, mappings)
+        old = _place(source, _wrap(graph, old_frames), old_segments, rotations, translations, mappings)
         weight = weight[:, None, None]
         positions[rows] = (1 - weight) * old + weight * positions[rows]
     return positions
@@ -164,11 +173,11 @@ def blended_frames(graph: MotionGraph, walk: Walk) -> tuple[np.ndarray, np.ndarr
     first (F,; 1 outside blends)), for playing other data of the source frames (a skeleton's
     poses) as synthesize plays positions. Raises ValidationError as synthesize does."""
     (_, source_start, length), _, _, _, blends = _plan(graph, walk)
-    frames = _runs(source_start, length)
+    frames = _wrap(graph, _runs(source_start, length))
     previous, weight = frames.copy(), np.ones(len(frames))
     if len(blends[0]):
         rows, old_frames, _, blend_weight = _blend_rows(blends, len(frames))
-        previous[rows], weight[rows] = old_frames, blend_weight
+        previous[rows], weight[rows] = _wrap(graph, old_frames), blend_weight
     return frames, previous, weight
 
 
@@ -178,7 +187,7 @@ def played_frames(graph: MotionGraph, walk: Walk) -> tuple[np.ndarray, np.ndarra
     as synthesize does."""
     (_, source_start, length), rotations, _, _, _ = _plan(graph, walk)
     segment = np.repeat(np.arange(len(length)), length)
-    return _runs(source_start, length), rotations[segment]
+    return _wrap(graph, _runs(source_start, length)), rotations[segment]
 
 
 def synthesize_graph(graph: MotionGraph, walk: Walk) -> Motion:

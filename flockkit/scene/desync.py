@@ -1,5 +1,11 @@
 """De-synchronisation (paper 002, section 6.2): how much of the time neighbouring duplicates play
-the same source frames (to within IN_STEP_FRAMES), the share above which one is walked again."""
+the same source frames (to within IN_STEP_FRAMES), the share above which one is walked again.
+
+Frames are compared as numbers. For a part whose graph loops (``MotionGraph.period``), the last
+frame of the cycle and the first are neighbours too: :func:`in_step` and :func:`part_in_step`
+take each part's period and compare around the loop. The scene report keeps the plain
+comparison, as ``SceneAnimation.in_step_share`` makes it; the scene decides whom to walk again,
+and which parts to warn about, around the loop."""
 
 from __future__ import annotations
 
@@ -46,8 +52,27 @@ def pairs_in_step(frames: np.ndarray, neighbours) -> float:
     return float(np.mean([in_step(frames[i], frames[[j]])[0] > MAX_IN_STEP for i, j in zip(first, second)]))
 
 
-def in_step(frames: np.ndarray, others: np.ndarray) -> np.ndarray:
+def in_step(frames: np.ndarray, others: np.ndarray, periods=None) -> np.ndarray:
     """Share of frames on which `frames` (parts, F) and each of `others` (K, parts, F) play source
-    frames at most IN_STEP_FRAMES apart in some part: (K,)."""
-    close = (np.abs(frames[None] - others) <= IN_STEP_FRAMES) & (frames[None] >= 0) & (others >= 0)
-    return close.any(axis=1).mean(axis=1)
+    frames at most IN_STEP_FRAMES apart in some part: (K,). `periods` (one per part, None or 0
+    where a part does not loop) compares around each looping part's cycle."""
+    return _close(frames, others, periods).any(axis=1).mean(axis=1)
+
+
+def part_in_step(frames: np.ndarray, others: np.ndarray, periods=None) -> np.ndarray:
+    """As :func:`in_step`, each part on its own: (K, parts)."""
+    return _close(frames, others, periods).mean(axis=2)
+
+
+def _close(frames, others, periods) -> np.ndarray:
+    """(K, parts, F): whether frames and others play within IN_STEP_FRAMES of each other."""
+    apart = np.abs(frames[None] - others)
+    if periods is not None:
+        cycle = np.zeros(frames.shape[0], dtype=np.int64)  # parts an object lacks play -1: never close
+        given = [p or 0 for p in periods][: len(cycle)]
+        cycle[: len(given)] = given
+        looping = cycle > 0
+        if looping.any():
+            around = np.where(looping, cycle, 1)[None, :, None]
+            apart = np.where(looping[None, :, None], np.minimum(apart % around, around - apart % around), apart)
+    return (apart <= IN_STEP_FRAMES) & (frames[None] >= 0) & (others >= 0)

@@ -3,7 +3,10 @@
 ``GraphLayers`` holds one MotionGraph per part (of a ``Segmentation``) over one source; walking the parts
 independently ("asynchronous transitions") and playing them together gives endless, varied motion
 of the whole object from a short source. Where parts meet on a mesh, the seams are smoothed (see
-:func:`synthesize_layers`).
+:func:`synthesize_layers`). A part whose source is a short cycle (a wing beat, a step) gets a
+looping graph with phase shifts from the windowed builder (``MotionGraph.period``,
+``MotionGraph.shifts``), so its walks start at any phase and waver in time: duplicates play it
+out of step, and no stretch of it repeats exactly.
 
 A mesh whose file holds one point of the surface as several vertices (split where normals or
 texture coordinates change, or a triangle soup whose triangles share no vertex) is welded
@@ -37,7 +40,10 @@ __all__ = [
     "part_motion",
 ]
 
-LAYERS_FORMAT_VERSION = 1
+# Files of layers with a looping graph (MotionGraph.period) are version 2, which version 1
+# readers would misread; other layers are still written as version 1.
+LAYERS_FORMAT_VERSION = 2
+PLAIN_LAYERS_FORMAT_VERSION = 1
 # Rings of mesh neighbors around a seam whose displacements are smoothed, and the smoothing
 # passes (our choice; on the Fox's minute, its copies of each vertex welded, seam edges stretch
 # 0.017 on average and 0.52 at most, against 0.019 and 0.47 unsmoothed, and 0.016 and 0.44 with 2
@@ -180,12 +186,16 @@ class GraphLayers:
     def save(self, path) -> None:
         """Write the source, the segmentation, the faces and every part's graph to one .npz (atomic)."""
         arrays, metadata = self._payload()
-        _npzfile.write(path, kind="layers", version=LAYERS_FORMAT_VERSION, arrays=arrays, metadata=metadata)
+        looping = any(graph.loops for graph in self.graphs)
+        version = LAYERS_FORMAT_VERSION if looping else PLAIN_LAYERS_FORMAT_VERSION
+        _npzfile.write(path, kind="layers", version=version, arrays=arrays, metadata=metadata)
 
     @classmethod
     def load(cls, path) -> GraphLayers:
         """Read a file written by :meth:`save`; FileFormatError naming the file if it is not one."""
-        arrays, header = _npzfile.read(path, kind="layers", versions=(LAYERS_FORMAT_VERSION,))
+        arrays, header = _npzfile.read(
+            path, kind="layers", versions=(PLAIN_LAYERS_FORMAT_VERSION, LAYERS_FORMAT_VERSION)
+        )
         return cls._from_payload(arrays, header, path)
 
 

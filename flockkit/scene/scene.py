@@ -5,7 +5,11 @@ uniformly, each with a random heading and scale, so that no two footprints (the 
 boxes of their placed outlines) overlap. Each object's parts then walk their graphs with a walk
 strategy that follows the object's target arrows (by default ``annotated``: the paper's E = C_T
 + alpha C_C + beta N_T), and neighbouring duplicates that play the same source frames at the
-same time are walked again, avoiding each other's frames, until they differ (section 6.2).
+same time are walked again, avoiding each other's frames, until they differ (section 6.2). A part
+that still plays in step with a neighbour's on more than MAX_IN_STEP of frames afterwards gets a
+``flockkit.errors.FlockkitWarning`` naming the template and the part: its graph leaves too few
+ways to differ (a short cycle without phase shifts, or more close neighbours than its cycle has
+phases to give them).
 
 Objects stand on the ground plane: a template's center (its mean center of mass) is placed at
 the object's position, turned by its heading about the up axis (+z) and scaled; a 2D template
@@ -16,17 +20,18 @@ target turned into its own (the template's) coordinates.
 from __future__ import annotations
 
 import math
+import warnings
 
 import attrs
 import numpy as np
 
-from ..errors import ValidationError
+from ..errors import FlockkitWarning, ValidationError
 from ..graphs import walk_parts
 from ..regions import Polygon
 from ..registry import require
 from ..validate import integer, number
 from .animation import SceneAnimation
-from .desync import IN_STEP_FRAMES, MAX_IN_STEP, in_step, largest_in_step, pairs_in_step, stacked
+from .desync import IN_STEP_FRAMES, MAX_IN_STEP, in_step, largest_in_step, pairs_in_step, part_in_step, stacked
 from .features import Features
 from .flow import Arrow, FlowField, SelfMovement, flow_constraints
 from .placement import PLACEMENT_TRIES, Placement, heading_turn, turned_half
@@ -263,6 +268,7 @@ class Scene:
             frames, neighbours = stacked(played, self.n_frames), animation.neighbours()
             before, pairs_before = largest_in_step(frames, neighbours), pairs_in_step(frames, neighbours)
             walks = self._desynchronise(animation, targets, seeds, frames, neighbours, report)
+        self._warn_in_step(placement, frames, neighbours)
         report = {"in_step_before": before, "in_step_after": largest_in_step(frames, neighbours),
                   "pairs_in_step_before": pairs_before, "pairs_in_step_after": pairs_in_step(frames, neighbours),
                   "in_step_frames": IN_STEP_FRAMES}  # fmt: skip
@@ -291,22 +297,70 @@ class Scene:
         """Section 6.2: each object in step with a neighbour on more than MAX_IN_STEP of its frames
         is walked again avoiding its neighbours' frames. They go in rounds of objects no two of
         which are neighbours (a greedy colouring, in object order), each round in parallel and
-        seeing the walks of the rounds before; `frames` (animation.source_frames()) is kept up
-        to date."""
+        seeing the walks of the rounds before; an object avoids the neighbours that keep their
+        walks and those walked again in earlier rounds, not those of later rounds, which avoid it
+        in turn (so it keeps room to vary). `frames` (animation.source_frames()) is kept up to
+        date."""
         walks = list(animation.walks)
-        need = [i for i, nb in enumerate(near) if len(nb) and in_step(frames[i], frames[nb]).max() > MAX_IN_STEP]
+        periods = self._periods(animation.placement)
+        need = [i for i, nb in enumerate(near)
+                if len(nb) and in_step(frames[i], frames[nb], periods[i]).max() > MAX_IN_STEP]  # fmt: skip
         colour = {}
         for i in need:
             taken = {colour[j] for j in near[i] if j in colour}
             colour[i] = next(c for c in range(len(need) + 1) if c not in taken)
         for c in range(max(colour.values(), default=-1) + 1):
             members = [i for i in need if colour[i] == c]
-            items = [(i, targets[i], int(seeds[i].generate_state(2)[1]), frames[near[i]]) for i in members]
+            settled = [near[i][[colour.get(int(j), -1) < c for j in near[i]]] for i in members]
+            items = [(i, targets[i], int(seeds[i].generate_state(2)[1]), frames[own] if len(own) else None)
+                     for i, own in zip(members, settled)]  # fmt: skip
             again, played = self._walk_many(animation.placement, items, report, f"out of step ({c + 1})")
             for i, walk, own in zip(members, again, played):
                 walks[i] = walk
                 frames[i, : len(own)] = own
         return walks
+
+    def _periods(self, placement: Placement) -> list:
+        """Each object's parts' periods (MotionGraph.period: None for a part that does not loop)."""
+        own = [[g.period for g in template_view(t).graphs] for t in self.templates]
+        return [own[kind] for kind in placement.templates]
+
+    def _warn_in_step(self, placement: Placement, frames, near) -> None:
+        """A FlockkitWarning for each template part that a pair of neighbours still plays in step
+        on more than MAX_IN_STEP of frames (around the loop, for a looping part), naming it, the
+        pairs and what its graph offers."""
+        periods = self._periods(placement)
+        stuck = {}  # (template, part) -> pairs in step
+        for i, nb in enumerate(near):
+            later = nb[nb > i]
+            if not len(later):
+                continue
+            shares = part_in_step(frames[i], frames[later], periods[i])  # (neighbours, parts)
+            kind = int(placement.templates[i])
+            for part in np.flatnonzero((shares > MAX_IN_STEP).any(axis=0)):
+                stuck[kind, int(part)] = stuck.get((kind, int(part)), 0) + int(np.sum(shares[:, part] > MAX_IN_STEP))
+        pairs = sum(len(nb) for nb in near) // 2
+        for (kind, part), count in sorted(stuck.items()):
+            graph = template_view(self.templates[kind]).graphs[part]
+            shifts = int(np.count_nonzero(graph.shifts))
+            ordinary = len(graph.transitions) - shifts
+            if graph.period is not None and shifts:
+                members = np.flatnonzero(placement.templates == kind)
+                crowd = max((len(near[i]) for i in members), default=0)
+                why = (f"its graph loops over {graph.period} frames with {shifts} phase shifts, too few phases to "
+                       f"keep up to {crowd} close neighbours out of step: place the objects farther apart or use "
+                       f"fewer")  # fmt: skip
+            else:
+                why = (f"its graph has {ordinary} transition{'s' * (ordinary != 1)} and {shifts} phase shifts over "
+                       f"{graph.kept_frames()} frames: build the layers from a longer source, or with phase shifts "
+                       f"(the windowed builder adds them to sparse graphs unless shift_blend=0)")  # fmt: skip
+            warnings.warn(
+                f"Scene: template {kind} part {part} still plays in step with a neighbour (source frames at most "
+                f"{IN_STEP_FRAMES} apart) on more than {MAX_IN_STEP:.0%} of frames for {count} of {pairs} neighbour "
+                f"pairs after de-synchronisation: {why}",
+                FlockkitWarning,
+                stacklevel=3,
+            )
 
 
 def _walk_batch(scene: Scene, placement: Placement, items) -> list:

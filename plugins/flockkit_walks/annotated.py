@@ -9,6 +9,16 @@ The walk minimizes E = C_T + alpha C_C + beta N_T over the output frames it must
   mismatch of 0.1 for one second costs 0.1, whatever the frame rate);
 - N_T, the number of transitions.
 
+Phase shifts (``MotionGraph.shifts``: a transition to the same motion a frame or two sooner or
+later, which its blend hides, as a builder adds to a short cycle) are neither in C_T nor in N_T:
+they keep the motion continuous and only let its timing drift. Where one is allowed, the initial
+pass prefers a phase shift it has not taken yet to going straight on or to one it has taken (each
+of those costs `vary` more), so that a short cycle wavers in time without playing any blend
+twice, while it can; it keeps within `drift` frames of the timing it started with, so that walks
+started out of step stay so, and the target and the walks to avoid still come first. With walks
+to avoid, a drifting walk's start is judged over its whole length, and being in step counts over
+the next two blends only: after a blend it may shift away again.
+
 An initial pass starts where the source's arrows meet the first target (a random node among
 those that do), then takes, at each node, the edge whose next two seconds best follow the target
 (those within TIE of the best chosen among at random). Then repeated subsequence replacement
@@ -134,6 +144,14 @@ class AnnotatedWalk:
         002, section 6.2).
     in_step : float
         The error of a frame in step with an avoided walk (default 1).
+    vary : float
+        Where a phase shift not taken yet is allowed, the extra cost of going straight on or of
+        taking a phase shift taken before, in the initial pass (default 0.5: above its random
+        tie-break, below one frame in step with an avoided walk).
+    drift : int
+        Frames at most by which the initial pass's phase shifts move the walk's timing from its
+        start's, either way (default 2): its timing wavers, but a walk started out of step with
+        its neighbours stays so.
     """
 
     # takes target, features and avoid: the walks a flockkit.Scene makes
@@ -150,6 +168,8 @@ class AnnotatedWalk:
     start: int | None = validate.parameter("annotated", default=None, kind="integer", minimum=0, optional=True)
     avoid: np.ndarray | None = attrs.field(default=None, converter=_avoid, eq=attrs.cmp_using(eq=_same_array))
     in_step: float = validate.parameter("annotated", default=1.0, minimum=0)
+    vary: float = validate.parameter("annotated", default=0.5, minimum=0)
+    drift: int = validate.parameter("annotated", default=2, kind="integer", minimum=0)
 
     def walk(self, graph: flockkit.MotionGraph, rng: np.random.Generator, duration: float) -> flockkit.Walk:
         problem = _Problem(self, graph, duration)
@@ -204,8 +224,10 @@ class _Path:
         clips = [k for k, (kind, _) in enumerate(edges) if kind == "clip"]
         lengths = problem.clip_frames[[edges[k][1] for k in clips]]
         first = problem.nodes[[edges[k][1] for k in clips]]
-        self.frames = np.append(np.repeat(first - np.cumsum(lengths) + lengths, lengths) + np.arange(lengths.sum()),
-                                problem.nodes[self.node[-1]])  # fmt: skip
+        self.frames = problem.wrap(
+            np.append(np.repeat(first - np.cumsum(lengths) + lengths, lengths) + np.arange(lengths.sum()),
+                      problem.nodes[self.node[-1]])
+        )  # fmt: skip
         self.played = problem.features[self.frames]
         if problem.rotating:
             rotations = np.stack([self.rotation[k] for k in clips] + [self.rotation[-1]])
@@ -216,10 +238,13 @@ class _Path:
         self.error[:n] = problem.frame_error(self.played[:n], self.frames[:n], 0)
         # each edge's share of C_T + beta N_T, and its running sum (what pick weighs stretches by)
         self.edge_cost = np.array(
-            [problem.trans_cost[i] + problem.beta if k == "transition" else 0.0 for k, i in edges]
+            [
+                problem.trans_cost[i] + problem.beta * (not problem.shift[i]) if k == "transition" else 0.0
+                for k, i in edges
+            ]  # fmt: skip
         )
         self.running_cost = np.concatenate([[0.0], np.cumsum(self.edge_cost)])
-        taken = [index for kind, index in edges if kind == "transition"]
+        taken = [index for kind, index in edges if kind == "transition" and not problem.shift[index]]
         self.c_t = float(problem.trans_cost[taken].sum())
         self.n_t = len(taken)
 
@@ -248,22 +273,25 @@ class _Shared:
         self.trans_target = tables.transition_target
         self.trans_source = tables.transition_source
         self.rotating = len(graph.transitions) > 0 and not np.allclose(tables.rotation, np.eye(dims))
+        self.period, self.shift, self.clip_target = graph.period, tables.shift, tables.clip_target
         distance = np.array([t.alignment.distance for t in graph.transitions])
-        ordinary = [t.alignment.distance for t in graph.transitions if not t.is_turn]
+        ordinary = [t.alignment.distance for t, s in zip(graph.transitions, self.shift) if not t.is_turn and not s]
         scale = float(np.median(ordinary)) if ordinary else 0.0
         self.trans_cost = distance / scale if scale > 0 else np.zeros(len(distance))
+        self.trans_cost[self.shift != 0] = 0.0  # phase shifts keep the motion continuous: no C_T, no N_T
         self.longest = int(tables.transition_blend.max()) if len(graph.transitions) else 0
         self.out = [[] for _ in self.nodes]
         for index, t in enumerate(graph.transitions):
             self.out[t.source].append(index)
+        self.n_clips = len(graph.clips)
         # per node: its edges (the clip first, if any), the node each looks ahead from (a clip
         # goes straight on from here) and its fixed cost (C_T + beta for a transition)
         self.choices = []
         for node, out in enumerate(self.out):
-            clip = [("clip", node)] if node < len(self.nodes) - 1 else []
+            clip = [("clip", node)] if node < self.n_clips else []
             edges = clip + [("transition", i) for i in out]
             targets = np.array([node] * len(clip) + [int(self.trans_target[i]) for i in out], dtype=np.int64)
-            fixed = np.array([0.0] * len(clip) + [self.trans_cost[i] + beta for i in out])
+            fixed = np.array([0.0] * len(clip) + [self.trans_cost[i] + beta * (not self.shift[i]) for i in out])
             self.choices.append((edges, targets, fixed))
         self._memos = {}
 
@@ -326,6 +354,12 @@ class _Problem:
             shared.trans_source,
         )
         self.rotating, self.out, self.choices = shared.rotating, shared.out, shared.choices
+        self.period, self.shift, self.n_clips = shared.period, shared.shift, shared.n_clips
+        self.clip_target = shared.clip_target
+        self.vary, self.drift = strategy.vary, strategy.drift
+        # frames ahead over which being in step with an avoided walk counts: with phase shifts, two
+        # blends (after one, the walk may shift away again); without, the whole look-ahead
+        self.react = 2 * self.longest if self.shift.any() else None
         self.segment_frames = max(2, round(strategy.segment / self.dt))
         self.threshold = strategy.threshold
         # frames played straight on from each node over the next two seconds or the longest clip
@@ -334,7 +368,10 @@ class _Problem:
         # options whose look-ahead costs within a mean arrow error of TIE of the best's are
         # chosen among at random, so duplicates following one target do not all play alike
         self.noise = TIE * self.alpha * self.dt * self.ahead
-        self.straight = np.minimum(self.nodes[:, None] + np.arange(self.ahead), self.nodes[-1])
+        if self.period is None:
+            self.straight = np.minimum(self.nodes[:, None] + np.arange(self.ahead), self.nodes[-1])
+        else:  # round the loop
+            self.straight = (self.nodes[:, None] + np.arange(self.ahead)) % self.period
         self._check_reach(strategy.reach)
         self.start = strategy.start
         # runs of output frames with one target arrow: an error over a window inside a run does
@@ -353,12 +390,19 @@ class _Problem:
                 f"walk parameter avoid covers {self.avoid.shape[1]} frames; the walk needs {self.needed}"
             )
 
-    def in_step_frames(self, frames, t) -> np.ndarray:
+    def wrap(self, frames: np.ndarray) -> np.ndarray:
+        """Source frames for frames counted on across the loop of a looping graph."""
+        return frames if self.period is None else frames % self.period
+
+    def in_step_frames(self, frames, t, within: int = 1) -> np.ndarray:
         """Whether each of `frames` (..., m: source frames played from output frame t on) is
-        within one source frame of an avoided walk's."""
+        within `within` source frames of an avoided walk's (around the loop, on a looping graph)."""
         others = self.avoid[:, t : t + frames.shape[-1]]
         others = others.reshape(len(others), *[1] * (frames.ndim - 1), -1)
-        return np.any((others >= 0) & (np.abs(others - frames) <= 1), axis=0)
+        apart = np.abs(others - frames)
+        if self.period is not None:
+            apart = np.minimum(apart, self.period - apart % self.period)
+        return np.any((others >= 0) & (apart <= within), axis=0)
 
     def frame_error(self, played, frames, t) -> np.ndarray:
         """Per output frame from t: the feature error, plus in_step where in step with an avoided walk."""
@@ -375,8 +419,9 @@ class _Problem:
                 return np.linalg.norm(vectors, axis=1, keepdims=True)
             return np.column_stack([np.linalg.norm(vectors[:, :2], axis=1), vectors[:, 2]])
 
-        first = int(self.nodes[0])  # the frames the graph plays: its kept part of the source
-        closest, index = cKDTree(shape(self.features[first : int(self.nodes[-1]) + 1])).query(shape(self.track))
+        # the frames the graph plays: its kept part of the source, or the whole loop
+        first, last = (int(self.nodes[0]), int(self.nodes[-1])) if self.period is None else (0, self.period - 1)
+        closest, index = cKDTree(shape(self.features[first : last + 1])).query(shape(self.track))
         index = index + first
         worst = int(np.argmax(closest))
         if closest[worst] > reach:
@@ -395,7 +440,7 @@ class _Problem:
         node, t, since, rotation = state
         kind, index = edge
         if kind == "clip":
-            return node + 1, t + self.clip_frames[index], since + self.clip_frames[index], rotation
+            return int(self.clip_target[index]), t + self.clip_frames[index], since + self.clip_frames[index], rotation
         turned = rotation @ self.trans_rotation[index] if self.rotating else rotation
         return self.trans_target[index], t, 0, turned
 
@@ -409,7 +454,8 @@ class _Problem:
             played = np.einsum("kij,khj->khi", rotations, played)
         error = np.linalg.norm(played - track, axis=2)
         if self.avoid is not None:
-            error += self.in_step * self.in_step_frames(frames, t)
+            react = self.react
+            error[:, :react] += self.in_step * self.in_step_frames(frames[:, :react], t)
         return error.sum(axis=1) * self.dt
 
     def initial(self, rng) -> _Path:
@@ -418,26 +464,27 @@ class _Problem:
                 raise ValidationError(f"walk start must be a node index in 0..{len(self.nodes) - 1}; got {self.start}")
             node = self.start
         else:
-            # nodes whose next two seconds stay within 0.1 (mean arrow error) of the best start
-            cost = self._lookahead(np.arange(len(self.nodes)), None, 0) / (self.ahead * self.dt)
-            good = np.flatnonzero(cost <= cost.min() + 0.1)
-            node = int(rng.choice(good))
-        start, edges = node, []
+            node = self._start(rng)
+        start, edges, shifted, drifted = node, [], set(), 0
         state = (node, 0, math.inf, np.eye(self.dims))
         while state[1] < self.needed:
             node, t, since, rotation = state
-            edges_here, targets, fixed = self.choices[node]
+            all_edges, all_targets, all_fixed = self.choices[node]
             if since < self.longest:  # no transition until the last blend has played out: the clip alone
-                keep = 1 if node < len(self.nodes) - 1 else 0
-                edges_here, targets, fixed = edges_here[:keep], targets[:keep], fixed[:keep]
-            if not edges_here:
+                keep = [0] if node < self.n_clips else []
+            else:  # phase shifts only while they keep the timing within `drift` frames of the start's
+                keep = [k for k, (kind, i) in enumerate(all_edges)
+                        if kind == "clip" or abs(drifted + self.shift[i]) <= self.drift]  # fmt: skip
+            if not keep:
                 raise ValidationError(
                     f"annotated walk: node {node} has no edge to take {since} frames after a transition"
                 )
+            edges_here = [all_edges[k] for k in keep]
             if len(edges_here) == 1:
                 rng.random(1)  # the draw a choice among several would take, so the stream stays the same
                 edge = edges_here[0]
             else:
+                targets, fixed = all_targets[keep], all_fixed[keep]
                 if self.rotating:
                     rotations = np.stack(
                         [rotation if kind == "clip" else rotation @ self.trans_rotation[i] for kind, i in edges_here]
@@ -445,14 +492,48 @@ class _Problem:
                     cost = self.alpha * self._lookahead(targets, rotations, t) + fixed
                 else:  # remembered per node, choices and target window, as clip errors are
                     memo, window = self._memo(t, self.ahead)
-                    key = ("ahead", node, len(edges_here), window)
+                    key = ("ahead", node, len(all_edges), window)
                     if key not in memo:
-                        memo[key] = self.alpha * self._lookahead(targets, None, t) + fixed
-                    cost = memo[key]
+                        memo[key] = self.alpha * self._lookahead(all_targets, None, t) + all_fixed
+                    cost = memo[key][keep]
+                cost = cost + self._monotony(edges_here, shifted)
                 edge = edges_here[int(np.argmin(cost + self.noise * rng.random(len(cost))))]
+                if edge[0] == "transition" and self.shift[edge[1]]:
+                    shifted.add(edge[1])
+                    drifted += int(self.shift[edge[1]])
             edges.append(edge)
             state = self.step(state, edge)
         return self.path(start, edges)
+
+    def _start(self, rng) -> int:
+        """A random node among those whose next two seconds stay within 0.1 (mean arrow error) of
+        the best start; with walks to avoid, among those that play in step with them on the
+        fewest of those frames (on a looping graph with phase shifts, of the whole walk, played
+        straight on) and, with phase shifts, of those, come within 2 `drift` + 1 frames of them
+        (where the drifts of both could bring them in step) on the fewest."""
+        nodes = np.arange(len(self.nodes))
+        frames = self.straight[nodes][:, : len(self.track)]
+        played = self.features[frames]
+        cost = np.linalg.norm(played - self.track[: frames.shape[1]], axis=2).sum(axis=1) / self.ahead
+        if self.avoid is not None:
+            frames_on = frames
+            if self.period is not None and self.shift.any():
+                # a drifting walk keeps within `drift` frames of going straight on: judge its whole length
+                frames_on = (self.nodes[:, None] + np.arange(self.needed)) % self.period
+            for within in (1, 2 * self.drift + 1) if self.shift.any() else (1,):
+                near = self.in_step_frames(frames_on, 0, within).sum(axis=1)
+                near = np.where(np.isfinite(cost), near, np.iinfo(np.int64).max)
+                cost = np.where(near == near.min(), cost, np.inf)
+        good = np.flatnonzero(cost <= cost.min() + 0.1)
+        return int(rng.choice(good))
+
+    def _monotony(self, edges, shifted) -> np.ndarray | float:
+        """`vary` on each of `edges` that goes straight on or takes a phase shift in `shifted`
+        (taken before), where one of them is a phase shift not taken yet; else 0."""
+        fresh = [kind == "transition" and bool(self.shift[i]) and i not in shifted for kind, i in edges]
+        if not any(fresh):
+            return 0.0
+        return self.vary * ~np.array(fresh)
 
     def pick(self, path: _Path, rng, tried):
         """A stretch (first edge, edge after it) whose share of E per second exceeds the
@@ -509,7 +590,7 @@ class _Problem:
             if since >= self.longest and n_trans < self.MAX_TRANSITIONS:
                 for index in self.out[node]:
                     turned = rotation @ self.trans_rotation[index] if self.rotating else rotation
-                    extra = self.trans_cost[index] + self.beta
+                    extra = self.trans_cost[index] + self.beta * (not self.shift[index])
                     stack.append(
                         (
                             self.trans_target[index],
@@ -521,12 +602,12 @@ class _Problem:
                             cost + extra,
                         )  # fmt: skip
                     )
-            if node < len(self.nodes) - 1:
+            if node < self.n_clips:
                 n = self.clip_frames[node]
                 error = self._clip_error(node, t0 + frames, rotation)
                 stack.append(
                     (
-                        node + 1,
+                        int(self.clip_target[node]),
                         since + n,
                         rotation,
                         frames + n,
@@ -557,11 +638,12 @@ class _Problem:
         if not self.rotating and key in memo:
             return memo[key]
         n = self.clip_frames[node]
-        played = self.features[self.nodes[node] : self.nodes[node] + n]
+        frames = self.wrap(self.nodes[node] + np.arange(n))
+        played = self.features[frames]
         if self.rotating:
             played = played @ rotation.T
         hi = min(t + n, self.needed)
-        source = np.arange(self.nodes[node], self.nodes[node] + max(hi - t, 0))
+        source = frames[: max(hi - t, 0)]
         error = float(self.frame_error(played[: len(source)], source, t).sum())
         if not self.rotating:
             memo[key] = error

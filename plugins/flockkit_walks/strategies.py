@@ -46,6 +46,11 @@ def _frames_of(graph, edge) -> int:
     return graph.clips[edge[1]].n_frames - 1 if edge[0] == "clip" else 0
 
 
+def _source(graph, frames):
+    """Source frames for frames counted on across the loop of a looping graph (MotionGraph.period)."""
+    return frames if graph.period is None else frames % graph.period
+
+
 def _is_turn(graph, edge) -> bool:
     return edge[0] == "transition" and graph.transitions[edge[1]].is_turn
 
@@ -188,7 +193,10 @@ class _Steer:
         points = []
         for edge in options:
             r, t = _advance(self.graph, edge, rotation, translation)
-            frame = self.graph.clips[edge[1]].stop if edge[0] == "clip" else self.graph.transitions[edge[1]].end
+            if edge[0] == "clip":
+                frame = _source(self.graph, self.graph.clips[edge[1]].stop)
+            else:
+                frame = self.graph.transitions[edge[1]].end
             points.append(r @ (self.com[frame] + self.ahead * self.velocity[frame]) + t)
         inside = -self.region.signed_distance(np.array(points)) / self.depth  # 1 deep inside, < 0 outside
         turn = np.array([_is_turn(self.graph, edge) for edge in options])
@@ -258,7 +266,7 @@ class _Search:
             clip = graph.clips[edge[1]]
             # the edge decided on is played whole, so it is checked whole, however long
             end = clip.stop if ahead == 0 else min(clip.stop, clip.start + self.horizon - ahead)
-            frames = np.arange(clip.start + 1, end + 1)
+            frames = _source(graph, np.arange(clip.start + 1, end + 1))
             if not np.all(self.region.contains(self.com[frames] @ rotation.T + translation)):
                 return False
             ahead += len(frames)
@@ -267,7 +275,7 @@ class _Search:
             # A blend mixes the old motion's continuation in: check it too (inside a convex
             # region, a blend of two inside points stays inside).
             transition = graph.transitions[edge[1]]
-            frames = np.arange(transition.start, transition.start + transition.blend)
+            frames = _source(graph, np.arange(transition.start, transition.start + transition.blend))
             if not np.all(self.region.contains(self.com[frames] @ rotation.T + translation)):
                 return False
             rotation, translation = _advance(graph, edge, rotation, translation)

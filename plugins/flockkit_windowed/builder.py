@@ -31,6 +31,16 @@ the window's terms up to the transition and D_post the mean from it on, the blen
 shortened by D_pre / D_post when they grow apart, for a long blend would then mix increasingly
 different poses; it is at least `min_blend` frames, and never runs past the end of the recording
 (the old motion must exist to be blended), so a transition from the last frame is a cut.
+
+A source that loops (``flockkit.graphs.loop_period``: a walk, run or flapping cycle whose first
+frame follows its last) is compared around the loop: windows, velocities, the gap and blends
+wrap, so transitions are found anywhere within the cycle, and the graph loops
+(``MotionGraph.period``): a walk plays round the cycle along clips, with no cut back to its
+first frame. Where the graph is too sparse to vary (fewer than `min_transitions` transitions a
+blend can hide, as a short cycle, which has none, gives), phase shifts are added
+(``flockkit.graphs.phase_shifts``): from every frame (at most SHIFT_NODES of them, evenly
+spread), transitions to the frame 1 or 2 frames on and back, blended over `shift_blend` seconds,
+so that walks start at any phase, drift in time and play out of step with each other.
 """
 
 from __future__ import annotations
@@ -44,6 +54,14 @@ import numpy as np
 import flockkit
 from flockkit import validate
 from flockkit.errors import ValidationError
+
+# Phase shifts of 1 and 2 frames each way (at most: their blend must hide them, 3 |shift| <=
+# blend + 1). Our choice: with 0.6 s blends at 30 fps a 42-frame cycle gets 168 of them, so that a
+# minute of drifting plays no blend twice, and the timing wavers by at most 16%.
+SHIFT_SIZES = (1, 2)
+# Frames that phase shifts leave from at most, evenly spread over the kept frames (our choice: a
+# cycle of up to 128 frames gets them at every frame; longer sparse recordings, fewer).
+SHIFT_NODES = 128
 
 
 @attrs.frozen(kw_only=True)
@@ -64,6 +82,10 @@ class Windowed:
         Longest blend, in seconds.
     min_blend : int
         Shortest blend, in frames.
+    loops : bool
+        Treat a source that loops (``flockkit.graphs.loop_period``) as a loop (module docstring).
+    shift_blend : float
+        Blend of the phase shifts added to a sparse graph, in seconds; 0: none.
     """
 
     window: int = validate.parameter("windowed", default=2, kind="integer", minimum=0)
@@ -75,6 +97,8 @@ class Windowed:
     transitions_per_minute: float = validate.parameter("windowed", default=60.0, minimum=0)
     blend_time: float = validate.parameter("windowed", default=0.3, minimum=0)
     min_blend: int = validate.parameter("windowed", default=2, kind="integer", minimum=0)
+    loops: bool = validate.parameter("windowed", default=True, kind="flag")
+    shift_blend: float = validate.parameter("windowed", default=0.6, minimum=0)
 
     def build(self, motion: flockkit.Motion, metric, rng: np.random.Generator) -> flockkit.MotionGraph:
         """The motion graph of `motion` (deterministic; the metric and `rng` are not used: the
@@ -86,20 +110,28 @@ class Windowed:
             raise ValidationError(
                 f"windowed: a motion of {frames} frames has no transition to find; it needs 3 or more"
             )
-        total, pre, post = self.costs(motion)
-        blends = self.blends(motion, pre, post)
+        period = flockkit.graphs.loop_period(motion) if self.loops else None
+        total, pre, post = self.costs(motion, period=period)
+        blends = self.blends(motion, pre, post, period=period)
         gap = max(1, math.ceil(self.min_gap / motion.dt - 1e-9))
-        index = np.arange(frames)
-        far = np.abs(index[:, None] - index[None, :]) >= gap
+        index = np.arange(len(total))
+        apart = np.abs(index[:, None] - index[None, :])
+        if period is not None:  # around the loop
+            apart = np.minimum(apart, period - apart)
+        far = apart >= gap
         # pairs nearer than min_gap are not candidates, nor neighbors that could hide one: a motion that
         # never returns (a flock crossing the scene) still has minima, along the edge of the gap
         minima = sorted(flockkit.graphs.local_minima(np.where(far, total, np.inf), far), key=lambda pq: (total[pq], pq))
+        shifting = self.shift_blend > 0 and round(self.shift_blend / motion.dt) >= 2
         if self.threshold is not None:
             chosen = [pq for pq in minima if total[pq] <= self.threshold]
         else:
             wanted = max(self.min_transitions, math.ceil(self.transitions_per_minute * motion.duration / 60))
-            chosen = self._adaptive(motion, minima, total, blends, wanted)
+            # a looping graph that gets phase shifts needs no poor transition to be walkable
+            chosen = self._adaptive(motion, minima, total, blends, wanted, period, fallback=not (period and shifting))
         transitions = self._transitions(motion, chosen, total, blends)
+        if shifting and self._kept(motion, chosen, blends, period) < self.min_transitions:
+            transitions = self._with_shifts(motion, transitions, period)
         if not transitions:
             smallest = f"{total[minima[0]]:.4g}" if minima else "none"
             raise ValidationError(
@@ -114,22 +146,30 @@ class Windowed:
             "threshold": float(max(total[pq] for pq in chosen)) if chosen else None,
             "threshold_rule": "absolute" if self.threshold is not None else "adaptive",
             "blend_time": self.blend_time,
+            "period": period,
+            "shift_blend": self.shift_blend,
         }
-        return flockkit.MotionGraph.assemble(motion, transitions, params=params, provenance={"builder": "windowed"})
+        return flockkit.MotionGraph.assemble(motion, transitions, params=params, provenance={"builder": "windowed"},
+                                             period=period)  # fmt: skip
 
-    def costs(self, motion: flockkit.Motion) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def costs(self, motion: flockkit.Motion, period: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(D, D_pre, D_post), each (T, T): D of the module docstring; D_pre and D_post the means of
-        its terms over k <= 0 and k >= 0."""
-        x = motion.positions.reshape(motion.n_frames, -1)
-        steps = np.diff(x, axis=0)
-        v = np.vstack([steps, steps[-1:]])  # the last frame keeps the last step
+        its terms over k <= 0 and k >= 0. With `period` (a looping source), each (period, period)
+        over one cycle, the windows and velocities running on across the loop."""
+        frames = motion.n_frames if period is None else period
+        x = motion.positions[:frames].reshape(frames, -1)
+        if period is None:
+            steps = np.diff(x, axis=0)
+            v = np.vstack([steps, steps[-1:]])  # the last frame keeps the last step
+        else:
+            v = np.roll(x, -1, axis=0) - x  # the last frame steps on to the first
         n_points = motion.n_agents
         terms = self.alpha * _squared_distances(x) / n_points + self.beta * _squared_distances(v) / n_points
-        frames, n = motion.n_frames, self.window
+        n = self.window
         sums = {side: np.zeros((frames, frames)) for side in ("pre", "post")}
         counts = {side: np.zeros((frames, frames)) for side in ("pre", "post")}
         for k in range(-n, n + 1):
-            shifted, inside = _diagonal_shift(terms, k)
+            shifted, inside = _diagonal_shift(terms, k, wrap=period is not None)
             for side in ("pre",) * (k <= 0) + ("post",) * (k >= 0):
                 sums[side] += shifted
                 counts[side] += inside
@@ -139,50 +179,87 @@ class Windowed:
         total = (sums["pre"] + sums["post"] - terms) * (2 * n + 1) / np.maximum(count, 1)
         return total, pre, post
 
-    def _adaptive(self, motion, minima, total, blends, wanted):
+    def _adaptive(self, motion, minima, total, blends, wanted, period=None, fallback=True):
         """The lowest minima a blend can hide (module docstring) until `wanted` transitions survive
-        the trimming of dead ends; else the lowest until one does. Minima are looked at in order,
-        only as far as needed (a part that never moves has a local minimum almost everywhere)."""
+        the trimming of dead ends; else (with `fallback`) the lowest until one does. Minima are
+        looked at in order, only as far as needed (a part that never moves has a local minimum
+        almost everywhere)."""
         x = motion.positions
         step = np.linalg.norm(np.diff(x, axis=0), axis=2).max()
-        hidden = (pq for pq in minima if self._separation(x, *pq, blends) <= step * (1 + 1e-9))
+        hidden = (pq for pq in minima if self._separation(x, *pq, int(blends[pq]), period) <= step * (1 + 1e-9))
         chosen, kept = [], 0
         while kept < wanted:
             more = list(itertools.islice(hidden, wanted - kept))
             if not more:
                 break
             chosen += more
-            kept = self._kept(motion, chosen, blends)
-        if kept:
+            kept = self._kept(motion, chosen, blends, period)
+        if kept or not fallback:
             return chosen
         for count in range(1, len(minima) + 1):
-            if self._kept(motion, minima[:count], blends):
+            if self._kept(motion, minima[:count], blends, period):
                 return minima[:count]
         return minima
 
-    def _kept(self, motion, chosen, blends) -> int:
+    def _kept(self, motion, chosen, blends, period=None) -> int:
         """How many of the chosen transitions survive assembly (dead-end trimming)."""
         identity = flockkit.Alignment(distance=0.0, assignment=np.arange(motion.n_agents), rotation=np.eye(motion.dims),
                                       translation=np.zeros(motion.dims))  # fmt: skip
-        transitions = [(p, q, identity, int(blends[p, q])) for p, q in chosen]
-        try:
-            return len(flockkit.MotionGraph.assemble(motion, transitions).transitions)
-        except ValidationError:
-            return 0
+        return _surviving(motion, [(p, q, identity, int(blends[p, q])) for p, q in chosen], period)
 
-    def _separation(self, x, p, q, blends) -> float:
+    def _separation(self, x, p, q, blend: int, period=None) -> float:
         """The largest distance between a point's places in the two motions over the blend of
-        p -> q, times 3 / (blend + 1): at most the largest step for a blend to hide it."""
-        blend = int(blends[p, q])
-        span = min(max(blend, 1), len(x) - p, len(x) - q)  # the new motion may end first: then a jump
-        apart = np.linalg.norm(x[p : p + span] - x[q : q + span], axis=2).max()
+        p -> q (`blend` frames), times 3 / (blend + 1): at most the largest step for a blend to
+        hide it."""
+        if period is not None:  # both motions run on across the loop
+            span = np.arange(max(blend, 1))
+            apart = np.linalg.norm(x[(p + span) % period] - x[(q + span) % period], axis=2).max()
+        else:
+            span = min(max(blend, 1), len(x) - p, len(x) - q)  # the new motion may end first: then a jump
+            apart = np.linalg.norm(x[p : p + span] - x[q : q + span], axis=2).max()
         return float(apart * 3 / (blend + 1))
 
-    def blends(self, motion, pre, post) -> np.ndarray:
-        """Blend frames of every transition p -> q, (T, T) (module docstring)."""
+    def _with_shifts(self, motion, transitions, period) -> list:
+        """`transitions` and phase shifts for a sparse graph (module docstring): from up to
+        SHIFT_NODES frames of the cycle, or of the frames the transitions span on a source that
+        does not loop, each where a blend can hide it. There a walk must still reach the
+        transitions' frames before the recording ends, so the shifts blend no longer than the
+        longest of them, and are left out if the graph would keep fewer of them."""
+        blend = max(self.min_blend, round(self.shift_blend / motion.dt))
+        if period is not None:
+            first, last = 0, period - 1
+        else:
+            if not transitions:
+                return transitions
+            blend = min(blend, max(t[3] for t in transitions))
+            frames = [f for p, q, _, _ in transitions for f in (p, q)]
+            first, last = min(frames), max(frames)
+        sizes = [s for size in SHIFT_SIZES if 3 * size <= blend + 1 for s in (size, -size)]
+        if not sizes:
+            return transitions
+        frames = np.unique(np.linspace(first, last, min(SHIFT_NODES, last - first + 1)).round().astype(np.int64))
+        x = motion.positions
+        step = np.linalg.norm(np.diff(x, axis=0), axis=2).max()
+        found = flockkit.graphs.phase_shifts(motion, frames, sizes=sizes, blend=blend, period=period)
+        hidden = [t for t in found if self._separation(x, t[0], t[1], blend, period) <= step * (1 + 1e-9)]
+        shifted = transitions + hidden
+        if period is not None:
+            return shifted
+        try:
+            graph = flockkit.MotionGraph.assemble(motion, shifted)
+        except ValidationError:
+            return transitions
+        kept = len(graph.transitions) - int(np.count_nonzero(graph.shifts))
+        return shifted if kept >= _surviving(motion, transitions) else transitions
+
+    def blends(self, motion, pre, post, period: int | None = None) -> np.ndarray:
+        """Blend frames of every transition p -> q, (T, T) (module docstring; with `period`, over
+        one cycle, and not cut at the recording's end: the old motion runs on across the loop)."""
         longest = round(self.blend_time / motion.dt)
         ratio = np.minimum(1.0, (pre + 1e-300) / (post + 1e-300))
         blend = np.minimum(np.maximum(self.min_blend, np.round(longest * ratio)), max(longest, self.min_blend))
+        if period is not None:
+            return np.minimum(blend, motion.n_frames - 1).astype(np.int64)
         left = motion.n_frames - 1 - np.arange(motion.n_frames)  # frames after p: the old motion must exist
         return np.minimum(blend, left[:, None]).astype(np.int64)
 
@@ -196,15 +273,28 @@ class Windowed:
         return found
 
 
+def _surviving(motion, transitions, period=None) -> int:
+    """How many of `transitions` survive MotionGraph.assemble (0 if it refuses them)."""
+    if not transitions:
+        return 0
+    try:
+        return len(flockkit.MotionGraph.assemble(motion, transitions, period=period).transitions)
+    except ValidationError:
+        return 0
+
+
 def _squared_distances(rows: np.ndarray) -> np.ndarray:
     """|rows[p] - rows[q]|^2 for every p, q, by one matrix product."""
     norms = np.einsum("ij,ij->i", rows, rows)
     return np.maximum(norms[:, None] + norms[None, :] - 2 * rows @ rows.T, 0.0)
 
 
-def _diagonal_shift(matrix: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """(matrix[p + k, q + k] where both exist else 0, 1 where they exist else 0)."""
+def _diagonal_shift(matrix: np.ndarray, k: int, wrap: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """(matrix[p + k, q + k] where both exist else 0, 1 where they exist else 0); with `wrap`,
+    indices run on around the matrix and always exist."""
     size = len(matrix)
+    if wrap:
+        return np.roll(matrix, (-k, -k), axis=(0, 1)), np.ones_like(matrix)
     shifted = np.zeros_like(matrix)
     inside = np.zeros_like(matrix)
     lo, hi = max(0, -k), min(size, size - k)
