@@ -228,22 +228,25 @@ class ConfigurationMetric(Protocol):
     ``compare(a, b)``
         Return a ``flockkit.Alignment`` whose ``distance`` >= 0 is the mean squared distance
         between `a` and `b` after the best rigid motion and agent assignment found, with
-        ``a.positions[i] ~= rotation @ b.positions[assignment[i]] + translation``. Symmetric up to
-        the search, zero for identical configurations, invariant to rigid motion and to the order
-        of agents.
+        ``a.positions[i] ~= rotation @ b.positions[assignment[i]] + translation``. Symmetric
+        (``compare(b, a).distance`` equals it to a relative 1e-6: search both ways, or so that
+        the order cannot matter), zero for identical configurations, invariant to rigid motion
+        and to the order of agents. Anything but two ``flockkit.Configuration`` of one size and
+        dimension raises ``flockkit.errors.ValidationError``.
 
     Optional, each declared in ``Capabilities`` (``lower_bound``, ``pairs_within``,
     ``pairwise``), used by graph builders to go faster and checked by the kit:
 
     ``lower_bound(a, b)``
-        A proven lower bound on ``compare(a, b).distance``, much cheaper than `compare`.
+        A proven lower bound on ``compare(a, b).distance``, much cheaper than `compare`: a
+        Python or numpy float.
     ``pairs_within(configurations, threshold, *, rows=None)``
         Integer array (P, 2) of pairs (i, j), i < j, each once, including every pair whose
         ``compare`` distance is at most `threshold` (pairs left out are proven farther apart).
         With ``rows=(start, stop)``, only the pairs with start <= i < stop, so that a builder can
         share the job among workers.
     ``pairwise(configurations, pairs=None)``
-        Distances (P,) of ``compare(configurations[i], configurations[j])`` for each row (i, j) of
+        A float64 numpy array (P,): ``compare(configurations[i], configurations[j])``'s distance for each row (i, j) of
         `pairs`; without `pairs`, every i < j in row-major order (``scipy`` ``pdist`` order).
     """
 

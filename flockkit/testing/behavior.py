@@ -73,11 +73,17 @@ def _close(a, b, scale=1.0) -> bool:
 
 
 def check_forward_shape(name, model):
-    """forward returns a finite float64 Motion of steps + 1 frames with the state's agents and dims."""
+    """forward returns a finite float64 Motion of steps + 1 frames with the state's agents and
+    dims, at the model's time step where it has one (a ``dt`` attribute)."""
     for state, context in _each(name, model):
         with context:
             for steps in (0, 1, STEPS):
-                _check_motion(name, _forward(model, state, steps), state, steps, "forward")
+                motion = _forward(model, state, steps)
+                _check_motion(name, motion, state, steps, "forward")
+                step = getattr(model, "dt", None)
+                assert step is None or motion.dt == step, (
+                    f"{name}.forward returned a Motion at dt = {motion.dt:g} s; the model's dt is {step:g} s"
+                )
 
 
 def check_backward_shape(name, model):

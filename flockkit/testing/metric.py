@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..motion import Alignment, Configuration, random_flock
+from ..motion import Alignment, Configuration, State, random_flock
 from ._expect import agents, applies_when, dims_of, expect_validation_error, fixed_by, on_input
 
 SEED = 4205
@@ -229,7 +229,9 @@ def check_lower_bound(name, metric):
     rng = np.random.default_rng(SEED + 3)
     tied = [c for d in dims_of(metric) for _, c in degenerate_configurations(d)]
     for a, b in [*_pairs(metric), *((c, _rigid_copy(c, rng)) for c in [*_configurations(metric), *tied])]:
-        bound, distance = float(metric.lower_bound(a, b)), metric.compare(a, b).distance
+        raw = metric.lower_bound(a, b)
+        assert isinstance(raw, (float, np.floating)), f"{name}.lower_bound returned {type(raw).__name__}, not a float"
+        bound, distance = float(raw), metric.compare(a, b).distance
         assert np.isfinite(bound) and bound <= distance + 1e-9 * _scale(a), (
             f"{name}.lower_bound = {bound} exceeds compare's distance {distance}"
         )
@@ -284,7 +286,11 @@ def check_pairwise(name, metric):
     configs = [random_flock(n_agents=6, dims=dims_of(metric)[0], rng=rng).configuration() for _ in range(4)]
     pairs = np.array([[2, 0], [1, 3], [0, 1]])
     for given, expected_pairs in ((pairs, pairs), (None, np.column_stack(np.triu_indices(4, 1)))):
-        found = np.asarray(metric.pairwise(configs) if given is None else metric.pairwise(configs, given))
+        found = metric.pairwise(configs) if given is None else metric.pairwise(configs, given)
+        assert isinstance(found, np.ndarray) and found.dtype == np.float64, (
+            f"{name}.pairwise returned {type(found).__name__} of {getattr(found, 'dtype', 'no dtype')}, "
+            "not a float64 numpy array"
+        )
         assert found.shape == (len(expected_pairs),), (
             f"{name}.pairwise returned shape {found.shape}; expected ({len(expected_pairs)},)"
         )
@@ -313,7 +319,8 @@ def check_inputs_unchanged(name, metric):
 
 
 def check_rejects_mismatched_sizes(name, metric):
-    """Configurations of different sizes or dimensions raise flockkit.errors.ValidationError."""
+    """Configurations of different sizes or dimensions, and anything that is not a
+    flockkit.Configuration (a State, an array of positions), raise flockkit.errors.ValidationError."""
     rng = np.random.default_rng(SEED + 5)
     d = dims_of(metric)[0]
     base = random_flock(n_agents=5, dims=d, rng=rng).configuration()
@@ -323,6 +330,9 @@ def check_rejects_mismatched_sizes(name, metric):
             lambda other=other: metric.compare(base, other),
             f"{name}.compare of {agents(base.n_agents)} in {d}D with {other.n_agents} in {other.dims}D",
         )
+    state = State(positions=base.positions, velocities=base.velocities)
+    for other, what in ((state, "a State"), (np.array(base.positions), "an array of positions")):
+        expect_validation_error(lambda other=other: metric.compare(base, other), f"{name}.compare(a, {what})")
 
 
 CHECKS = (

@@ -672,7 +672,7 @@ class $Class:
             raise ValidationError(f"{NAME}: start {node} is not a node of the graph")
         first, edges, used = node, [], {}
         needed, played = math.ceil(frames - 1e-9), 0  # frames to play after the first
-        since = graph.motion.n_frames  # frames since the last transition: none yet
+        since = math.inf  # frames since the last transition: none yet, so any may be taken
         while played < needed:
             options = graph.allowed_edges(node, since)
             if not options:

@@ -37,6 +37,8 @@ def _played(name, graph, walk) -> float:
 
 
 def _graph(strategy, graph):
+    """The graph given, else the kit's own in the first dimension the walk declares (a configured
+    walk may handle only some of its kind's dimensions: a region walk those of its region)."""
     if graph is not None:
         return graph
     from .inputs import graph as kit_graph
@@ -83,13 +85,17 @@ def check_deterministic(name, strategy, *, graph=None):
 
 @needs("graph")
 def check_rejects_bad_duration(name, strategy, *, graph=None):
-    """A duration <= 0 raises flockkit.errors.ValidationError."""
+    """A duration <= 0, and a graph that is not a flockkit.MotionGraph, raise
+    flockkit.errors.ValidationError."""
     graph = _graph(strategy, graph)
     for duration in (0.0, -5.0):
         expect_validation_error(
             lambda duration=duration: strategy.walk(graph, np.random.default_rng(0), duration),
             f"{name}.walk(duration={duration})",
         )
+    expect_validation_error(
+        lambda: strategy.walk(graph.motion, np.random.default_rng(0), 5.0), f"{name}.walk(a Motion as the graph)"
+    )
 
 
 CHECKS = (check_walk_covers_duration, check_walks_a_single_loop, check_deterministic, check_rejects_bad_duration)

@@ -219,3 +219,72 @@ def test_a_value_flockkit_refuses_gets_that_errors_advice_and_the_plugins_line()
     fix = str(info.value).splitlines()[-1]
     assert "Segmentation.labels must lie in" in str(info.value)
     assert "raised ValidationError at test_kit_fails_on_broken_fakes.py:" in fix and "kinds/segmenter/" in fix
+
+
+def _returns_a_list_pairwise():
+    from .fakes import _Wrapped
+
+    class PairwiseList(_Wrapped):
+        def pairwise(self, configurations, pairs=None):
+            return list(super().pairwise(configurations, pairs))
+
+    return PairwiseList()
+
+
+def _returns_an_array_bound():
+    from .fakes import _Wrapped
+
+    class BoundArray(_Wrapped):
+        def lower_bound(self, a, b):
+            return np.array([super().lower_bound(a, b)])
+
+    return BoundArray()
+
+
+def _takes_anything_metric():
+    from .fakes import _Wrapped
+
+    class DuckTyped(_Wrapped):
+        """Compares anything with positions, refusing only sizes that differ."""
+
+        def compare(self, a, b):
+            a, b = (flockkit.Configuration(positions=x.positions, velocities=x.velocities) if hasattr(x, "velocities")
+                    else flockkit.Configuration(positions=x, velocities=np.zeros_like(x)) for x in (a, b))  # fmt: skip
+            return super().compare(a, b)
+
+    return DuckTyped()
+
+
+def _takes_any_graph_walk():
+    class WalksAMotion(RandomWalk):
+        def walk(self, graph, rng, duration):
+            if isinstance(graph, flockkit.Motion):
+                flockkit.validate.number(duration, "duration", minimum=0, strict=True)
+                return flockkit.Walk(start=0, edges=[])
+            return super().walk(graph, rng, duration)
+
+    return WalksAMotion()
+
+
+def _fixed_step_motion():
+    class FixedStep(RandomVelocity):
+        def forward(self, initial, steps, rng):
+            motion = super().forward(initial, steps, rng)
+            return flockkit.Motion(positions=motion.positions, dt=0.1)
+
+    return FixedStep(dt=0.05)
+
+
+@pytest.mark.parametrize(
+    "kind, check_name, make, words",
+    [
+        ("behavior", "check_forward_shape", _fixed_step_motion, "the model's dt is 0.05 s"),
+        ("metric", "check_pairwise", _returns_a_list_pairwise, "not a float64 numpy array"),
+        ("metric", "check_lower_bound", _returns_an_array_bound, "not a float"),
+        ("metric", "check_rejects_mismatched_sizes", _takes_anything_metric, "compare(a, a State)"),
+        ("walk", "check_rejects_bad_duration", _takes_any_graph_walk, "a Motion as the graph"),
+    ],
+)
+def test_returned_types_and_refused_arguments_are_checked(kind, check_name, make, words):
+    with pytest.raises(AssertionError, match=words.replace("(", r"\(").replace(")", r"\)")):
+        check_named(kind, check_name)("broken", make())
