@@ -182,6 +182,9 @@ class Walk:
     played - 1) x the source's dt: a walk strategy asked for `duration` returns a walk at least
     that long.
 
+    Made with keywords, as ``Walk(start=0, edges=[("clip", 0), ("transition", 2)])``; every
+    field is checked when it is made.
+
     Attributes
     ----------
     start : int
@@ -192,7 +195,7 @@ class Walk:
         one's blend has played.
     rotation, translation : ndarray or None
         The start pose: source coordinates map to the world as ``rotation @ p + translation``
-        (a proper (D, D) rotation and a (D,) vector; None: the identity).
+        (a proper (D, D) rotation and a (D,) vector; either None: no rotation, no translation).
     """
 
     start: int = attrs.field(converter=lambda v: integer(v, "Walk.start", minimum=0))
