@@ -298,9 +298,10 @@ class Scene:
         is walked again avoiding its neighbours' frames. They go in rounds of objects no two of
         which are neighbours (a greedy colouring, in object order), each round in parallel and
         seeing the walks of the rounds before; an object avoids the neighbours that keep their
-        walks and those walked again in earlier rounds, not those of later rounds, which avoid it
-        in turn (so it keeps room to vary). `frames` (animation.source_frames()) is kept up to
-        date."""
+        walks and those walked again in earlier rounds, not those of this round or later ones,
+        which avoid it in turn (so it keeps room to vary): they are passed as walks yet to be made
+        (rows of -1), which count for the room a loop leaves it. `frames`
+        (animation.source_frames()) is kept up to date."""
         walks = list(animation.walks)
         periods = self._periods(animation.placement)
         need = [i for i, nb in enumerate(near)
@@ -311,14 +312,23 @@ class Scene:
             colour[i] = next(c for c in range(len(need) + 1) if c not in taken)
         for c in range(max(colour.values(), default=-1) + 1):
             members = [i for i in need if colour[i] == c]
-            settled = [near[i][[colour.get(int(j), -1) < c for j in near[i]]] for i in members]
-            items = [(i, targets[i], int(seeds[i].generate_state(2)[1]), frames[own] if len(own) else None)
-                     for i, own in zip(members, settled)]  # fmt: skip
+            items = [(i, targets[i], int(seeds[i].generate_state(2)[1]), self._avoided(frames, near[i], colour, c))
+                     for i in members]  # fmt: skip
             again, played = self._walk_many(animation.placement, items, report, f"out of step ({c + 1})")
             for i, walk, own in zip(members, again, played):
                 walks[i] = walk
                 frames[i, : len(own)] = own
         return walks
+
+    @staticmethod
+    def _avoided(frames, near, colour, c):
+        """What an object of round c avoids: its neighbours' frames, -1 (nothing) for those walked
+        again in round c or later, which avoid it in turn; None without neighbours."""
+        if not len(near):
+            return None
+        avoided = frames[near].copy()
+        avoided[[colour.get(int(j), -1) >= c for j in near]] = -1
+        return avoided
 
     def _periods(self, placement: Placement) -> list:
         """Each object's parts' periods (MotionGraph.period: None for a part that does not loop)."""

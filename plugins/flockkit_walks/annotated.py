@@ -11,13 +11,14 @@ The walk minimizes E = C_T + alpha C_C + beta N_T over the output frames it must
 
 Phase shifts (``MotionGraph.shifts``: a transition to the same motion a frame or two sooner or
 later, which its blend hides, as a builder adds to a short cycle) are neither in C_T nor in N_T:
-they keep the motion continuous and only let its timing drift. Where one is allowed, the initial
-pass prefers a phase shift it has not taken yet to going straight on or to one it has taken (each
-of those costs `vary` more), so that a short cycle wavers in time without playing any blend
-twice, while it can; it keeps within `drift` frames of the timing it started with, so that walks
-started out of step stay so, and the target and the walks to avoid still come first. With walks
-to avoid, a drifting walk's start is judged over its whole length, and being in step counts over
-the next two blends only: after a blend it may shift away again.
+they keep the motion continuous and only let its timing drift. The initial pass prefers a phase
+shift it has not taken yet to going straight on, and going straight on (a clip, after which other
+phase shifts leave) to a phase shift it has taken (each costs `vary` more than the one before it),
+so that a short cycle wavers in time without playing any blend twice while it can. It keeps
+within `drift` frames of the timing it started with, so that walks started out of step stay so;
+the target and the walks to avoid still come first. With walks to avoid, a drifting walk's
+start is judged over its whole length, being in step counts over the next two blends only (after
+a blend it may shift away again), and on a loop crowded by them it drifts less (see `drift`).
 
 An initial pass starts where the source's arrows meet the first target (a random node among
 those that do), then takes, at each node, the edge whose next two seconds best follow the target
@@ -138,20 +139,24 @@ class AnnotatedWalk:
     start : int, optional
         Start node (None: a random node among those that meet the first target).
     avoid : int array (K, F), optional
-        Source frames other walks of the same graph play at each output frame (-1: none). Each
-        output frame that plays within one frame of one of them adds `in_step` to its feature
-        error, so the walk falls out of step with them (the neighbour optimization of paper
-        002, section 6.2).
+        Source frames other walks of the same graph play at each output frame (-1: none; a row
+        of -1 is a walk yet to be made, which will avoid this one: it counts for the room a loop
+        leaves, see `drift`). Each output frame that plays within one frame of one of them (around
+        the loop, on a looping graph) adds `in_step` to its feature error, so the walk falls out
+        of step with them (the neighbour optimization of paper 002, section 6.2).
     in_step : float
         The error of a frame in step with an avoided walk (default 1).
     vary : float
-        Where a phase shift not taken yet is allowed, the extra cost of going straight on or of
-        taking a phase shift taken before, in the initial pass (default 0.5: above its random
+        In the initial pass, the extra cost of going straight on where a phase shift not taken
+        yet is allowed, and of taking a phase shift taken before (default 0.5: above its random
         tie-break, below one frame in step with an avoided walk).
     drift : int
         Frames at most by which the initial pass's phase shifts move the walk's timing from its
         start's, either way (default 2): its timing wavers, but a walk started out of step with
-        its neighbours stays so.
+        its neighbours stays so. On a loop of P frames shared with K walks to avoid, at most
+        (P / (K + 1) - 1) / 2, and at least 1: walks drifting that much each, started 2 drift +
+        1 frames apart, come within a frame of each other only by both drifting all the way
+        towards each other.
     """
 
     # takes target, features and avoid: the walks a flockkit.Scene makes
@@ -380,6 +385,10 @@ class _Problem:
         self.run = np.concatenate([[0], np.cumsum(change)])
         self.run_end = np.concatenate([np.flatnonzero(change), [self.needed - 1]])[self.run]
         self.avoid, self.in_step = strategy.avoid, strategy.in_step
+        if self.avoid is not None and self.period is not None and self.shift.any():
+            # as far as the loop's room for this walk and those it avoids allows (see `drift`)
+            room = self.period / (len(self.avoid) + 1)
+            self.drift = min(self.drift, max(1, int((room - 1) // 2)))
         # errors over windows of one target arrow are the same for every walk of this graph with
         # these arrows and weights: remembered across walks (a scene's duplicates share them);
         # windows where the target changes, or walks that avoid others, are remembered per walk
@@ -528,12 +537,16 @@ class _Problem:
         return int(rng.choice(good))
 
     def _monotony(self, edges, shifted) -> np.ndarray | float:
-        """`vary` on each of `edges` that goes straight on or takes a phase shift in `shifted`
-        (taken before), where one of them is a phase shift not taken yet; else 0."""
-        fresh = [kind == "transition" and bool(self.shift[i]) and i not in shifted for kind, i in edges]
-        if not any(fresh):
+        """`vary` on each of `edges` that takes a phase shift in `shifted` (taken before), and on
+        going straight on where a phase shift not taken yet is among them; else 0 (going straight
+        on plays a clip and finds other phase shifts at its end, where a blend taken again would
+        replay all its frames)."""
+        shift = np.array([kind == "transition" and bool(self.shift[i]) for kind, i in edges])
+        if not shift.any():
             return 0.0
-        return self.vary * ~np.array(fresh)
+        taken = np.array([kind == "transition" and i in shifted for kind, i in edges])
+        fresh = shift & ~taken
+        return self.vary * (taken | (~shift & fresh.any()))
 
     def pick(self, path: _Path, rng, tried):
         """A stretch (first edge, edge after it) whose share of E per second exceeds the
