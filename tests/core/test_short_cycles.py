@@ -143,6 +143,25 @@ def test_the_windowed_builder_loops_a_cycle_and_adds_phase_shifts():
     assert not plain.loops and len(plain.clips) == len(plain.nodes) - 1
 
 
+def test_a_looping_graph_finds_transitions_within_the_cycle_and_across_its_seam():
+    """Two beats a cycle, the second a little weaker: the graph jumps between the beats anywhere
+    in the cycle, the windows and blends running on across the seam, where the plain builder cuts
+    from the last frame (no frame after it to blend) and finds fewer."""
+    beat = 2 * np.pi * np.arange(PERIOD)[:, None] / (PERIOD / 2)
+    weaker = 0.6 * (1 + 0.03 * np.cos(2 * np.pi * np.arange(PERIOD)[:, None] / PERIOD))
+    tips = np.linspace(0.1, 1.0, 6)[None, :]
+    wing = np.stack(np.broadcast_arrays(tips, 0.0 * tips, weaker * tips * np.sin(beat)), axis=2)
+    motion = flockkit.Motion(positions=wing, dt=DT)
+    graph = flockkit.build_graph(motion, builder="windowed")
+    within = [(t.start, t.end, t.blend) for t, shift in zip(graph.transitions, graph.shifts) if not shift]
+    assert graph.period == PERIOD and len(within) >= 4
+    assert all(min(abs(a - b), PERIOD - abs(a - b)) == PERIOD // 2 for a, b, _ in within)  # beat to beat
+    assert (PERIOD - 1, PERIOD // 2 - 1, 9) in within  # from the last frame, blended over 0.3 s
+    plain = flockkit.build_graph(motion, builder="windowed", **PLAIN_LOOP)
+    assert (PERIOD - 1, PERIOD // 2 - 1, 0) in [(t.start, t.end, t.blend) for t in plain.transitions]  # a cut
+    assert len(plain.transitions) < len(within)
+
+
 def test_synthesis_runs_on_across_the_loop_without_a_jump():
     graph = bird().graphs[0]
     clips = [("clip", k % PERIOD) for k in range(30, 30 + 2 * PERIOD)]
