@@ -265,7 +265,7 @@ class State(_OneInstant):
         As in Configuration.
     extra : mapping of str to array_like (N, D), optional
         Model arrays carried between steps, such as the boids ``wander`` contribution. Names are
-        Python identifiers; each array has the shape of `positions`.
+        Python identifiers; each array has the shape of `positions` (default: none).
     """
 
     positions: np.ndarray = _field("State.positions")
@@ -299,6 +299,9 @@ class State(_OneInstant):
 class Motion:
     """The trajectories of a group: positions (T, N, D) sampled every `dt` seconds.
 
+    Indexing with a slice (``motion[10:20]``, ``motion[::2]``) returns a Motion of those frames; a
+    step k multiplies `dt` by k.
+
     Parameters
     ----------
     positions : array_like, shape (T, N, D)
@@ -306,10 +309,8 @@ class Motion:
     dt : float
         Seconds between frames, > 0.
     channels : mapping of str to array_like (T, N, D), optional
-        Named per-agent, per-frame model arrays, such as the boids ``wander`` contribution.
-
-    Indexing with a slice (``motion[10:20]``, ``motion[::2]``) returns a Motion of those frames; a
-    step k multiplies `dt` by k.
+        Named per-agent, per-frame model arrays, such as the boids ``wander`` contribution
+        (default: none).
     """
 
     positions: np.ndarray = _field("Motion.positions")
