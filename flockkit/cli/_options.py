@@ -6,6 +6,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import json
+import os
 import sys
 from pathlib import Path
 
@@ -189,18 +190,78 @@ def parse_region(text: str, option: str = "--region"):
 MESH_SUFFIXES = (".glb", ".gltf", ".usda", ".usdc", ".usdz", ".usd", ".obj")
 
 
-def read_source(path: str, clip=None, fps=None, allow_outside=False):
-    """A Motion or an AnimatedMesh: a flockkit .npz of either, or an animated-mesh file (glTF,
-    USD, an OBJ folder or glob) read at `fps` (default 30) for `clip`."""
+def is_mesh_file(path: str) -> bool:
+    """Whether `path` names an animated-mesh file that :func:`read_source` reads with
+    flockkit.io (glTF, USD, an OBJ file, a folder of them or a glob), not a flockkit .npz."""
+    glob = not Path(path).exists() and any(c in path for c in "*?[")
+    return Path(path).suffix.lower() in MESH_SUFFIXES or Path(path).is_dir() or glob
+
+
+def is_mesh_source(path: str) -> bool:
+    """Whether :func:`read_source` reads `path` as an AnimatedMesh (a mesh file, or a flockkit
+    mesh .npz) rather than a Motion: what a command that draws either asks."""
     from .._npzfile import kind_of
 
-    glob = not Path(path).exists() and any(c in path for c in "*?[")
-    if Path(path).suffix.lower() in MESH_SUFFIXES or Path(path).is_dir() or glob:
-        return flockkit.io.read_mesh_animation(path, clip=clip, fps=30.0 if fps is None else fps,
+    return is_mesh_file(path) or kind_of(path) == "mesh"
+
+
+def read_source(path: str, clip=None, fps=None, allow_outside=False, up=None, meters_per_unit=None):
+    """A Motion or an AnimatedMesh: a flockkit .npz of either, or an animated-mesh file (glTF,
+    USD, an OBJ folder or glob) read at `fps` (default 30) for `clip`. With `up` or
+    `meters_per_unit` (--up, --meters-per-unit), a mesh is turned into flockkit's axes (z up,
+    metres), these stating its file's up axis and unit where the file is silent or wrong."""
+    from .._npzfile import kind_of
+
+    convert = up is not None or meters_per_unit is not None
+    if is_mesh_file(path):
+        mesh = flockkit.io.read_mesh_animation(path, clip=clip, fps=30.0 if fps is None else fps,
                                                allow_outside=allow_outside)  # fmt: skip
-    if kind_of(path) == "mesh":
-        return flockkit.AnimatedMesh.load(path)
-    return flockkit.Motion.load(path)
+    elif kind_of(path) == "mesh":
+        mesh = flockkit.AnimatedMesh.load(path)
+    else:
+        if convert:
+            raise ValidationError(f"--up, --meters-per-unit: {path} is a motion, not an animated mesh")
+        return flockkit.Motion.load(path)
+    if not convert:
+        return mesh
+    return mesh.to_flockkit_axes(up_axis=up, meters_per_unit=_unit(meters_per_unit))
+
+
+def _unit(text):
+    """--meters-per-unit as to_flockkit_axes takes it: a number, or a unit's name ("cm")."""
+    try:
+        return None if text is None else float(text)
+    except ValueError:
+        return text
+
+
+def check_folder(path) -> Path:
+    """The output folder `path` (-o), checked before any work: not a file, and its parent exists."""
+    folder = Path(path)
+    if folder.exists() and not folder.is_dir():
+        raise ValidationError(f"-o must be a folder; {folder} is a file")
+    if not folder.parent.is_dir():
+        raise ValidationError(f"-o {folder}: folder {folder.parent} does not exist")
+    return folder
+
+
+@contextlib.contextmanager
+def staged_folder(folder: Path):
+    """Yield a new temporary folder beside `folder` to write a command's files into; when the
+    block succeeds they are moved into `folder` (made if missing), each replacing its namesake,
+    and otherwise removed with the temporary folder: a failure halfway leaves no file behind."""
+    import shutil
+    import tempfile
+
+    folder = check_folder(folder)
+    staging = Path(tempfile.mkdtemp(prefix=f".{folder.name}.", dir=folder.parent))
+    try:
+        yield staging
+        folder.mkdir(exist_ok=True)
+        for file in sorted(staging.iterdir()):
+            os.replace(file, folder / file.name)
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
 
 
 @contextlib.contextmanager
@@ -272,6 +333,17 @@ def add_scale_out(parser) -> None:
 def add_mesh_options(parser) -> None:
     parser.add_argument("--clip", help="the clip of an animated-mesh file (default: its first)")
     parser.add_argument("--fps", type=float, help="frames per second to sample an animated-mesh file at (default 30)")
+    parser.add_argument(
+        "--up", choices=("x", "y", "z"),
+        help="turn an animated mesh into flockkit's axes (z up, metres), its file's up axis being this one "
+             "(default: what the file says; glTF: y)",
+    )  # fmt: skip
+    parser.add_argument(
+        "--meters-per-unit", metavar="UNIT",
+        help="turn an animated mesh into flockkit's axes (z up, metres), its file's unit being this many metres "
+             "(a number, or m, cm, mm, in, ft, ...; the glTF Fox: cm); what a scene's templates need to stand "
+             "upright at true size",
+    )  # fmt: skip
     add_allow_outside(parser)
 
 

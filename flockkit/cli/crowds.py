@@ -3,22 +3,15 @@
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
-from ..errors import ValidationError
-from ._options import (
-    add_allow_outside,
-    add_quiet,
-)
+from ._options import add_allow_outside, add_quiet, check_folder, staged_folder
 
 
 def _cmd_crowd(args) -> int:
     from ..crowd.file import read_crowd_scene
     from ..crowd.record import record
 
-    folder = Path(args.output)
-    if folder.exists() and not folder.is_dir():
-        raise ValidationError(f"-o must be a folder; {folder} is a file")
+    folder = check_folder(args.output)
     scene = read_crowd_scene(args.scene, allow_outside=args.allow_outside)
     if not args.no_usd:  # fail before the run, not after it, when usd-core is missing
         from ..io.usd import require_usd_core
@@ -26,16 +19,7 @@ def _cmd_crowd(args) -> int:
         require_usd_core()
     driver = scene.driver()
     recording = record(driver, scene.seconds, agents=range(scene.record))
-    folder.mkdir(parents=True, exist_ok=True)
-    written = []
-    if not args.no_usd:
-        recording.export_usd(folder / "crowd.usdc")
-        written.append(folder / "crowd.usdc")
-    if not args.no_pictures:
-        from ..viz import animate_recording
-
-        animate_recording(recording, folder / "crowd.gif", progress=not args.quiet)
-        written.append(folder / "crowd.gif")
+    names = ([] if args.no_usd else ["crowd.usdc"]) + ([] if args.no_pictures else ["crowd.gif"]) + ["crowd.json"]
     summary = {
         "agents": driver.crowd.n_agents,
         "recorded": scene.record,
@@ -44,8 +28,15 @@ def _cmd_crowd(args) -> int:
         "stream switches": driver.switches,
         "memory (bytes)": driver.crowd.pool.memory(),
     }
-    (folder / "crowd.json").write_text(json.dumps(summary, indent=2))
-    written.append(folder / "crowd.json")
+    with staged_folder(folder) as staging:  # every file, or none
+        if not args.no_usd:
+            recording.export_usd(staging / "crowd.usdc")
+        if not args.no_pictures:
+            from ..viz import animate_recording
+
+            animate_recording(recording, staging / "crowd.gif", progress=not args.quiet)
+        (staging / "crowd.json").write_text(json.dumps(summary, indent=2))
+    written = [folder / name for name in names]
     print(f"wrote {', '.join(str(p) for p in written)}: {summary['agents']} agents, {summary['frames']} frames, "
           f"{summary['stream switches']} stream switches")  # fmt: skip
     return 0

@@ -4,17 +4,16 @@ from __future__ import annotations
 
 import json
 import sys
-from pathlib import Path
 
 import flockkit
 
 from ._options import (
-    MESH_SUFFIXES,
     Component,
     add_components,
     add_output,
     add_quiet,
     component_params,
+    is_mesh_source,
     parse_region,
     pixel_size,
     read_source,
@@ -103,11 +102,10 @@ def _cmd_info(args) -> int:
 
 
 def _cmd_render(args) -> int:
-    from .._npzfile import kind_of
     from ..viz import ANIMATION_SUFFIXES, PICTURE_SUFFIXES
 
     output = require_suffix(args.output, PICTURE_SUFFIXES + ANIMATION_SUFFIXES, "-o")
-    if Path(args.motion).suffix.lower() in MESH_SUFFIXES or kind_of(args.motion) == "mesh":
+    if is_mesh_source(args.motion):
         from .. import viz
 
         mesh = read_source(args.motion, args.clip)
@@ -189,7 +187,9 @@ def _info_arguments(parser) -> None:
 
 
 def _render_arguments(parser) -> None:
-    parser.add_argument("motion", help="motion or animated-mesh file (.npz; or .glb, .gltf, .usd*)")
+    parser.add_argument(
+        "motion", help="motion or animated-mesh file (.npz; or .glb, .gltf, .usd*, an OBJ folder or glob, as segment)"
+    )
     parser.add_argument("--parts", help="colour an animated mesh's parts from this segmentation (.npz)")
     parser.add_argument("--clip", help="the clip of an animated-mesh file (default: its first), read at 30 fps")
     parser.add_argument("--fps", type=float, help="animation frames per second (default: real time, at most 25)")

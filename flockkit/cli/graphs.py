@@ -34,7 +34,7 @@ def _cmd_build(args) -> int:
     params["metric_params"] = component_params(args, "metric")
     if args.threshold is not None:
         params["threshold"] = args.threshold
-    source = read_source(args.motion, args.clip, args.fps, args.allow_outside)
+    source = read_source(args.motion, args.clip, args.fps, args.allow_outside, args.up, args.meters_per_unit)
     if args.layers or args.parts:
         segmentation = flockkit.Segmentation.load(args.parts) if args.parts else None
         segmenter = {} if args.segmenter is None else {"segmenter": args.segmenter}

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import flockkit
 
-from ..errors import ValidationError
+from ..scene.file import FEATURE_SOURCES
 from ._options import (
     Component,
     add_allow_outside,
@@ -15,10 +13,12 @@ from ._options import (
     add_output,
     add_quiet,
     add_scale_out,
+    check_folder,
     component_params,
     joblib_backend,
     read_source,
     require_suffix,
+    staged_folder,
 )
 
 # Frames of the scene animation the CLI draws at most (frames are skipped evenly beyond): a
@@ -29,27 +29,28 @@ SCENE_GIF_FRAMES = 150
 def _cmd_scene(args) -> int:
     from ..scene import read_scene
 
-    folder = Path(args.output)
-    if folder.exists() and not folder.is_dir():
-        raise ValidationError(f"-o must be a folder; {folder} is a file")
-    scene = read_scene(args.scene, n_jobs=args.jobs, allow_outside=args.allow_outside)
+    folder = check_folder(args.output)
+    scene = read_scene(args.scene, features=args.features, n_jobs=args.jobs, allow_outside=args.allow_outside)
+    if not args.no_usd:  # fail before the walks, not after them, when usd-core is missing
+        from ..io.usd import require_usd_core
+
+        require_usd_core()
     with joblib_backend(args):
         animation = scene.synthesize(progress=not args.quiet)
-    folder.mkdir(parents=True, exist_ok=True)
-    animation.save(folder / "scene.npz")
-    written = [folder / "scene.npz"]
-    if not args.no_usd:
-        animation.export(folder / "scene.usda")
-        written.append(folder / "scene.usda")
-    if not args.no_pictures:
-        from ..viz import animate_scene, plot_scene
+    names = ["scene.npz"] + ([] if args.no_usd else ["scene.usda"]) + ([] if args.no_pictures else
+                                                                        ["scene.png", "scene.gif"])  # fmt: skip
+    with staged_folder(folder) as staging:  # every file, or none
+        animation.save(staging / "scene.npz")
+        if not args.no_usd:
+            animation.export(staging / "scene.usda")
+        if not args.no_pictures:
+            from ..viz import animate_scene, plot_scene
 
-        plot_scene(animation, folder / "scene.png")
-        animate_scene(animation, folder / "scene.gif", max_frames=SCENE_GIF_FRAMES, progress=not args.quiet)
-        written += [folder / "scene.png", folder / "scene.gif"]
+            plot_scene(animation, staging / "scene.png")
+            animate_scene(animation, staging / "scene.gif", max_frames=SCENE_GIF_FRAMES, progress=not args.quiet)
     report = animation.report
     print(
-        f"wrote {', '.join(str(p) for p in written)}: {animation.placement.n_objects} objects, "
+        f"wrote {', '.join(str(folder / name) for name in names)}: {animation.placement.n_objects} objects, "
         f"{animation.n_frames} frames; neighbours in step (within {report['in_step_frames']} frame) at most "
         f"{report['in_step_before']:.1%} of frames before de-synchronisation, {report['in_step_after']:.1%} after; "
         f"pairs in step over 5% of frames {report['pairs_in_step_before']:.1%} before, "
@@ -61,7 +62,7 @@ def _cmd_scene(args) -> int:
 def _cmd_segment(args) -> int:
     output = require_suffix(args.output, (".npz",), "-o")
     params = component_params(args, "segmenter")
-    source = read_source(args.source, args.clip, args.fps, args.allow_outside)
+    source = read_source(args.source, args.clip, args.fps, args.allow_outside, args.up, args.meters_per_unit)
     if args.parts is not None:
         params["n_parts"] = args.parts
     found = flockkit.segment(source, segmenter=args.segmenter, seed=args.seed, **params)
@@ -85,6 +86,13 @@ def _scene_arguments(parser) -> None:
     parser.add_argument(
         "-o", "--output", required=True, help="folder to write scene.npz, scene.usda, scene.png, scene.gif"
     )
+    parser.add_argument(
+        "--features", choices=FEATURE_SOURCES,
+        help="feature arrows for layers that carry none (build --layers makes none): keyframes, from each "
+             "[[templates]] entry's features = [[time, [x, y]], ...] (which every such entry must then have); "
+             "motion, the source's own heading and speed (animals, characters, flocks that travel); an entry's "
+             "keyframes are used whichever is chosen. Default: none, and such layers are refused",
+    )  # fmt: skip
     parser.add_argument("--no-usd", action="store_true", help="skip the USD export (needs flockkit[usd])")
     parser.add_argument(
         "--no-pictures", action="store_true", help="skip the top view and animation (need flockkit[viz])"

@@ -11,6 +11,9 @@
     [[templates]]            # one per template: layers or graph, a flockkit file, relative to this one
     layers = "plants.npz"
     count = 30
+    features = [[0, [0.8, 0]], [2.5, [0.3, 0.1]]]   # optional, for layers that carry no feature
+                             # arrows (build --layers makes none): keyframed [time, vector], time in
+                             # seconds of the template's source, vectors in its coordinates
 
     [[arrows]]               # a flow field: physical-force arrows, keyframed [time, vector]
     position = [20, 15]
@@ -28,23 +31,44 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import attrs
+
 from .. import _files, _tomlfile
 from ..errors import FlockkitError, ValidationError
 from ..graphs import MotionGraph
 from ..regions import Polygon
+from .features import Features
 from .flow import Arrow, FlowField, SelfMovement
 from .layers import GraphLayers
 from .scene import Scene
 
-__all__ = ["read_scene"]
+__all__ = ["read_scene", "FEATURE_SOURCES"]
 
 _KEYS = {"duration", "seed", "region", "scale", "headings", "templates", "arrows", "self_movement", "walk", "n_jobs"}
 
+# Where the feature arrows of layers that carry none come from (read_scene's `features`): the
+# paper's two kinds of annotation (section 4.2), keyframed by hand, or an object's own movement.
+FEATURE_SOURCES = ("keyframes", "motion")
 
-def read_scene(path, *, n_jobs: int | None = None, allow_outside: bool = False) -> Scene:
+
+def read_scene(path, *, features: str | None = None, n_jobs: int | None = None, allow_outside: bool = False) -> Scene:
     """The Scene a TOML scene file describes; errors name the file and the entry. The template
-    files it names must lie in its folder (below it), unless `allow_outside` is True."""
+    files it names must lie in its folder (below it), unless `allow_outside` is True.
+
+    A scene's objects follow arrows matched against their templates' feature arrows, one per
+    source frame (``flockkit.Features``). Layers built with ``features=`` carry theirs, and a
+    plain graph's come from its motion; layers that carry none (what ``flockkit build --layers``
+    writes) get them from their ``[[templates]]`` entry's ``features`` keyframes where it has
+    them (``[[time, vector], ...]``: seconds of the source and vectors in its coordinates,
+    interpolated as ``Features.from_keyframes``), else as `features` says: "motion", the
+    source's own heading and speed (``Features.from_motion``: animals, characters, flocks that
+    travel); "keyframes", the entry's keyframes, which every such template must then have; None
+    (the default), none, and such a template is refused naming both ways."""
     path = Path(path)
+    if features is not None and features not in FEATURE_SOURCES:
+        raise ValidationError(
+            f"read_scene: features must be one of {', '.join(map(repr, FEATURE_SOURCES))} or None; got {features!r}"
+        )
     data = _tomlfile.read(path, "scene")
     unknown = sorted(set(data) - _KEYS)
     if unknown:
@@ -56,11 +80,12 @@ def read_scene(path, *, n_jobs: int | None = None, allow_outside: bool = False) 
         templates, counts = [], []
         for k, entry in enumerate(data["templates"]):
             kinds = [key for key in ("layers", "graph") if key in entry]
-            if len(kinds) != 1 or "count" not in entry or set(entry) - {"layers", "graph", "count"}:
-                raise ValidationError(f"[[templates]] {k} needs one of layers or graph, and count")
+            if len(kinds) != 1 or "count" not in entry or set(entry) - {"layers", "graph", "count", "features"}:
+                raise ValidationError(f"[[templates]] {k} needs one of layers or graph, and count (features optional)")
             file = _files.confined(path.parent, entry[kinds[0]], source=path, where=f"templates[{k}].{kinds[0]}",
                                    allow_outside=allow_outside, uri=False)  # fmt: skip
-            templates.append((GraphLayers if kinds[0] == "layers" else MotionGraph).load(file))
+            template = (GraphLayers if kinds[0] == "layers" else MotionGraph).load(file)
+            templates.append(_with_features(template, entry.get("features"), features, k, entry[kinds[0]]))
             counts.append(entry["count"])
         for table, keys in (("arrows", {"position", "keyframes"}), ("self_movement", {"object", "keyframes"})):
             for k, entry in enumerate(data.get(table, [])):
@@ -91,3 +116,36 @@ def read_scene(path, *, n_jobs: int | None = None, allow_outside: bool = False) 
         raise type(exc)(str(exc) if str(exc).startswith(str(path)) else f"{path}: {exc}") from None
     except (TypeError, ValueError, OverflowError) as exc:  # a value of the wrong type or size
         raise ValidationError(f"{path}: {type(exc).__name__}: {exc}") from None
+
+
+def _with_features(template, keyframes, source: str | None, k: int, name: str):
+    """`template` with feature arrows: its own, its entry's `keyframes`, or as `source` says
+    (see read_scene); a ValidationError naming the entry where it gets none, or keyframes it
+    cannot take."""
+    where = f"[[templates]] {k} ({name})"
+    if not isinstance(template, GraphLayers) or template.features is not None:
+        if keyframes is not None:
+            own = "a graph's arrows come from its motion" if not isinstance(template, GraphLayers) else (
+                "its layers carry their own feature arrows")  # fmt: skip
+            raise ValidationError(f"{where} features: {own}; leave out features here")
+        return template
+    motion = template.source
+    if keyframes is not None:
+        try:
+            arrows = Features.from_keyframes(keyframes, n_frames=motion.n_frames, dt=motion.dt)
+        except ValidationError as exc:
+            raise ValidationError(f"{where} features: {exc}") from None
+    elif source == "motion":
+        arrows = Features.from_motion(motion)
+    elif source == "keyframes":
+        raise ValidationError(
+            f"{where}: features='keyframes' (flockkit scene --features keyframes) but the entry has no features "
+            f"keyframes: add features = [[time, [x, y]], ...] (seconds of its {motion.duration:g} s source)"
+        )
+    else:
+        raise ValidationError(
+            f"{where}: its layers carry no feature arrows (flockkit build --layers makes none), which a scene's "
+            f"objects need to follow arrows: give the entry features = [[time, [x, y]], ...] keyframes, or take them "
+            f"from its own motion with features='motion' (flockkit scene --features motion)"
+        )
+    return attrs.evolve(template, features=arrows)

@@ -37,8 +37,10 @@ class TemplateView:
             return Features.from_motion(self.source)
         if self.template.features is None and needed:
             raise ValidationError(
-                f"Scene.templates[{k}] has no features but the scene has constraints: build its layers with "
-                f"features= (flockkit.Features, e.g. Features.from_keyframes or Features.from_motion)"
+                f"Scene.templates[{k}] has no features: a scene's objects follow arrows (its constraints', or one "
+                f"made from the first template's features when it has none), matched against their template's "
+                f"feature arrows: build its layers with features= (flockkit.Features, e.g. Features.from_keyframes "
+                f"or Features.from_motion)"
             )
         return self.template.features
 
