@@ -33,6 +33,24 @@ def option(argv: list[str], name: str) -> str:
     return argv[argv.index(name) + 1]
 
 
+def foxes_face_the_wind_upright_at_true_size(animation):
+    """scenes/foxes.toml's claims: out of step, every fox turned to face east (the Fox faces -y:
+    a quarter turn), standing on the ground about 0.75 m tall."""
+    import numpy as np
+
+    assert animation.report["pairs_in_step_after"] == 0.0
+
+    turned = np.stack([np.cos(animation.placement.headings), np.sin(animation.placement.headings)], axis=1)
+    np.testing.assert_allclose(turned, [[0.0, 1.0]] * animation.placement.n_objects, atol=1e-9)
+    for i, scale in enumerate(animation.placement.scales):
+        heights = animation.motions[i].positions[..., 2]
+        assert heights.min() > -0.05 * scale and 0.7 < (heights.max() - heights.min()) / scale < 0.85
+
+
+# what an example's header claims beyond files, objects, agents and frames: file -> check of its output
+CLAIMS = {"scenes/foxes.toml": foxes_face_the_wind_upright_at_true_size}
+
+
 def test_there_are_scene_and_crowd_examples():
     folders = {path.parent.name for path in EXAMPLES}
     assert folders == {"scenes", "crowds"}
@@ -74,6 +92,7 @@ def test_every_example_runs_as_its_header_says(example, tmp_path, monkeypatch, c
         assert animation.placement.n_objects == objects and animation.n_frames == frames
         assert f"{objects} objects, {frames} frames" in out
         assert f"{objects} objects, {frames} frames" in text  # the header says what it writes
+        CLAIMS.get(f"{example.parent.name}/{example.name}", lambda animation: None)(animation)
         if usd:
             stage = Usd.Stage.Open(str(output / "scene.usda"))
             assert len(stage.GetPseudoRoot().GetChild("Scene").GetChildren()) == objects
