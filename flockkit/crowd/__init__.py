@@ -1,11 +1,22 @@
 """Massive crowds (paper 003): skeletons and clips, shared streams of poses, the crowd runtime."""
 
+from ..io.skin import SkinnedMesh, read_skin
 from ..skeleton import Channel, Event, Pose, SkeletalClip, Skeleton, sample_keys, stream_times
 from .drive import Cue, Driver, Gait, StateMachine
 from .feet import driven_sliding, foot_sliding, ground_speed, plant_feet
 from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
 from .record import CrowdRecording, record, write_engine_buffers
 from .runtime import INSTANCE, Crowd, CrowdEvent
+from .textures import (
+    TEXTURE_INSTANCE,
+    AnimationTextures,
+    bake_textures,
+    instance_buffer,
+    instances,
+    shader_source,
+    skin,
+    skinning_matrices,
+)
 
 __all__ = [
     "SkeletalClip",
@@ -34,4 +45,14 @@ __all__ = [
     "foot_sliding",
     "driven_sliding",
     "plant_feet",
+    "AnimationTextures",
+    "bake_textures",
+    "instance_buffer",
+    "instances",
+    "skin",
+    "skinning_matrices",
+    "shader_source",
+    "TEXTURE_INSTANCE",
+    "SkinnedMesh",
+    "read_skin",
 ]
