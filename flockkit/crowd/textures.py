@@ -476,7 +476,7 @@ def bake_textures(source, *, seconds=None, fps=None, inverse_bind=None, skeleton
         if isinstance(player, SkeletalClip):
             count = math.ceil(player.duration * rate - 1e-3) + 1
             pose = player.sample(np.arange(count) / rate)
-            period = player.duration * rate
+            period = min(player.duration * rate, count - 1)  # its end, within float32 rounding
         else:
             pose = player.pose(np.arange(frames) / rate)
             if pose.n_joints != skeleton.n_joints or pose.shape != (frames,):
