@@ -680,25 +680,7 @@ def skin(textures: AnimationTextures, records, mesh: SkinnedMesh, *, normals: bo
     if not isinstance(textures, AnimationTextures):
         raise ValidationError(f"skin: textures must be AnimationTextures; got {type(textures).__name__}")
     mesh.check_skeleton(textures.skeleton, field="skin: mesh")
-    if normals and mesh.normals is None:
-        raise ValidationError(f"skin: the mesh {mesh.name!r} has no normals")
-    palette = skinning_matrices(textures, records)
-    n = len(palette)
-    validate.allocation(n * mesh.n_vertices * (3 + 12 + (9 if normals else 0)),
-                        f"skin: {n} instances of {mesh.n_vertices} vertices")  # fmt: skip
-    positions = np.zeros((n, mesh.n_vertices, 3))
-    linear = np.zeros((n, mesh.n_vertices, 3, 3)) if normals else None
-    for k in range(mesh.joints.shape[1]):
-        m = palette[:, mesh.joints[:, k]]  # (n, V, 3, 4)
-        w = mesh.weights[:, k, None]
-        positions += w * (np.einsum("nvij,vj->nvi", m[..., :3], mesh.positions) + m[..., 3])
-        if normals:
-            linear += w[..., None] * m[..., :3]
-    if not normals:
-        return positions
-    turned = np.einsum("nvij,vj->nvi", linear, mesh.normals)
-    turned /= np.linalg.norm(turned, axis=-1, keepdims=True)
-    return positions, turned
+    return mesh.skin_with(skinning_matrices(textures, records), normals=normals)
 
 
 def shader_source() -> str:

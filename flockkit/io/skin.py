@@ -21,6 +21,7 @@ from pathlib import Path
 import attrs
 import numpy as np
 
+from .. import validate
 from .._arrays import readonly_float, readonly_int
 from ..errors import ValidationError
 from . import gltf
@@ -31,6 +32,8 @@ __all__ = ["SkinnedMesh", "read_skin", "BIND_TOLERANCE"]
 # its own space); a vertex is then moved into the first skin's bind space, which needs the same
 # change of space for every joint it follows: equal to this, relative to the matrices' size.
 BIND_TOLERANCE = 1e-5
+# Skinning works on blocks of instances whose blended matrices take about this many bytes.
+_BLOCK_BYTES = 64 * 1024**2
 
 
 def _positions(value):
@@ -121,6 +124,42 @@ class SkinnedMesh:
                 f"({', '.join(self.joint_names[:3])}, ...) and the skeleton has others; read both from one file"
             )
 
+    def weight_matrix(self) -> np.ndarray:
+        """Each vertex's weight per joint (V, J), zero where it does not follow the joint: linear
+        blend skinning as one matrix product."""
+        j = len(self.joint_names)
+        flat = np.arange(self.n_vertices)[:, None] * j + self.joints
+        return np.bincount(flat.ravel(), self.weights.ravel(), minlength=self.n_vertices * j).reshape(-1, j)
+
+    def skin_with(self, matrices, *, normals: bool = False):
+        """Positions (n, V, 3) of the mesh skinned by skinning matrices `matrices` (n, J, 3, 4)
+        (rows 0-2 of joint world @ inverse bind), and with `normals` also the normals (n, V, 3)
+        turned by each vertex's blended 3 x 3 part and normalized: each vertex's matrices blended
+        by its weights, then applied (what a skinning shader does), in blocks of instances."""
+        matrices = np.asarray(matrices, dtype=np.float64)
+        j = len(self.joint_names)
+        if matrices.ndim != 4 or matrices.shape[1:] != (j, 3, 4):
+            raise ValidationError(f"skin_with: matrices must have shape (n, {j}, 3, 4); got {matrices.shape}")
+        if normals and self.normals is None:
+            raise ValidationError(f"skin_with: the mesh {self.name!r} has no normals")
+        n, v = len(matrices), self.n_vertices
+        validate.allocation(n * v * (6 if normals else 3), f"skinning {n} instances of {v} vertices")
+        weights = self.weight_matrix()
+        points = np.concatenate([self.positions, np.ones((v, 1))], axis=1)[:, :, None]
+        positions = np.empty((n, v, 3))
+        turned = np.empty((n, v, 3)) if normals else None
+        block = max(1, _BLOCK_BYTES // (v * 12 * 8))
+        for start in range(0, n, block):
+            stop = min(start + block, n)
+            mixed = np.matmul(weights, matrices[start:stop].reshape(stop - start, j, 12)).reshape(-1, v, 3, 4)
+            positions[start:stop] = (mixed @ points)[..., 0]
+            if normals:
+                turned[start:stop] = (mixed[..., :3] @ self.normals[:, :, None])[..., 0]
+        if not normals:
+            return positions
+        turned /= np.linalg.norm(turned, axis=-1, keepdims=True)
+        return positions, turned
+
     def skinned(self, world) -> np.ndarray:
         """Positions (..., V, 3) of the mesh skinned by world joint matrices `world` (..., J, 4, 4):
         linear blend skinning, directly from the poses (the check of every faster skinning)."""
@@ -128,13 +167,9 @@ class SkinnedMesh:
         if world.shape[-3:] != (len(self.joint_names), 4, 4):
             raise ValidationError(f"skinned: world must have shape (..., {len(self.joint_names)}, 4, 4); "
                                   f"got {world.shape}")  # fmt: skip
-        matrices = (world @ self.inverse_bind)[..., :3, :]  # (..., J, 3, 4)
-        out = np.zeros(world.shape[:-3] + (self.n_vertices, 3))
-        for k in range(self.joints.shape[1]):
-            m = matrices[..., self.joints[:, k], :, :]  # (..., V, 3, 4)
-            moved = np.einsum("...vij,vj->...vi", m[..., :3], self.positions) + m[..., 3]
-            out += self.weights[:, k, None] * moved
-        return out
+        matrices = (world @ self.inverse_bind)[..., :3, :]
+        flat = matrices.reshape((-1,) + matrices.shape[-3:])
+        return self.skin_with(flat).reshape(world.shape[:-3] + (self.n_vertices, 3))
 
 
 def _skeleton_nodes(document, s: int):
