@@ -60,9 +60,10 @@ TEXELS_PER_JOINT = 5
 # Per joint, the skeleton texture: inverse bind matrix rows 0, 1, 2; (scale x, y, z, parent).
 SKELETON_TEXELS = 4
 # A stream is kept as a loop of P frames when every frame it plays in the run is within this of
-# frame k mod P: rotation and matrix entries absolutely, translations relative to the skeleton's
-# size. A looping clip drifts by the float32 rounding of its length each loop (the Fox's walk,
-# 2e-8 s a loop at 24 fps); a loop that drifts further over the run is baked whole.
+# frame k mod P (bake_textures' loop_tolerance): rotations and the linear part of skinning matrices
+# relative to their size, translations relative to the skeleton's. A looping clip drifts by the
+# float32 rounding of its length each loop (the Fox's walk: 2e-8 s a loop at 24 fps, past 1e-5
+# after about 40 s), so a long run bakes it whole unless a looser tolerance is asked for.
 LOOP_TOLERANCE = 1e-5
 FORMAT, FORMAT_VERSION, MAGIC = "flockkit-animation-textures", 1, b"FKANIMTX"
 SHADER = "crowd_skinning.vert"
@@ -374,9 +375,9 @@ def _size(skeleton: Skeleton, texels: np.ndarray) -> float:
     return max(float(np.ptp(positions, axis=1).max()), 1e-12)
 
 
-def _loop(texels: np.ndarray, size: float) -> int:
+def _loop(texels: np.ndarray, size: float, tolerance: float) -> int:
     """The fewest frames P (at most half the frames) after which every frame k of `texels` is
-    frame k mod P within LOOP_TOLERANCE: skinning matrices relative to their size (the linear
+    frame k mod P within `tolerance`: skinning matrices relative to their size (the linear
     part to its largest entry, the translation to the skeleton's `size`), local rotations as they
     are (a rotation or its negation); 0 where there is none. Local translations follow from the
     matrices."""
@@ -393,7 +394,7 @@ def _loop(texels: np.ndarray, size: float) -> int:
     frames = len(texels)
     every = np.arange(frames)
     for period in range(1, frames // 2 + 1):
-        if distance(period, 0) <= LOOP_TOLERANCE and distance(every, every % period) <= LOOP_TOLERANCE:
+        if distance(period, 0) <= tolerance and distance(every, every % period) <= tolerance:
             return period
     return 0
 
@@ -405,7 +406,8 @@ def _clips(source) -> list:
     return items
 
 
-def bake_textures(source, *, seconds=None, fps=None, inverse_bind=None, skeleton=None) -> AnimationTextures:
+def bake_textures(source, *, seconds=None, fps=None, inverse_bind=None, skeleton=None,
+                  loop_tolerance: float = LOOP_TOLERANCE) -> AnimationTextures:  # fmt: skip
     """Bake `source` into animation textures.
 
     Parameters
@@ -414,7 +416,7 @@ def bake_textures(source, *, seconds=None, fps=None, inverse_bind=None, skeleton
         A pool: one texture per stream (texture s is stream s, what ``instance_buffer`` reads),
         frame k its controller's pose at k / pool.fps, for every frame a crowd made from the
         pool and run `seconds` can reach (history + seconds x fps); a stream whose poses repeat
-        over those frames keeps one loop (``LOOP_TOLERANCE``). Streams of another skeleton than
+        over those frames keeps one loop (within `loop_tolerance`). Streams of another skeleton than
         `skeleton` (default the first stream's) get no frames. Clips: one texture per clip,
         frame k its pose at k / `fps` up to its end, looping over its duration (engines set
         their own frame positions with :func:`instances`).
@@ -425,7 +427,14 @@ def bake_textures(source, *, seconds=None, fps=None, inverse_bind=None, skeleton
     inverse_bind : (J, 4, 4) or SkinnedMesh, optional
         The skin's inverse bind matrices (``read_skin``); default the inverse of each joint's
         rest world transform (a mesh bound in the rest pose).
+    skeleton : Skeleton, optional
+        For a pool: the skeleton whose streams are baked (default the first stream's).
+    loop_tolerance : float
+        How far (relative, see ``LOOP_TOLERANCE``) a stream's frame k may be from frame k mod P
+        for the stream to be kept as a loop of P frames: what the textures may then differ from
+        the crowd's poses by. 0 keeps only exact repeats.
     """
+    loop_tolerance = validate.number(loop_tolerance, "bake_textures: loop_tolerance", minimum=0)
     if isinstance(source, StreamPool):
         if fps is not None and fps != source.fps:
             raise ValidationError(f"bake_textures: a pool's textures are at its own fps ({source.fps}); got fps={fps}")
@@ -484,7 +493,7 @@ def bake_textures(source, *, seconds=None, fps=None, inverse_bind=None, skeleton
                                       f"{pose.n_joints} joints for {frames} times")  # fmt: skip
         texels = _texels(skeleton, pose.rotations, pose.translations, inverse_bind)
         if not isinstance(player, SkeletalClip):
-            period = _loop(texels, _size(skeleton, texels))
+            period = _loop(texels, _size(skeleton, texels), loop_tolerance)
             if period:
                 texels = texels[: period + 1]  # frame P (frame 0 again) closes the loop
         blocks.append(texels)

@@ -147,6 +147,9 @@ def test_streams_that_repeat_keep_one_loop_and_others_the_whole_run(characters):
     textures = bake_textures(pool, seconds=10, inverse_bind=mesh)
     assert textures.periods.tolist() == [17, 34, 0]
     assert textures.lengths.tolist() == [18, 35, 30 + 240]
+    # over 60 s the walk's float32 length drifts it past LOOP_TOLERANCE: baked whole, unless asked
+    assert bake_textures(pool, seconds=60, inverse_bind=mesh).periods.tolist() == [0, 0, 0]
+    assert bake_textures(pool, seconds=60, inverse_bind=mesh, loop_tolerance=1e-4).periods.tolist() == [17, 34, 139]
     # a loop's frame k + P is its frame k: the pool writes the same pose there
     walk = pool.streams[0].controller.pose(np.arange(200) / FPS)
     kept = textures.rotations[textures.starts[0] + np.arange(200) % 17]
