@@ -18,8 +18,8 @@ float32 precision, in every case.
 
 A stream is baked by evaluating its controller (a function of its clock alone) at every frame a
 crowd run of `seconds` can reach; a stream whose poses repeat (a looping clip whose length is a
-whole number of frames) keeps one loop, checked over the whole run, so that its texture does not
-grow with the run.
+whole number of frames) keeps one loop, checked against every frame of the run (within
+`loop_tolerance`), so that its texture does not grow with the run.
 """
 
 from __future__ import annotations
@@ -83,15 +83,18 @@ TEXTURE_INSTANCE = np.dtype(
 )
 
 
-def _inverse_bind(value, j: int) -> np.ndarray:
+def _inverse_bind(value, j: int, field: str = "AnimationTextures.inverse_bind") -> np.ndarray:
     """`value` (J, 4, 4) affine matrices, rounded to float32 as the GPU holds them."""
-    matrices = np.asarray(value, dtype=np.float64)
+    try:
+        matrices = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        raise ValidationError(f"{field} must be an array of numbers: {exc}") from None
     if matrices.shape != (j, 4, 4):
-        raise ValidationError(f"AnimationTextures.inverse_bind must have shape ({j}, 4, 4); got {matrices.shape}")
+        raise ValidationError(f"{field} must have shape ({j}, 4, 4); got {matrices.shape}")
     if not np.all(np.isfinite(matrices)):
-        raise ValidationError("AnimationTextures.inverse_bind must be finite")
+        raise ValidationError(f"{field} must be finite")
     if np.abs(matrices[:, 3] - [0, 0, 0, 1]).max() > 1e-6:
-        raise ValidationError("AnimationTextures.inverse_bind must be affine (last row 0, 0, 0, 1)")
+        raise ValidationError(f"{field} must be affine (last row 0, 0, 0, 1)")
     out = matrices.astype(np.float32).astype(np.float64)
     out[:, 3] = [0, 0, 0, 1]
     out.setflags(write=False)
@@ -399,8 +402,19 @@ def _loop(texels: np.ndarray, size: float, tolerance: float) -> int:
     return 0
 
 
+def _skeleton(value) -> Skeleton:
+    if not isinstance(value, Skeleton):
+        raise ValidationError(f"bake_textures: skeleton must be a flockkit.Skeleton; got {type(value).__name__}")
+    return value
+
+
 def _clips(source) -> list:
-    items = list(source.values()) if isinstance(source, dict) else list(source)
+    if isinstance(source, dict):
+        items = list(source.values())
+    elif isinstance(source, (list, tuple)):
+        items = list(source)
+    else:
+        items = []
     if not items or not all(isinstance(c, SkeletalClip) for c in items):
         raise ValidationError("bake_textures needs a StreamPool or a non-empty sequence (or mapping) of SkeletalClip")
     return items
@@ -441,7 +455,7 @@ def bake_textures(source, *, seconds=None, fps=None, inverse_bind=None, skeleton
         if seconds is None:
             raise ValidationError("bake_textures: seconds (how long the pool's crowd runs) is needed for a pool")
         seconds = validate.number(seconds, "bake_textures: seconds", minimum=0)
-        skeleton = source.streams[0].skeleton if skeleton is None else skeleton
+        skeleton = _skeleton(source.streams[0].skeleton if skeleton is None else skeleton)
         rate = source.fps
         frames = int(source.history.max()) + math.ceil(seconds * rate - 1e-9)
         streams = [(s.name or f"stream {k}", s.controller) for k, s in enumerate(source.streams)]
@@ -454,7 +468,7 @@ def bake_textures(source, *, seconds=None, fps=None, inverse_bind=None, skeleton
         if seconds is not None:
             raise ValidationError("bake_textures: seconds is for a pool; clips are baked over their duration")
         clips = _clips(source)
-        skeleton = clips[0].skeleton if skeleton is None else skeleton
+        skeleton = _skeleton(clips[0].skeleton if skeleton is None else skeleton)
         for k, clip in enumerate(clips):
             if not clip.skeleton.matches(skeleton):
                 raise ValidationError(f"bake_textures: clip {k} ({clip.name!r}) has another skeleton than clip 0")
@@ -468,14 +482,12 @@ def bake_textures(source, *, seconds=None, fps=None, inverse_bind=None, skeleton
         chosen = list(range(len(clips)))
         validate.allocation(sum(c.duration * rate + 2 for c in clips) * skeleton.n_joints * (TEXELS_PER_JOINT * 4 + 40),
                             f"bake_textures: {len(clips)} clips at {rate:g} fps")  # fmt: skip
-    if not isinstance(skeleton, Skeleton):
-        raise ValidationError(f"bake_textures: skeleton must be a flockkit.Skeleton; got {type(skeleton).__name__}")
     if isinstance(inverse_bind, SkinnedMesh):
         inverse_bind.check_skeleton(skeleton, field="bake_textures: inverse_bind")
         inverse_bind = inverse_bind.inverse_bind
     if inverse_bind is None:
         inverse_bind = np.linalg.inv(skeleton.world(skeleton.rest))
-    inverse_bind = _inverse_bind(inverse_bind, skeleton.n_joints)
+    inverse_bind = _inverse_bind(inverse_bind, skeleton.n_joints, "bake_textures: inverse_bind")
     blocks, starts, lengths, periods = [], [], [], []
     row = 0
     for k, (_, player) in enumerate(streams):
