@@ -237,14 +237,25 @@ def read_skin(path, *, skin=None, allow_outside: bool = False) -> SkinnedMesh:
             return np.tile(np.eye(4), (n, 1, 1))
         return document.accessor(spec["inverseBindMatrices"])[:n].reshape(-1, 4, 4).transpose(0, 2, 1)
 
+    def invertible(node: int, matrix: np.ndarray, what: str) -> np.ndarray:
+        if abs(np.linalg.det(matrix[:3, :3])) <= 1e-12 * max(1e-300, float(np.abs(matrix[:3, :3]).max()) ** 3):
+            document.fail(f"nodes[{node}]", f"has {what} that cannot be inverted (a zero scale): no bind space")
+        return matrix
+
+    def inverted(node: int, matrix: np.ndarray, what: str = "a rest transform") -> np.ndarray:
+        return np.linalg.inv(invertible(node, matrix, what))
+
     # each joint's inverse bind matrix: from the first skin of the group that lists it, else the
     # inverse of its rest world transform (an armature node above the skin)
-    inverse = np.linalg.inv(np.stack([world[n] for n in chosen]))
+    inverse = np.zeros((len(chosen), 4, 4))
     given = np.zeros(len(chosen), dtype=bool)
     for k in group:
         for joint, matrix in zip(skins[k]["joints"], ibm_of(k)):
             if not given[column[joint]]:
-                inverse[column[joint]], given[column[joint]] = matrix, True
+                inverse[column[joint]] = invertible(joint, matrix, f"an inverse bind matrix in skins[{k}]")
+                given[column[joint]] = True
+    for j in np.flatnonzero(~given):
+        inverse[j] = inverted(chosen[j], world[chosen[j]])
     positions, normals, faces, joints, weights = [], [], [], [], []
     count, every_normal, width = 0, True, 1
     for node in document.order:
@@ -277,7 +288,7 @@ def read_skin(path, *, skin=None, allow_outside: bool = False) -> SkinnedMesh:
                                                   f"{path}: skins[{k}]", names)  # fmt: skip
             else:
                 j = column[anchor]
-                move = np.linalg.inv(inverse[j]) @ np.linalg.inv(world[anchor]) @ world[node]
+                move = np.linalg.inv(inverse[j]) @ inverted(anchor, world[anchor]) @ world[node]
                 points = points @ move[:3, :3].T + move[:3, 3]
                 if normal is not None:
                     normal = _unit(normal @ np.linalg.inv(move[:3, :3]))
