@@ -11,7 +11,9 @@ Fixtures:
 
 Option ``--flockkit-kit`` adds one test per check of the conformance kit for every installed
 component (each made with its default parameters; a clip player plays the kit's walker clip),
-with ids ``kit:<kind>:<name>-<check>``; ``--flockkit-kit=KIND[,KIND]`` limits it to those kinds.
+with ids ``kit:<kind>:<name>-<check>``; ``--flockkit-kit=KIND[,KIND]`` limits it to those kinds,
+and ``--flockkit-kit-from=DIST[,DIST]`` (alone or with it) to the components those installed distributions register
+(names as pip lists them), so a plugin's own test run checks its components and nobody else's.
 A check that does not apply to what the component declares is reported skipped, with the reason.
 """
 
@@ -29,6 +31,12 @@ def pytest_addoption(parser):
         default=None,
         metavar="KIND[,KIND]",
         help="run flockkit's conformance kit on every installed component (or those of the kinds given)",
+    )
+    group.addoption(
+        "--flockkit-kit-from",
+        default=None,
+        metavar="DIST[,DIST]",
+        help="run flockkit's conformance kit on the components these installed distributions register",
     )
 
 
@@ -144,36 +152,57 @@ class KitItem(pytest.Item):
 
 
 def pytest_collection_modifyitems(session, config, items):
-    wanted = config.getoption("flockkit_kit")
-    if wanted is None:
+    wanted, sources = config.getoption("flockkit_kit"), config.getoption("flockkit_kit_from")
+    if wanted is None and sources is None:
         return
     from ..errors import ValidationError
     from ..kinds import KINDS
     from ..registry import describe
     from . import _plan, checks_for
 
-    kinds = list(KINDS) if wanted == "all" else [k.strip() for k in wanted.split(",") if k.strip()]
+    kinds = list(KINDS) if wanted in (None, "all") else _names(wanted)
     unknown = [k for k in kinds if k not in KINDS]
     if unknown:
         raise pytest.UsageError(f"--flockkit-kit: unknown kind {unknown[0]!r}; the kinds are {', '.join(KINDS)}")
-    for kind in kinds:
-        for found in describe(kind):
-            try:
-                plan = _plan(kind, _made(kind, found.name))
-            except ValidationError as exc:  # parameters without defaults: a test must configure it
-                reason = (
-                    f"{kind} {found.name!r} cannot be made with its default parameters ({exc}); check it "
-                    "from a test: flockkit.testing.parametrize_with_checks([(kind, configured_component)])"
+    components = [(kind, found) for kind in kinds for found in describe(kind)]
+    if sources is not None:
+        wanted_from = {_canonical(d) for d in _names(sources)}
+        installed = {_canonical(found.distribution) for _, found in components if found.distribution}
+        missing = sorted(wanted_from - installed)
+        if missing:
+            raise pytest.UsageError(
+                f"--flockkit-kit-from: no installed distribution {missing[0]!r} registers a flockkit component "
+                f"of the kinds asked for; those that do: {', '.join(sorted(installed)) or 'none'}"
+            )
+        components = [(k, f) for k, f in components if f.distribution and _canonical(f.distribution) in wanted_from]
+    for kind, found in components:
+        try:
+            plan = _plan(kind, _made(kind, found.name))
+        except ValidationError as exc:  # parameters without defaults: a test must configure it
+            reason = (
+                f"{kind} {found.name!r} cannot be made with its default parameters ({exc}); check it "
+                "from a test: flockkit.testing.parametrize_with_checks([(kind, configured_component)])"
+            )
+            plan = [(check, reason) for check in checks_for(kind)]
+        for check, skip in plan:
+            items.append(
+                KitItem.from_parent(
+                    session,
+                    name=f"kit:{kind}:{found.name}-{check.__name__}",
+                    kind=kind,
+                    component_name=found.name,
+                    check=check,
+                    skip=skip,
                 )
-                plan = [(check, reason) for check in checks_for(kind)]
-            for check, skip in plan:
-                items.append(
-                    KitItem.from_parent(
-                        session,
-                        name=f"kit:{kind}:{found.name}-{check.__name__}",
-                        kind=kind,
-                        component_name=found.name,
-                        check=check,
-                        skip=skip,
-                    )
-                )
+            )
+
+
+def _names(option: str) -> list[str]:
+    return [n.strip() for n in option.split(",") if n.strip()]
+
+
+def _canonical(distribution: str) -> str:
+    """A distribution name as packaging compares them: case, '-', '_' and '.' do not matter."""
+    import re
+
+    return re.sub(r"[-_.]+", "-", distribution).lower()

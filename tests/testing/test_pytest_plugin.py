@@ -1,5 +1,6 @@
 """flockkit's pytest plugin, as a plugin author's test suite meets it (through pytester)."""
 
+import flockkit
 from flockkit.testing import checks_for
 
 pytest_plugins = ["pytester"]
@@ -116,3 +117,19 @@ def test_kit_option_refuses_an_unknown_kind(pytester):
     result = pytester.runpytest_subprocess("--flockkit-kit=metrc", "-p", "no:cacheprovider")
     assert result.ret != 0
     result.stderr.fnmatch_lines(["*unknown kind 'metrc'*"])
+
+
+def test_kit_from_limits_the_kit_to_one_distribution(pytester):
+    ours = {found.distribution for found in flockkit.registry.describe("metric")} - {None}
+    assert ours, "the built-in metric comes from an installed distribution"
+    result = pytester.runpytest_subprocess(f"--flockkit-kit-from={ours.pop().upper()}", "-p", "no:cacheprovider", "-v")
+    outcomes = result.parseoutcomes()
+    assert outcomes.get("failed", 0) == 0 and outcomes["passed"] >= 14
+    result.stdout.fnmatch_lines(["*kit:metric:icp-hungarian-check_symmetric PASSED*"])
+    assert "kit:behavior:boids" in result.stdout.str()
+
+
+def test_kit_from_refuses_a_distribution_that_registers_nothing(pytester):
+    result = pytester.runpytest_subprocess("--flockkit-kit-from=numpy", "-p", "no:cacheprovider")
+    assert result.ret != 0
+    result.stderr.fnmatch_lines(["*no installed distribution 'numpy' registers a flockkit component*"])
