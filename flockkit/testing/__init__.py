@@ -203,10 +203,11 @@ def check_plugin(
 ) -> CheckReport:
     """Run every check of `kind` that applies to `component` (a configured instance).
 
-    Raises AssertionError naming the first failed check and the plugin (an unexpected exception
-    inside a check counts as that check failing), or naming a check listed in
-    `expected_failed_checks` (check name -> reason, or a callable taking the component and
-    returning that) that passed. Returns a CheckReport. `progress` shows a bar over the checks.
+    Raises AssertionError listing every failed check with the plugin, each with its "to fix:"
+    line (an unexpected exception inside a check counts as that check failing; a failed
+    ``check_interface`` ends the run, since every later check relies on it), and naming any check
+    listed in `expected_failed_checks` (check name -> reason, or a callable taking the component
+    and returning that) that passed. Returns a CheckReport. `progress` shows a bar over the checks.
     """
     name = name or component_id(kind, component)
     expected = _expected(expected_failed_checks, component)
@@ -215,21 +216,32 @@ def check_plugin(
         from tqdm.auto import tqdm
 
         checks = tqdm(checks, desc=f"checking {kind} {name}", unit="check")
-    passed, failed_as_expected = [], {}
+    passed, failed_as_expected, failures = [], {}, []
     for check in checks:
         try:
             _run(check, kind, name, component)
-        except AssertionError:
+        except AssertionError as failure:
             if check.__name__ in expected:
                 failed_as_expected[check.__name__] = expected[check.__name__]
                 continue
-            raise
+            failures.append(failure)
+            if check.__name__ == "check_interface":
+                break
+            continue
         if check.__name__ in expected:
-            raise AssertionError(
-                f"{check.__name__} passed for {kind} {name!r} although it is listed in expected_failed_checks "
-                f"({expected[check.__name__]}); remove it from the list"
+            failures.append(
+                AssertionError(
+                    f"{check.__name__} passed for {kind} {name!r} although it is listed in expected_failed_checks "
+                    f"({expected[check.__name__]}); remove it from the list"
+                )
             )
+            continue
         passed.append(check.__name__)
+    if len(failures) == 1:
+        raise failures[0]
+    if failures:
+        listed = "\n\n".join(f"{i}. {failure}" for i, failure in enumerate(failures, 1))
+        raise AssertionError(f"{len(failures)} checks failed for {kind} {name!r}:\n\n{listed}") from failures[0]
     return CheckReport(
         passed=tuple(passed), skipped=skipped_checks(kind, component), expected_failures=failed_as_expected
     )

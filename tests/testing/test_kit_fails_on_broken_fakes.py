@@ -10,6 +10,7 @@ import flockkit
 from flockkit.testing import check_plugin, checks_for, parametrize_with_checks, skipped_checks
 from flockkit.testing import strategies as fst
 
+from . import fakes
 from .fakes import (
     BROKEN_BY_KIND,
     ComTerm,
@@ -64,6 +65,25 @@ def test_check_plugin_names_the_failed_check_and_plugin(kind, check_name):
         check_plugin(kind, BROKEN_BY_KIND[kind][check_name](), name="broken-component")
     message = str(info.value)
     assert "broken-component" in message and f"failed for {kind}" in message
+
+
+class AsymmetricWithWrongPairwise(fakes.Asymmetric, fakes.WrongPairwise):
+    """Two independent defects in one metric."""
+
+
+def test_check_plugin_lists_every_failed_check_not_only_the_first():
+    with pytest.raises(AssertionError) as info:
+        check_plugin("metric", AsymmetricWithWrongPairwise(), name="two-defects")
+    message = str(info.value)
+    failed = int(message.split(" checks failed for metric 'two-defects':", 1)[0])
+    assert failed >= 2 and message.count("to fix:") == failed
+    assert "check_symmetric failed" in message and "check_pairwise failed" in message
+
+
+def test_a_failed_interface_check_ends_the_run():
+    with pytest.raises(AssertionError) as info:
+        check_plugin("metric", fakes.NoCompare(), name="no-compare")
+    assert str(info.value).startswith("check_interface failed for metric 'no-compare'")
 
 
 def test_checks_for_unknown_kind():
