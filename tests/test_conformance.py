@@ -31,6 +31,8 @@ COMPONENTS = [
     for kind in ("behavior", "metric", "builder", "walk", "proposal", "objective", "segmenter", "controller")
     for name in flockkit.available(kind)
 ]
+# a configured component declares only what it handles: a region walk the dimension of its region
+COMPONENTS.append(("walk", flockkit.get("walk", "region", region=flockkit.Ball(center=[0.0, 0.0, 0.0], radius=60.0))))
 
 
 @parametrize_with_checks(COMPONENTS)

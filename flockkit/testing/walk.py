@@ -36,23 +36,24 @@ def _played(name, graph, walk) -> float:
         ) from exc
 
 
-def _graph(strategy, graph):
-    """The graph given, else the kit's own in the first dimension the walk declares (a configured
-    walk may handle only some of its kind's dimensions: a region walk those of its region)."""
+def _graphs(strategy, graph):
+    """The graph given, else the kit's own in every dimension the walk declares (a configured
+    walk may declare only some of its kind's dimensions: a region walk those of its region)."""
     if graph is not None:
-        return graph
+        return [graph]
     from .inputs import graph as kit_graph
 
-    return kit_graph(dims=dims_of(strategy)[0])
+    return [kit_graph(dims=d) for d in dims_of(strategy)]
 
 
 @needs("graph")
 def check_walk_covers_duration(name, strategy, *, graph=None):
     """walk returns a Walk that fits the graph and plays at least the duration asked for."""
-    graph = _graph(strategy, graph)
-    for duration in (5.0, 30.0):
-        played = _played(name, graph, _walk(name, strategy, graph, 1, duration))
-        assert played >= duration - 1e-9, f"{name}.walk(duration={duration}) plays only {played} s"
+    for kit_graph in _graphs(strategy, graph):
+        for duration in (5.0, 30.0):
+            with on_input(name, strategy, kit_graph.motion.dims, "the kit's graph"):
+                played = _played(name, kit_graph, _walk(name, strategy, kit_graph, 1, duration))
+            assert played >= duration - 1e-9, f"{name}.walk(duration={duration}) plays only {played} s"
 
 
 @fixed_by(
@@ -65,29 +66,31 @@ def check_walks_a_single_loop(name, strategy):
     of 60 s is made, within WALK_SECONDS, and plays at least 60 s."""
     from .inputs import loop_graph
 
-    dims = dims_of(strategy)[0]
-    graph = loop_graph(dims=dims)
-    with on_input(name, strategy, dims, "the kit's single-loop graph"):
-        walk = _walk(name, strategy, graph, 3, 60.0)
-    played = _played(name, graph, walk)
-    assert played >= 60.0 - 1e-9, f"{name}.walk(duration=60) on a single loop plays only {played} s"
+    for dims in dims_of(strategy):
+        graph = loop_graph(dims=dims)
+        with on_input(name, strategy, dims, "the kit's single-loop graph"):
+            walk = _walk(name, strategy, graph, 3, 60.0)
+        played = _played(name, graph, walk)
+        assert played >= 60.0 - 1e-9, f"{name}.walk(duration=60) on a single loop plays only {played} s"
 
 
 @needs("graph")
 def check_deterministic(name, strategy, *, graph=None):
     """The same seed gives the same walk (60 s walks, three seeds: an unseeded walk cannot match
     by chance)."""
-    graph = _graph(strategy, graph)
-    for seed in (7, 8, 9):
-        first = _walk(name, strategy, graph, seed, 60.0)
-        assert first == _walk(name, strategy, graph, seed, 60.0), f"{name}.walk differs for the same seed"
+    for kit_graph in _graphs(strategy, graph):
+        for seed in (7, 8, 9):
+            first = _walk(name, strategy, kit_graph, seed, 60.0)
+            assert first == _walk(name, strategy, kit_graph, seed, 60.0), (
+                f"{name}.walk differs for the same seed (in {kit_graph.motion.dims}D)"
+            )
 
 
 @needs("graph")
 def check_rejects_bad_duration(name, strategy, *, graph=None):
     """A duration <= 0, and a graph that is not a flockkit.MotionGraph, raise
     flockkit.errors.ValidationError."""
-    graph = _graph(strategy, graph)
+    graph = _graphs(strategy, graph)[0]
     for duration in (0.0, -5.0):
         expect_validation_error(
             lambda duration=duration: strategy.walk(graph, np.random.default_rng(0), duration),

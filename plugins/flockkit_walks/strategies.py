@@ -88,7 +88,7 @@ def _region(value):
     return value
 
 
-@attrs.frozen(kw_only=True)
+@attrs.frozen(kw_only=True, slots=False)
 class RegionWalk:
     """Keep the group's center of mass inside `region` (paper 000 section 5.2).
 
@@ -123,6 +123,11 @@ class RegionWalk:
     horizon: float = validate.parameter("walk", default=3.0, minimum=0, strict=True)
     start: int | None = validate.parameter("walk", default=None, kind="integer", minimum=0, optional=True)
     budget: int = validate.parameter("walk", default=2000, kind="integer", minimum=1)
+
+    capabilities = flockkit.Capabilities()  # the class: any region; an instance: its region's dimension
+
+    def __attrs_post_init__(self):
+        object.__setattr__(self, "capabilities", flockkit.Capabilities(dims=(self.region.dims,)))
 
     def walk(self, graph: flockkit.MotionGraph, rng: np.random.Generator, duration: float) -> flockkit.Walk:
         _check_graph(graph)

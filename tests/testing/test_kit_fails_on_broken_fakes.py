@@ -86,6 +86,24 @@ def test_a_failed_interface_check_ends_the_run():
     assert str(info.value).startswith("check_interface failed for metric 'no-compare'")
 
 
+class PlanarOnly:
+    """Declares every dimension, walks only planar graphs."""
+
+    def walk(self, graph, rng, duration):
+        if graph.motion.dims == 3:
+            raise flockkit.errors.ValidationError("cannot walk a 3D graph")
+        return RandomWalk().walk(graph, rng, duration)
+
+
+@pytest.mark.parametrize("check_name", ["check_walk_covers_duration", "check_walks_a_single_loop"])
+def test_a_walk_is_checked_in_every_dimension_it_declares(check_name):
+    with pytest.raises(AssertionError, match="3D"):
+        check_named("walk", check_name)("planar", PlanarOnly())
+    planar = PlanarOnly()
+    planar.capabilities = flockkit.Capabilities(dims=(2,))  # declared per instance, as a region walk does
+    check_named("walk", check_name)("planar", planar)
+
+
 def test_checks_for_unknown_kind():
     with pytest.raises(ValueError, match="unknown plugin kind"):
         checks_for("behaviour")
