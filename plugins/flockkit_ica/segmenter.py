@@ -9,7 +9,10 @@
    motion carries.
 4. k-means on those rows, scaled to unit length (which components a point follows, not how far it
    moves; the amount of motion is what the energy already separates from static points).
-5. With `n_parts` None, parts whose points together move as one rigid body (every frame a
+5. The points are taken in a canonical order (their trajectories sorted lexicographically), so
+   that shuffling the input's points shuffles the labels with them: FastICA's and k-means'
+   seeded starts pick points by index, and would otherwise find other parts for another order.
+6. With `n_parts` None, parts whose points together move as one rigid body (every frame a
    rotation and translation of the first, to 1e-5 of their extent) are merged: the energies of
    a body that turns as it travels differ from point to point, and k-means cuts it, although
    nothing in it moves independently.
@@ -87,8 +90,9 @@ class IcaKmeans:
         if moving.sum() == 0 or wanted == 0:
             return flockkit.Segmentation(labels=labels, n_parts=1)
         seed = int(rng.integers(2**31 - 1))
-        found = self._moving_parts(energy[:, moving], wanted, seed)
-        labels[moving] = found + still
+        moving_points = np.flatnonzero(moving)
+        order = moving_points[_canonical_order(motion.positions[:, moving_points])]
+        labels[order] = self._moving_parts(energy[:, order], wanted, seed) + still
         if wanted is None:
             labels = flockkit.scene.merge_rigid_parts(motion, labels, tolerance=_RIGID)
         return flockkit.Segmentation(labels=flockkit.scene.canonical_labels(labels), n_parts=int(labels.max()) + 1)
@@ -125,6 +129,14 @@ class IcaKmeans:
             if score > best + 1e-3:
                 best, chosen = score, labels
         return chosen if chosen is not None else np.zeros(points, dtype=np.int64)
+
+
+def _canonical_order(positions: np.ndarray) -> np.ndarray:
+    """The points of `positions` (T, N, D) sorted by their whole trajectories, lexicographically
+    (points with the same trajectory keep their order: nothing tells them apart)."""
+    trajectories = np.ascontiguousarray(positions.transpose(1, 0, 2).reshape(positions.shape[1], -1))
+    _, inverse = np.unique(trajectories, axis=0, return_inverse=True)
+    return np.argsort(inverse.ravel(), kind="stable")
 
 
 def _explaining(energy: np.ndarray, most: int) -> int:

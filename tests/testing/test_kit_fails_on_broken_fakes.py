@@ -104,6 +104,14 @@ def test_a_walk_is_checked_in_every_dimension_it_declares(check_name):
     check_named("walk", check_name)("planar", planar)
 
 
+def test_a_segmenter_that_depends_on_point_order_only_where_parts_are_ambiguous_is_caught(monkeypatch):
+    import flockkit_ica.segmenter as ica
+
+    monkeypatch.setattr(ica, "_canonical_order", lambda positions: np.arange(positions.shape[1]))
+    with pytest.raises(AssertionError, match="on a waving sheet"):
+        check_named("segmenter", "check_order_of_points_does_not_matter")("indexed", IcaKmeans())
+
+
 def test_checks_for_unknown_kind():
     with pytest.raises(ValueError, match="unknown plugin kind"):
         checks_for("behaviour")
