@@ -5,7 +5,7 @@ from ..skeleton import Channel, Event, Pose, SkeletalClip, Skeleton, sample_keys
 from .drive import Cue, Driver, Gait, StateMachine
 from .feet import driven_sliding, foot_sliding, ground_speed, plant_feet
 from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
-from .record import CrowdRecording, record, write_engine_buffers
+from .record import CrowdRecording, export_usd, record, write_engine_buffers
 from .runtime import INSTANCE, Crowd, CrowdEvent
 from .textures import (
     TEXTURE_INSTANCE,
@@ -39,6 +39,7 @@ __all__ = [
     "Cue",
     "CrowdRecording",
     "record",
+    "export_usd",
     "write_engine_buffers",
     "Driver",
     "ground_speed",

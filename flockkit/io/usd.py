@@ -3,9 +3,10 @@
 Writes, each on a stage with the conventions tools import unchanged (up axis z, metersPerUnit,
 a time line at a frame rate Blender, Houdini and Maya play at the right speed), saved atomically:
 a motion's agents as a PointInstancer (:func:`write_usd`), animated meshes and point clouds
-(:func:`write_meshes`, for scenes), and skeletons with their animation (:func:`write_skeletons`,
-for crowds). Reads the time-sampled ``UsdGeom.Mesh`` points of a stage (:func:`read_meshes`),
-after checking that every layer it composes lies inside its folder.
+(:func:`write_meshes`, for scenes), and crowds of skinned characters (:func:`write_crowd`). Frame
+f is time code f * dt * fps, an integer wherever the frame rate is the time line's. Reads the
+time-sampled ``UsdGeom.Mesh`` points of a stage (:func:`read_meshes`), after checking that every
+layer it composes lies inside its folder.
 """
 
 from __future__ import annotations
@@ -23,8 +24,8 @@ from ..errors import FileFormatError, MissingDependencyError, ValidationError
 from ..mesh import fan_triangles
 from ..motion import Motion
 
-__all__ = ["USD_FPS", "write_usd", "write_meshes", "write_skeletons", "read_meshes", "stage_axes", "time_range",
-           "require_usd_core"]  # fmt: skip
+__all__ = ["USD_FPS", "write_usd", "write_meshes", "write_crowd", "read_meshes", "stage_axes", "time_range",
+           "time_codes", "require_usd_core"]  # fmt: skip
 
 
 # The frame rate of the time line a USD export is written on, unless asked otherwise: 24, the
@@ -104,37 +105,182 @@ def write_meshes(path, objects, *, dt: float, n_frames: int, fps: float | None =
                 prim.GetPrim().SetCustomDataByKey(key, value)
 
 
-def write_skeletons(path, *, joints, bind, rest, scales, roots, rotations, translations, fps: float,
-                    meters_per_unit: float = 1.0, metadata: dict | None = None) -> None:  # fmt: skip
-    """A USD stage of agents under /Crowd: /Crowd/Agent_k a UsdSkel.Root whose transform is
-    `roots` (F, N, 4, 4) at each frame, holding a Skeleton (`joints` as paths, `bind` model-space
-    and `rest` local transforms (J, 4, 4)) bound to a SkelAnimation with the agent's local joint
-    `rotations` (F, N, J, 4; x, y, z, w), `translations` (F, N, J, 3) and the fixed `scales`
-    (J, 3). The time line runs at `fps`; `metadata` (JSON-like) goes in the root layer's
-    ``customLayerData["flockkit"]``."""
-    Gf, _, _, Vt = _modules()
-    from pxr import UsdSkel
+def write_crowd(path, *, names, joints, rest, bind, scales, fps: float, n_frames: int, rotations, translations,
+                library=(), references=None, samples=None, roots=None, mesh=None, instanceable: bool = False,
+                meters_per_unit: float = 1.0, metadata: dict | None = None) -> None:  # fmt: skip
+    """A USD crowd under /Crowd, written as UsdSkel lays a crowd out (one Sdf layer, saved atomically).
 
-    frames, agents = roots.shape[:2]
-    scales = Vt.Vec3hArray.FromNumpy(np.asarray(scales).astype(np.float16))
-    with _stage(path, "/Crowd", dt=1.0 / fps, n_frames=frames, fps=fps, meters_per_unit=meters_per_unit,
-                metadata=metadata) as (stage, times):  # fmt: skip
-        for agent in range(agents):
-            root = UsdSkel.Root.Define(stage, f"/Crowd/Agent_{agent}")
-            transform = root.AddTransformOp()
-            skeleton = UsdSkel.Skeleton.Define(stage, f"/Crowd/Agent_{agent}/Skeleton")
-            skeleton.CreateJointsAttr(joints)
-            skeleton.CreateBindTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(m.T.tolist()) for m in bind]))
-            skeleton.CreateRestTransformsAttr(Vt.Matrix4dArray([Gf.Matrix4d(m.T.tolist()) for m in rest]))
-            animation = UsdSkel.Animation.Define(stage, f"/Crowd/Agent_{agent}/Skeleton/Animation")
-            animation.CreateJointsAttr(joints)
-            animation.CreateScalesAttr(scales)
-            turns, moves = animation.CreateRotationsAttr(), animation.CreateTranslationsAttr()
-            UsdSkel.BindingAPI.Apply(skeleton.GetPrim()).CreateAnimationSourceRel().SetTargets([animation.GetPath()])
-            for frame, when in enumerate(times):
-                transform.Set(Gf.Matrix4d(roots[frame, agent].T.tolist()), when)
-                turns.Set(Vt.QuatfArray.FromNumpy(np.ascontiguousarray(rotations[frame, agent])), when)
-                moves.Set(Vt.Vec3fArray.FromNumpy(np.ascontiguousarray(translations[frame, agent])), when)
+    Every pose the file holds is a row of the pose table `rotations` (M, J, 4; x, y, z, w) and
+    `translations` (M, J, 3), float32. /Crowd/Prototypes (a class: abstract, drawn by no one)
+    holds the character once: ``Skeleton`` (`joints` as UsdSkel paths, `bind` model-space and
+    `rest` local transforms (J, 4, 4), column vectors), ``Body`` (where `mesh` is given: a Mesh
+    of ``points`` (V, 3), ``faces`` (F, 3), ``joint_indices`` / ``joint_weights`` (V, K), optional
+    ``normals``, bound to the skeleton's joints in its order with an identity geomBindTransform),
+    and one SkelAnimation per entry of `library`, (name, first, rows): time code first + i holds
+    table row rows[i].
+
+    Each agent k is /Crowd/<names[k]>, a SkelRoot bound to its own Skeleton (a reference to the
+    prototype's) whose animation source is its SkelAnimation ``Skeleton/Animation``: either a
+    reference to library entry ``references[k] = (entry, offset, scale)`` with that layer offset
+    (agent time t reads the entry at (t - offset) / scale: one stream at one offset, or dilating at
+    one rate), or time samples ``samples[k]`` (n_frames,) table rows, one per frame. Each distinct
+    row is one Vt array, and usdc stores an array once however many samples hold it, so agents
+    that read shared streams frame by frame cost an index per sample. Its ``Body`` references the
+    prototype's (one copy of the mesh in the file), instanceable where `instanceable` (readers that
+    skin instance proxies share it in memory too; Blender 5.0 then imports it undeformed). `roots`
+    (translations (F, N, 3), orientations (F, N, 4) x, y, z, w, uniform scales (F, N)) place each
+    agent (translate, orient, scale ops; constant ones as a default value, not per frame).
+
+    Frame f is time code f (integers, frame 0 at 0): startTimeCode 0, endTimeCode n_frames - 1,
+    timeCodesPerSecond = framesPerSecond = `fps`; up axis z, metersPerUnit `meters_per_unit`,
+    `metadata` in ``customLayerData["flockkit"]``."""
+    Gf, _, _, Vt = _modules()
+    from pxr import Sdf
+
+    fps = validate.number(fps, "USD fps", minimum=0, strict=True)
+    rotations = np.ascontiguousarray(rotations, dtype=np.float32)
+    translations = np.ascontiguousarray(translations, dtype=np.float32)
+    references, samples = dict(references or {}), dict(samples or {})
+    table: dict = {}
+
+    def row(k: int):
+        """Row k of the pose table as Vt arrays, made once: usdc then stores them once."""
+        found = table.get(k)
+        if found is None:
+            found = table[k] = (Vt.QuatfArray.FromNumpy(rotations[k]), Vt.Vec3fArray.FromNumpy(translations[k]))
+        return found
+
+    matrices = lambda m: Vt.Matrix4dArray([Gf.Matrix4d(x.T.tolist()) for x in np.asarray(m)])  # noqa: E731
+    token_joints = Vt.TokenArray(list(joints))
+    half_scales = Vt.Vec3hArray.FromNumpy(np.asarray(scales).astype(np.float16))
+    with _layer(path, "Crowd", n_frames=n_frames, fps=fps, meters_per_unit=meters_per_unit,
+                metadata=metadata) as (layer, crowd):  # fmt: skip
+        prototypes = Sdf.PrimSpec(crowd, "Prototypes", Sdf.SpecifierClass)
+        skeleton = Sdf.PrimSpec(prototypes, "Skeleton", Sdf.SpecifierDef, "Skeleton")
+        _attribute(skeleton, "joints", Sdf.ValueTypeNames.TokenArray, token_joints, uniform=True)
+        _attribute(skeleton, "bindTransforms", Sdf.ValueTypeNames.Matrix4dArray, matrices(bind), uniform=True)
+        _attribute(skeleton, "restTransforms", Sdf.ValueTypeNames.Matrix4dArray, matrices(rest), uniform=True)
+        _relationship(skeleton, "skel:animationSource", skeleton.path.AppendChild("Animation"))
+        _api(skeleton, "SkelBindingAPI")
+        body = None
+        if mesh is not None:
+            body = Sdf.PrimSpec(prototypes, "Body", Sdf.SpecifierDef, "Xform")
+            _mesh(Sdf.PrimSpec(body, "Mesh", Sdf.SpecifierDef, "Mesh"), mesh, token_joints, Sdf, Gf, Vt)
+        streams = Sdf.PrimSpec(prototypes, "Streams", Sdf.SpecifierDef, "Scope")
+        entries = []
+        for name, first, rows in library:
+            animation = Sdf.PrimSpec(streams, name, Sdf.SpecifierDef, "SkelAnimation")
+            _animation(animation, token_joints, half_scales, enumerate(np.asarray(rows).tolist(), first), row, Sdf)
+            entries.append(animation.path)
+        if roots is not None:
+            moves, turns, sizes = roots
+        for k, name in enumerate(names):
+            agent = Sdf.PrimSpec(crowd, name, Sdf.SpecifierDef, "SkelRoot")
+            bones = Sdf.PrimSpec(agent, "Skeleton", Sdf.SpecifierDef, "Skeleton")
+            bones.referenceList.Prepend(Sdf.Reference(primPath=skeleton.path))
+            _api(agent, "SkelBindingAPI")
+            _relationship(agent, "skel:skeleton", bones.path)
+            animation = Sdf.PrimSpec(bones, "Animation", Sdf.SpecifierDef, "SkelAnimation")
+            if k in references:
+                entry, offset, scale = references[k]
+                animation.referenceList.Prepend(
+                    Sdf.Reference(primPath=entries[entry], layerOffset=Sdf.LayerOffset(float(offset), float(scale)))
+                )
+            else:
+                frames = np.asarray(samples[k])
+                if frames.shape != (n_frames,):
+                    raise ValidationError(f"write_crowd: agent {name} has {frames.shape} sample rows; needs {n_frames}")
+                _animation(animation, token_joints, half_scales, enumerate(frames.tolist()), row, Sdf)
+            if body is not None:
+                part = Sdf.PrimSpec(agent, "Body", Sdf.SpecifierDef, "Xform")
+                part.referenceList.Prepend(Sdf.Reference(primPath=body.path))
+                part.SetInfo("instanceable", bool(instanceable))
+            if roots is not None:
+                _place(agent, moves[:, k], turns[:, k], sizes[:, k], Sdf, Gf)
+
+
+def _attribute(prim, name: str, type_name, value=None, *, uniform: bool = False, samples=None):
+    """An attribute spec on `prim`: its default `value` and/or time `samples` ((time, value) pairs)."""
+    from pxr import Sdf
+
+    variability = Sdf.VariabilityUniform if uniform else Sdf.VariabilityVarying
+    spec = Sdf.AttributeSpec(prim, name, type_name, variability)
+    if value is not None:
+        spec.default = value
+    for time, sample in samples or ():
+        spec.SetTimeSample(time, sample)
+    return spec
+
+
+def _relationship(prim, name: str, target) -> None:
+    from pxr import Sdf
+
+    Sdf.RelationshipSpec(prim, name, custom=False).targetPathList.explicitItems = [target]
+
+
+def _api(prim, *schemas: str) -> None:
+    from pxr import Sdf
+
+    prim.SetInfo("apiSchemas", Sdf.TokenListOp.Create(prependedItems=list(schemas)))
+
+
+def _animation(prim, joints, scales, rows, row, Sdf) -> None:
+    """A SkelAnimation's joints, fixed scales and, per (time code, table row), its rotations and translations."""
+    _attribute(prim, "joints", Sdf.ValueTypeNames.TokenArray, joints, uniform=True)
+    _attribute(prim, "scales", Sdf.ValueTypeNames.Half3Array, scales)
+    turns = _attribute(prim, "rotations", Sdf.ValueTypeNames.QuatfArray)
+    moves = _attribute(prim, "translations", Sdf.ValueTypeNames.Float3Array)
+    for time, k in rows:
+        rotation, translation = row(k)
+        turns.SetTimeSample(float(time), rotation)
+        moves.SetTimeSample(float(time), translation)
+
+
+def _mesh(prim, mesh: dict, joints, Sdf, Gf, Vt) -> None:
+    """A polygon mesh (no subdivision) skinned by the skeleton's joints in its order."""
+    faces = np.asarray(mesh["faces"], dtype=np.int32)
+    indices = np.asarray(mesh["joint_indices"], dtype=np.int32)
+    types = Sdf.ValueTypeNames
+    _attribute(prim, "points", types.Point3fArray, Vt.Vec3fArray.FromNumpy(np.asarray(mesh["points"], np.float32)))
+    _attribute(prim, "faceVertexCounts", types.IntArray, Vt.IntArray.FromNumpy(np.full(len(faces), 3, np.int32)))
+    _attribute(prim, "faceVertexIndices", types.IntArray, Vt.IntArray.FromNumpy(faces.ravel()))
+    _attribute(prim, "subdivisionScheme", types.Token, "none", uniform=True)
+    extent = np.stack([np.min(mesh["points"], axis=0), np.max(mesh["points"], axis=0)]).astype(np.float32)
+    _attribute(prim, "extent", types.Float3Array, Vt.Vec3fArray.FromNumpy(extent))
+    if mesh.get("normals") is not None:
+        normals = _attribute(prim, "normals", types.Normal3fArray,
+                             Vt.Vec3fArray.FromNumpy(np.asarray(mesh["normals"], np.float32)))  # fmt: skip
+        normals.SetInfo("interpolation", "vertex")
+    for name, type_name, values in (
+        ("primvars:skel:jointIndices", types.IntArray, Vt.IntArray.FromNumpy(indices.ravel())),
+        ("primvars:skel:jointWeights", types.FloatArray,
+         Vt.FloatArray.FromNumpy(np.asarray(mesh["joint_weights"], np.float32).ravel())),
+    ):  # fmt: skip
+        spec = _attribute(prim, name, type_name, values)
+        spec.SetInfo("interpolation", "vertex")
+        spec.SetInfo("elementSize", int(indices.shape[1]))
+    _attribute(prim, "primvars:skel:geomBindTransform", types.Matrix4d, Gf.Matrix4d(1))
+    _attribute(prim, "skel:joints", types.TokenArray, joints, uniform=True)
+    _api(prim, "SkelBindingAPI")
+
+
+def _place(prim, moves, turns, sizes, Sdf, Gf) -> None:
+    """Translate, orient and scale ops on `prim` from one agent's per-frame values: a default
+    value where a value never changes, else a time sample per frame."""
+    types = Sdf.ValueTypeNames
+    ops = []
+    for name, type_name, values, make in (
+        ("xformOp:translate", types.Float3, np.asarray(moves, np.float32), lambda v: Gf.Vec3f(*v)),
+        ("xformOp:orient", types.Quatf, np.asarray(turns, np.float32), lambda q: Gf.Quatf(q[3], q[0], q[1], q[2])),
+        ("xformOp:scale", types.Float3, np.repeat(np.asarray(sizes, np.float32)[:, None], 3, 1),
+         lambda v: Gf.Vec3f(*v)),
+    ):  # fmt: skip
+        ops.append(name)
+        if np.all(values == values[0]):
+            _attribute(prim, name, type_name, make(values[0].tolist()))
+        else:
+            _attribute(prim, name, type_name, samples=enumerate(map(make, values.tolist())))
+    _attribute(prim, "xformOpOrder", types.TokenArray, ops, uniform=True)
 
 
 def require_usd_core() -> None:
@@ -163,7 +309,7 @@ def _stage(path, root: str, *, dt: float, n_frames: int, fps: float | None = USD
     _, Usd, UsdGeom, _ = _modules()
     fps = 1.0 / dt if fps is None else validate.number(fps, "USD fps", minimum=0, strict=True)
     meters_per_unit = validate.number(meters_per_unit, "USD meters_per_unit", minimum=0, strict=True)
-    times = np.arange(n_frames) * dt * fps
+    times = time_codes(n_frames, dt, fps)
     with atomic_path(Path(path), create=False) as tmp:  # USD creates the layer itself
         stage = Usd.Stage.CreateNew(str(tmp))
         UsdGeom.SetStageUpAxis(stage, UsdGeom.Tokens.z)
@@ -177,6 +323,40 @@ def _stage(path, root: str, *, dt: float, n_frames: int, fps: float | None = USD
             stage.GetRootLayer().customLayerData = {"flockkit": _plain(metadata)}
         yield stage, times
         stage.GetRootLayer().Save()
+
+
+def time_codes(n_frames: int, dt: float, fps: float) -> np.ndarray:
+    """The time code of each of `n_frames` frames `dt` seconds apart on a time line at `fps`:
+    frame f at f * dt * fps, frame 0 at 0. Where that is an integer up to rounding (the frame rate
+    is the time line's, or a multiple), the integer itself: 239, not 238.99999999999997 (a reader
+    comparing time codes with frames, as Blender does, would miss the last frame)."""
+    times = np.arange(n_frames) * (dt * fps)
+    whole = np.round(times)
+    return np.where(np.abs(times - whole) <= 1e-6 * np.maximum(1.0, np.abs(whole)), whole, times)
+
+
+@contextlib.contextmanager
+def _layer(path, root: str, *, n_frames: int, fps: float, meters_per_unit: float = 1.0, metadata: dict | None = None):
+    """A new Sdf layer (what :func:`_stage` makes, authored without a stage: no recomposition while
+    tens of thousands of prims are written), saved atomically to `path` on leaving: up axis z,
+    metersPerUnit, frames 0 .. n_frames - 1 at `fps`, an Xform `root` as its default prim.
+    Yields (layer, the root's prim spec)."""
+    from pxr import Sdf
+
+    meters_per_unit = validate.number(meters_per_unit, "USD meters_per_unit", minimum=0, strict=True)
+    with atomic_path(Path(path), create=False) as tmp:
+        layer = Sdf.Layer.CreateNew(str(tmp))
+        with Sdf.ChangeBlock():
+            layer.pseudoRoot.SetInfo("upAxis", "Z")
+            layer.pseudoRoot.SetInfo("metersPerUnit", float(meters_per_unit))
+            layer.timeCodesPerSecond = layer.framesPerSecond = float(fps)
+            layer.startTimeCode, layer.endTimeCode = 0.0, float(max(n_frames - 1, 0))
+            layer.defaultPrim = root
+            if metadata:
+                layer.customLayerData = {"flockkit": _plain(metadata)}
+            spec = Sdf.PrimSpec(layer, root, Sdf.SpecifierDef, "Xform")
+            yield layer, spec
+        layer.Save()
 
 
 def _plain(value):

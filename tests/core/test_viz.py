@@ -176,7 +176,7 @@ def test_a_crowd_gif_colours_parts_by_stream_and_the_offsets_plot_shows_dilation
     assert np.mean(np.flatnonzero(orange.any(axis=0))) < np.mean(
         np.flatnonzero(blue.any(axis=0))
     )  # agents 0-2 are left
-    assert crowd.frame == 30  # the crowd ran
+    assert crowd.frame == 29  # the crowd ran: 30 frames kept, the first before any update
     figure = viz.plot_offsets(
         np.arange(4) / 30, np.array([[0, 0], [0.5, 0.4], [1, 0.8], [1.5, 0.8]]), tmp_path / "o.png", targets=[3, 0.8]
     )
