@@ -13,6 +13,7 @@ import numpy as np
 
 from .. import rigid
 from ..graphs import MotionGraph
+from ..mesh import AnimatedMesh, MeshSkin
 from ..motion import Alignment, Configuration, Motion
 
 __all__ = [
@@ -20,6 +21,8 @@ __all__ = [
     "graph",
     "loop_graph",
     "parts",
+    "chain_skin",
+    "limbs",
     "plants",
     "walker",
     "bird",
@@ -75,14 +78,16 @@ def _positions(n_agents, seconds, dims, dt, seed) -> np.ndarray:
     return positions
 
 
-@functools.lru_cache(maxsize=4)
-def graph(*, dims: int = 2) -> MotionGraph:
+@functools.lru_cache(maxsize=8)
+def graph(*, dims: int = 2, blend: int = 5) -> MotionGraph:
     """A motion graph over ``recording(n_agents=6, seconds=12, dims=dims)`` with a transition each
     way between every other frame and the frame WOBBLE_PERIOD seconds later (the same
-    configuration, turned): made without any metric or builder, each alignment exact."""
+    configuration, turned): made without any metric or builder, each alignment exact. Each
+    transition blends over `blend` frames; with 0 a walk may take one transition right after
+    another (a transition plays no frames), so a walk that always prefers transitions never
+    advances."""
     motion = recording(dims=dims)
     lag = round(WOBBLE_PERIOD / motion.dt)
-    blend = 5
     transitions = []
     for start in range(0, motion.n_frames - lag - blend - 1, 2):
         for a, b in ((start, start + lag), (start + lag, start)):
@@ -138,6 +143,84 @@ def parts(*, dims: int = 3, seconds: float = 6.0, dt: float = 0.1) -> tuple[Moti
         positions[:, columns] = turned + center
     truth = np.repeat([0, 1, 2], [12, 16, 16])
     return Motion(positions=positions, dt=dt), truth
+
+
+def chain_skin(points, groups, *, pieces: int = 2) -> MeshSkin:
+    """A skin for points `points` (N, D) (a motion's first frame) split into `groups` (N,) ints:
+    an empty root joint, and under it one chain of `pieces` joints per group (fewer for a group
+    of fewer points), its points cut into `pieces` slabs along the first axis (by rank, ties in
+    order of the points); each point weighs 0.75 on its slab's joint and 0.25 on the next joint
+    of its chain (the previous for the last), 1 on it where the chain has one joint. Points of a
+    group are skinned only by that group's joints, so a skin-aware segmenter sees the groups in
+    the hierarchy and must merge each chain's joints where the group moves as one."""
+    points = np.asarray(points, dtype=np.float64)
+    groups = np.asarray(groups)
+    names, parents = ["root"], [-1]
+    joints = np.zeros((len(points), 2), dtype=np.int64)
+    weights = np.zeros((len(points), 2))
+    for g in np.unique(groups):
+        members = np.flatnonzero(groups == g)
+        count = min(pieces, len(members))
+        first = len(names)
+        for k in range(count):
+            names.append(f"group{g}.{k}")
+            parents.append(0 if k == 0 else first + k - 1)
+        rank = np.empty(len(members), dtype=np.int64)
+        rank[np.argsort(points[members, 0], kind="stable")] = np.arange(len(members))
+        slab = rank * count // len(members)
+        joints[members, 0] = first + slab
+        if count == 1:
+            joints[members, 1], weights[members] = first, (1.0, 0.0)
+        else:
+            joints[members, 1] = first + np.where(slab < count - 1, slab + 1, slab - 1)
+            weights[members] = (0.75, 0.25)
+    return MeshSkin(joint_names=names, parents=parents, joints=joints, weights=weights)
+
+
+def limbs(*, dims: int = 3, seconds: float = 6.0, dt: float = 0.1) -> tuple[AnimatedMesh, np.ndarray]:
+    """A skinned mesh whose parts are known: a body (a box of 40 points on two joints) that turns
+    and travels as one rigid body, and two limbs (24 points each, on an upper and a lower joint
+    that never bend against each other) hung from it by joints that dominate no vertex, each
+    swinging about its shoulder at its own rate. (AnimatedMesh with a ``MeshSkin``, the part of
+    each vertex: 0 body, 1 left limb, 2 right limb.) The limbs touch the body; each vertex of a
+    limb is shared by its two joints (0.7 and 0.3); every part moves rigidly and the three
+    independently, so a skin-aware segmenter must find exactly these three."""
+    rng = np.random.default_rng(21)
+    t = np.arange(round(seconds / dt) + 1) * dt
+    body = rng.uniform([-1.0, -0.5, -0.5], [1.0, 0.5, 0.5], (40, 3))
+    shoulders = np.array([[0.0, 0.5, 0.0], [0.0, -0.5, 0.0]])
+    limb = [np.column_stack([rng.uniform(-0.2, 0.2, 24), side * rng.uniform(0.05, 1.5, 24), rng.uniform(-0.2, 0.2, 24)])
+            + [0.0, side * 0.5, 0.0] for side in (1.0, -1.0)]  # fmt: skip
+    rest = np.concatenate([body, *limb])[:, :dims]
+    truth = np.repeat([0, 1, 2], [40, 24, 24])
+
+    def turn(angle, axis):  # (T, D, D) turns by `angle` (T,) about `axis` (x: 0, z: 2; in 2D always in the plane)
+        c, s = np.cos(angle), np.sin(angle)
+        out = np.tile(np.eye(dims), (len(angle), 1, 1))
+        i, j = (0, 1) if dims == 2 or axis == 2 else (1, 2)
+        out[:, i, i], out[:, i, j], out[:, j, i], out[:, j, j] = c, -s, s, c
+        return out
+
+    heading, travel = turn(0.4 * np.sin(2 * np.pi * t / seconds), 2), np.zeros((len(t), dims))
+    travel[:, 0] = 0.5 * t
+    positions = np.empty((len(t), len(rest), dims))
+    for part, swing in ((0, None), (1, 0.7 * np.sin(2 * np.pi * 0.9 * t)), (2, 0.5 * np.sin(2 * np.pi * 1.7 * t + 1))):
+        local = np.broadcast_to(rest[truth == part], (len(t), int(np.sum(truth == part)), dims))
+        if swing is not None:
+            pivot = shoulders[part - 1, :dims]
+            local = np.einsum("tij,tnj->tni", turn(swing, 0), local - pivot) + pivot
+        positions[:, truth == part] = np.einsum("tij,tnj->tni", heading, local) + travel[:, None]
+    names = ["root", "body", "chest", "shoulder.L", "arm.L", "forearm.L", "shoulder.R", "arm.R", "forearm.R"]
+    parents = [-1, 0, 1, 2, 3, 4, 2, 6, 7]
+    joints = np.zeros((len(rest), 2), dtype=np.int64)
+    weights = np.tile([0.7, 0.3], (len(rest), 1))
+    joints[:40] = np.where(body[:, :1] < 0, [1, 2], [2, 1])
+    for part, (upper, lower) in ((1, (4, 5)), (2, (7, 8))):
+        far = np.abs(rest[truth == part, 1]) > 1.0
+        joints[truth == part] = np.where(far[:, None], [lower, upper], [upper, lower])
+    skin = MeshSkin(joint_names=names, parents=parents, joints=joints, weights=weights)
+    return AnimatedMesh(motion=Motion(positions=positions, dt=dt), faces=np.zeros((0, 3), dtype=np.int64),
+                        skin=skin), truth  # fmt: skip
 
 
 def plants(*, dt: float = 0.1, seconds: float = 24.0, points: int = 8, rates=(1.7, 2.9)):

@@ -36,22 +36,26 @@ def _played(name, graph, walk) -> float:
         ) from exc
 
 
-def _graphs(strategy, graph):
+def _graphs(strategy, graph, *, blends=(5,)):
     """The graph given, else the kit's own in every dimension the walk declares (a configured
-    walk may declare only some of its kind's dimensions: a region walk those of its region)."""
+    walk may declare only some of its kind's dimensions: a region walk those of its region), once
+    per blend length in `blends`."""
     if graph is not None:
         return [graph]
     from .inputs import graph as kit_graph
 
-    return [kit_graph(dims=d) for d in dims_of(strategy)]
+    return [kit_graph(dims=d, blend=b) for d in dims_of(strategy) for b in blends]
 
 
 @needs("graph")
 def check_walk_covers_duration(name, strategy, *, graph=None):
-    """walk returns a Walk that fits the graph and plays at least the duration asked for."""
-    for kit_graph in _graphs(strategy, graph):
+    """walk returns a Walk that fits the graph and plays at least the duration asked for, also on
+    the kit's graph with blends of 0 frames (where transitions can follow each other at once: a
+    walk must still move on through clips)."""
+    for kit_graph in _graphs(strategy, graph, blends=(5, 0)):
+        blend = max((t.blend for t in kit_graph.transitions), default=0)
         for duration in (5.0, 30.0):
-            with on_input(name, strategy, kit_graph.motion.dims, "the kit's graph"):
+            with on_input(name, strategy, kit_graph.motion.dims, f"the kit's graph with blends of {blend} frames"):
                 played = _played(name, kit_graph, _walk(name, strategy, kit_graph, 1, duration))
             assert played >= duration - 1e-9, f"{name}.walk(duration={duration}) plays only {played} s"
 

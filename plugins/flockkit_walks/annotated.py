@@ -284,7 +284,9 @@ class _Shared:
         scale = float(np.median(ordinary)) if ordinary else 0.0
         self.trans_cost = distance / scale if scale > 0 else np.zeros(len(distance))
         self.trans_cost[self.shift != 0] = 0.0  # phase shifts keep the motion continuous: no C_T, no N_T
-        self.longest = int(tables.transition_blend.max()) if len(graph.transitions) else 0
+        # frames after a transition before the next: its blend, and at least one (two transitions with
+        # no frame between are one jump, and with blends of 0 a search could chain them for ever)
+        self.longest = max(int(tables.transition_blend.max()), 1) if len(graph.transitions) else 0
         self.out = [[] for _ in self.nodes]
         for index, t in enumerate(graph.transitions):
             self.out[t.source].append(index)

@@ -1,5 +1,7 @@
 """Every check of the kit passes on a correct model and fails on a model broken in its way."""
 
+import math
+
 import numpy as np
 import pytest
 from hypothesis import given, settings
@@ -7,7 +9,7 @@ from hypothesis import strategies as st
 from hypothesis.errors import InvalidArgument
 
 import flockkit
-from flockkit.testing import check_plugin, checks_for, parametrize_with_checks, skipped_checks
+from flockkit.testing import check_plugin, checks_for, inputs, parametrize_with_checks, skipped_checks
 from flockkit.testing import strategies as fst
 
 from . import fakes
@@ -110,6 +112,34 @@ def test_a_segmenter_that_depends_on_point_order_only_where_parts_are_ambiguous_
     monkeypatch.setattr(ica, "_canonical_order", lambda positions: np.arange(positions.shape[1]))
     with pytest.raises(AssertionError, match="on a waving sheet"):
         check_named("segmenter", "check_order_of_points_does_not_matter")("indexed", IcaKmeans())
+
+
+class PrefersTransitions:
+    """Takes a transition whenever one is allowed, else the clip; gives up after 2 000 edges."""
+
+    def walk(self, graph, rng, duration):
+        if not duration > 0:
+            raise flockkit.errors.ValidationError(f"duration must be > 0; got {duration}")
+        node, since, played, edges = 0, math.inf, 0.0, []
+        while played < duration:
+            if len(edges) > 2000:
+                raise flockkit.errors.ValidationError("no walk found within 2 000 edges")
+            options = graph.allowed_edges(node, since)
+            edge = next((e for e in options if e[0] == "transition"), options[0])
+            frames = graph.clips[edge[1]].n_frames - 1 if edge[0] == "clip" else 0
+            edges.append(edge)
+            played += frames * graph.motion.dt
+            since = since + frames if edge[0] == "clip" else 0
+            node = graph.edge_target(edge)
+        return flockkit.Walk(start=0, edges=edges)
+
+
+def test_a_walk_that_only_advances_between_blends_is_caught_on_blends_of_zero():
+    walk = PrefersTransitions()
+    played = flockkit.synthesize(inputs.graph(), walk.walk(inputs.graph(), np.random.default_rng(0), 30.0))
+    assert played.duration >= 30.0  # it works while blends keep transitions apart
+    with pytest.raises(AssertionError, match="blends of 0 frames"):
+        check_named("walk", "check_walk_covers_duration")("prefers-transitions", walk)
 
 
 def test_checks_for_unknown_kind():
