@@ -15,7 +15,7 @@ from .crowd import Channel, Crowd, Event, Pose, SkeletalClip, Skeleton, Stream, 
 from .graphs import Clip, MotionGraph, Transition, Walk, synthesize_many
 from .hookspecs import hookimpl
 from .interfaces import Capabilities, capabilities
-from .mesh import AnimatedMesh
+from .mesh import AnimatedMesh, MeshSkin
 from .motion import DEFAULT_UP, Alignment, Configuration, ConfigurationFrame, Motion, State, heading_axes, random_flock
 from .regions import Ball, Box, Polygon, Region, fence
 from .registry import available, get, resolve
@@ -24,6 +24,7 @@ from .scene import Features, GraphLayers, LayeredWalk, Scene, SceneAnimation, Se
 __all__ = [
     "Motion",
     "AnimatedMesh",
+    "MeshSkin",
     "Features",
     "Configuration",
     "ConfigurationFrame",

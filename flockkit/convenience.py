@@ -20,7 +20,7 @@ from .validate import allocation, integer
 from .validate import dims as validate_dims
 from .validate import seed as validate_seed
 
-__all__ = ["simulate", "build_graph", "walk", "synthesize", "segment", "build_layers"]
+__all__ = ["simulate", "build_graph", "walk", "synthesize", "segment", "build_layers", "default_segmenter"]
 
 
 def simulate(
@@ -159,9 +159,26 @@ def synthesize(graph, walk) -> Motion:
     return graphs.synthesize_graph(graph, walk)
 
 
-def segment(source, *, segmenter="ica-kmeans", seed: int | None = None, weld=None, **params) -> Segmentation:
+# The segmenters the convenience layer picks where none is named: the skin-aware built-in for a
+# mesh that carries a skin, the motion-only one for anything else.
+SKIN_SEGMENTER, MOTION_SEGMENTER = "skin-parts", "ica-kmeans"
+
+
+def default_segmenter(source) -> str:
+    """The segmenter ``segment`` and ``build_layers`` use where none is named: ``skin-parts`` for
+    an AnimatedMesh with a skin (``AnimatedMesh.skin``: parts follow its joints, so they follow
+    anatomy), ``ica-kmeans`` for anything else (parts from motion alone)."""
+    return SKIN_SEGMENTER if isinstance(source, AnimatedMesh) and source.skin is not None else MOTION_SEGMENTER
+
+
+def segment(source, *, segmenter=None, seed: int | None = None, weld=None, **params) -> Segmentation:
     """Split the points of `source` (a Motion, or an AnimatedMesh's vertices) into parts that move
     independently, with `segmenter` (a registered name made with `params`, or an instance).
+
+    `segmenter` None (the default) picks :func:`default_segmenter`: ``skin-parts`` where `source`
+    is an AnimatedMesh with a skin (a skinned glTF character), ``ica-kmeans`` otherwise. A
+    segmenter declaring ``Capabilities(skin=True)`` is given the mesh's skin; one is refused for
+    a source without a skin.
 
     `weld`: the copies of one surface point (``flockkit.mesh.weld_map``) are segmented as one
     point and get one part. None (the default) welds an AnimatedMesh's vertices that coincide in
@@ -169,16 +186,38 @@ def segment(source, *, segmenter="ica-kmeans", seed: int | None = None, weld=Non
     alone; False welds nothing; True, or a tolerance (a fraction of the object's size), welds
     either. The labels are one per point of `source`, in its order."""
     motion = motion_of(source)
-    made = resolve("segmenter", segmenter, **params)
-    require_dims("segmenter", made, motion.dims, f"a {motion.dims}D motion", spec=segmenter)
-    return _segment(made, motion, resolve_weld(source, weld), seed)
+    spec = default_segmenter(source) if segmenter is None else segmenter
+    made = resolve("segmenter", spec, **params)
+    require_dims("segmenter", made, motion.dims, f"a {motion.dims}D motion", spec=spec)
+    return _segment(made, motion, resolve_weld(source, weld), seed, _skin_for(made, source, spec))
 
 
-def _segment(made, motion: Motion, welds, seed) -> Segmentation:
-    """`made`'s segmentation of `motion`, the points welded by `welds` (or None) segmented once."""
+def _skin_for(made, source, spec):
+    """The skin to give `made`: the source's where it declares ``Capabilities(skin=True)`` (a
+    ValidationError where the source has none), else None."""
+    if not capabilities(made).skin:
+        return None
+    skin = source.skin if isinstance(source, AnimatedMesh) else None
+    if skin is None:
+        what = "an AnimatedMesh without a skin" if isinstance(source, AnimatedMesh) else "a Motion"
+        raise ValidationError(
+            f"segmenter {label(spec)} needs a skin (Capabilities.skin) and the source is {what}: segment a skinned "
+            f"mesh (flockkit.io.read_mesh_animation of a skinned glTF character), or use a segmenter of motion alone "
+            f"such as {MOTION_SEGMENTER!r}"
+        )
+    return skin
+
+
+def _segment(made, motion: Motion, welds, seed, skin=None) -> Segmentation:
+    """`made`'s segmentation of `motion`, the points welded by `welds` (or None) segmented once,
+    given `skin` (the motion's, or None for a segmenter that takes none)."""
     kept = None if welds is None else np.flatnonzero(welds == np.arange(len(welds)))
     segmented = motion if kept is None else Motion(positions=motion.positions[:, kept], dt=motion.dt)
-    result = made.segment(segmented, np.random.default_rng(validate_seed(seed)))
+    rng = np.random.default_rng(validate_seed(seed))
+    if skin is None:
+        result = made.segment(segmented, rng)
+    else:
+        result = made.segment(segmented, rng, skin=skin if kept is None else skin.take(kept))
     if not isinstance(result, Segmentation):
         raise ValidationError(f"segmenter returned {type(result).__name__}, not a flockkit.Segmentation")
     result.check_fits(segmented, "the (welded) motion")
@@ -191,7 +230,7 @@ def build_layers(
     source,
     *,
     segmentation: Segmentation | None = None,
-    segmenter="ica-kmeans",
+    segmenter=None,
     segmenter_params: dict | None = None,
     builder="windowed",
     features=None,
@@ -200,7 +239,8 @@ def build_layers(
     **params,
 ) -> GraphLayers:
     """Graph layers of `source` (a Motion, or an AnimatedMesh whose faces are kept for seams): its
-    points split by `segmentation` (default: `segmenter` with `segmenter_params`), then one graph
+    points split by `segmentation` (default: `segmenter` with `segmenter_params`, as for
+    :func:`segment`: None picks ``skin-parts`` for a skinned mesh, else ``ica-kmeans``), then one graph
     per part built by `builder` with `params` (as for :func:`flockkit.build_graph`). `features`
     (a ``flockkit.Features`` of the source's frames, e.g. ``Features.from_keyframes`` for a flag
     in the wind or ``Features.from_motion`` for a walking animal) travel with the layers.
@@ -212,9 +252,10 @@ def build_layers(
     motion = motion_of(source)
     welds = resolve_weld(source, weld)
     if segmentation is None:
-        made = resolve("segmenter", segmenter, **dict(segmenter_params or {}))
-        require_dims("segmenter", made, motion.dims, f"a {motion.dims}D motion", spec=segmenter)
-        segmentation = _segment(made, motion, welds, seed)
+        spec = default_segmenter(source) if segmenter is None else segmenter
+        made = resolve("segmenter", spec, **dict(segmenter_params or {}))
+        require_dims("segmenter", made, motion.dims, f"a {motion.dims}D motion", spec=spec)
+        segmentation = _segment(made, motion, welds, seed, _skin_for(made, source, spec))
     elif not isinstance(segmentation, Segmentation):
         raise ValidationError(f"segmentation must be a flockkit.Segmentation; got {type(segmentation).__name__}")
     segmentation.check_fits(motion)

@@ -39,6 +39,7 @@ __all__ = [
     "LowerBound",
     "PairsWithin",
     "Pairwise",
+    "Skinned",
 ]
 
 
@@ -135,6 +136,11 @@ class Capabilities:
     clip_player : bool
         Controller: the factory takes ``clip`` (a ``flockkit.SkeletalClip``) and ``rate`` (its
         playback speed): what crowd files and ``flockkit.crowd.ground_speed`` make per stream.
+    skin : bool
+        Segmenter: it needs the skin of what it segments: ``segment`` takes ``skin``, a
+        ``flockkit.mesh.MeshSkin`` with one row per point of the motion (joints, hierarchy and
+        each point's weights). ``flockkit.segment`` passes an ``AnimatedMesh``'s skin (welded like
+        its points) and refuses a source without one; the kit segments its inputs with skins.
     """
 
     dims: tuple = attrs.field(default=(2, 3), converter=_dims)
@@ -150,6 +156,7 @@ class Capabilities:
     pairwise: bool = attrs.field(default=False, validator=_flag("pairwise"))
     targets: bool = attrs.field(default=False, validator=_flag("targets"))
     clip_player: bool = attrs.field(default=False, validator=_flag("clip_player"))
+    skin: bool = attrs.field(default=False, validator=_flag("skin"))
 
     def __attrs_post_init__(self):
         if self.coupling and not self.residuals:
@@ -351,6 +358,14 @@ class Controller(Protocol):
     def pose(self, times): ...
 
     def events(self, start: float, stop: float): ...
+
+
+class Skinned(Protocol):
+    """The operation a segmenter declaring ``Capabilities(skin=True)`` offers: ``segment`` with
+    the skin of the motion's points (a ``flockkit.mesh.MeshSkin``, one row per point); without
+    one (None) it raises ValidationError."""
+
+    def segment(self, motion, rng, *, skin=None): ...
 
 
 class Guided(Protocol):

@@ -19,6 +19,11 @@ centimetres). flockkit's own analysis and exports take z up and metres (``FLOCKK
 it is analysed or placed, with the one conversion every part of flockkit uses,
 :func:`conversion_matrix`. Nothing is converted or guessed silently: a unit that no one stated
 is refused, and a size no object plausibly has gets a hint (:func:`unit_hint`), never a change.
+
+Skins: a mesh read from a skinned character carries its skin (:class:`MeshSkin`): the joints of
+its skeleton with their hierarchy, and each vertex's joints and weights. That is what the file
+already says about which vertices move together, and segmenters that declare
+``Capabilities(skin=True)`` read it. A skin names no coordinates, so it holds in any axes.
 """
 
 from __future__ import annotations
@@ -30,12 +35,13 @@ import attrs
 import numpy as np
 
 from . import _npzfile, validate
-from ._arrays import readonly_int
+from ._arrays import readonly_float, readonly_int
 from .errors import FileFormatError, FlockkitWarning, ValidationError
 from .motion import Motion
 
 __all__ = [
     "AnimatedMesh",
+    "MeshSkin",
     "face_edges",
     "fan_triangles",
     "object_size",
@@ -53,8 +59,11 @@ __all__ = [
 
 # Version 2 adds the up axis and the unit; a version 1 file has neither and loads as flockkit's
 # convention (z up, metres), which is how flockkit used every mesh when it wrote those files.
-MESH_FORMAT_VERSION = 2
-MESH_FORMAT_VERSIONS = (1, 2)
+# Version 3 adds the skin, where the mesh has one (versions 1 and 2 load without one).
+MESH_FORMAT_VERSION = 3
+MESH_FORMAT_VERSIONS = (1, 2, 3)
+# Each vertex's skin weights must sum to 1 within this (readers normalize what files round).
+SKIN_WEIGHT_TOLERANCE = 1e-6
 
 # flockkit's own axes, which its analysis (footprints on the ground plane, headings about +z,
 # feature arrows on the ground) and its exports (USD upAxis Z, metersPerUnit) take: z up, metres.
@@ -147,6 +156,126 @@ def unit_hint(size: float, meters_per_unit: float, what: str) -> str | None:
     )
 
 
+def _joint_names(value) -> tuple:
+    if isinstance(value, str) or not isinstance(value, list | tuple | np.ndarray):
+        raise ValidationError(f"MeshSkin.joint_names must be a sequence of names; got {type(value).__name__}")
+    return tuple(value)
+
+
+def _skin_parents(value) -> np.ndarray:
+    parents = readonly_int(value, field="MeshSkin.parents")
+    if parents.ndim != 1 or len(parents) == 0:
+        raise ValidationError(f"MeshSkin.parents must be a non-empty 1D array; got shape {parents.shape}")
+    bad = np.flatnonzero((parents < -1) | (parents >= np.arange(len(parents))))
+    if len(bad):
+        j = int(bad[0])
+        raise ValidationError(
+            f"MeshSkin.parents[{j}] = {int(parents[j])}: each joint's parent must come before it (or be -1 for a root)"
+        )
+    return parents
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class MeshSkin:
+    """What moves each vertex of a skinned mesh: the skeleton's joints, their hierarchy, and each
+    vertex's joints and weights (linear blend skinning's influences).
+
+    Parameters
+    ----------
+    joint_names : sequence of str
+        The joints (J), non-empty distinct names; `parents` and `joints` index them.
+    parents : (J,) int
+        Each joint's parent, -1 for a root; a parent comes before its children.
+    joints : (V, K) int
+        Each vertex's K joints (0..J-1).
+    weights : (V, K)
+        Their weights: finite, >= 0, each vertex's summing to 1 (within SKIN_WEIGHT_TOLERANCE).
+    """
+
+    joint_names: tuple = attrs.field(converter=_joint_names)
+    parents: np.ndarray = attrs.field(converter=_skin_parents)
+    joints: np.ndarray = attrs.field(converter=lambda v: readonly_int(v, field="MeshSkin.joints"))
+    weights: np.ndarray = attrs.field(converter=lambda v: readonly_float(v, field="MeshSkin.weights"))
+
+    def __attrs_post_init__(self):
+        j = len(self.parents)
+        names = self.joint_names
+        if len(names) != j or not all(isinstance(n, str) and n for n in names) or len(set(names)) != j:
+            raise ValidationError(f"MeshSkin.joint_names must be {j} distinct non-empty strings, one per joint")
+        if self.joints.ndim != 2 or self.joints.shape[0] == 0 or self.joints.shape[1] == 0:
+            raise ValidationError(f"MeshSkin.joints must have shape (V, K), V, K >= 1; got {self.joints.shape}")
+        if self.joints.min() < 0 or self.joints.max() >= j:
+            raise ValidationError(
+                f"MeshSkin.joints must index the {j} joints; got {self.joints.min()}..{self.joints.max()}"
+            )
+        if self.weights.shape != self.joints.shape:
+            raise ValidationError(
+                f"MeshSkin.weights must have the shape of joints {self.joints.shape}; got {self.weights.shape}"
+            )
+        if not np.all(np.isfinite(self.weights)) or self.weights.min() < 0:
+            raise ValidationError("MeshSkin.weights must be finite and >= 0")
+        off = np.abs(self.weights.sum(axis=1) - 1.0)
+        if off.max() > SKIN_WEIGHT_TOLERANCE:
+            v = int(np.argmax(off))
+            raise ValidationError(
+                f"MeshSkin.weights of each vertex must sum to 1; vertex {v}'s sum to {self.weights[v].sum():.9g}"
+            )
+
+    @property
+    def n_vertices(self) -> int:
+        """V, the number of vertices."""
+        return len(self.joints)
+
+    @property
+    def n_joints(self) -> int:
+        """J, the number of joints."""
+        return len(self.parents)
+
+    def weight_matrix(self) -> np.ndarray:
+        """Each vertex's weight per joint (V, J), zero where it does not follow the joint (a joint
+        named twice for one vertex gets the sum)."""
+        flat = np.arange(self.n_vertices)[:, None] * self.n_joints + self.joints
+        return np.bincount(flat.ravel(), self.weights.ravel(), minlength=self.n_vertices * self.n_joints).reshape(
+            -1, self.n_joints
+        )
+
+    def dominant(self) -> np.ndarray:
+        """(V,) each vertex's joint of largest weight (the smallest such joint where weights tie)."""
+        return np.argmax(self.weight_matrix(), axis=1)
+
+    def take(self, vertices) -> MeshSkin:
+        """The skin of `vertices` (indices, in that order) alone: what a subset of the mesh's
+        points (welded copies dropped, say) keeps."""
+        vertices = readonly_int(vertices, field="MeshSkin.take: vertices")
+        if vertices.ndim != 1 or (len(vertices) and (vertices.min() < 0 or vertices.max() >= self.n_vertices)):
+            raise ValidationError(f"MeshSkin.take: vertices must be indices 0..{self.n_vertices - 1}")
+        return MeshSkin(joint_names=self.joint_names, parents=self.parents, joints=self.joints[vertices],
+                        weights=self.weights[vertices])  # fmt: skip
+
+    def check_fits(self, n_points: int, what: str) -> None:
+        """ValidationError naming `what` unless the skin has one row per point of `n_points`."""
+        if self.n_vertices != n_points:
+            raise ValidationError(f"{what}: the skin has {self.n_vertices} vertices but there are {n_points} points")
+
+    def __eq__(self, other):
+        if not isinstance(other, MeshSkin):
+            return NotImplemented
+        return (
+            self.joint_names == other.joint_names
+            and np.array_equal(self.parents, other.parents)
+            and np.array_equal(self.joints, other.joints)
+            and np.array_equal(self.weights, other.weights)
+        )
+
+    __hash__ = None
+
+
+def _skin_field(value) -> MeshSkin | None:
+    if value is not None and not isinstance(value, MeshSkin):
+        raise ValidationError(f"AnimatedMesh.skin must be a flockkit.mesh.MeshSkin or None; got {type(value).__name__}")
+    return value
+
+
 def _up_axis_field(value) -> str:
     return check_up_axis(value, "AnimatedMesh.up_axis")
 
@@ -161,17 +290,23 @@ class AnimatedMesh:
     a `name`, and the axes its coordinates are in: `up_axis` ("x", "y" or "z") and
     `meters_per_unit` (a number, or None where no one has stated the unit: an OBJ sequence's).
     The defaults are flockkit's convention (z up, metres); ``flockkit.io.read_mesh_animation``
-    reports what each file says. :meth:`to_flockkit_axes` converts."""
+    reports what each file says. :meth:`to_flockkit_axes` converts. `skin` (a :class:`MeshSkin`
+    with one row per vertex, or None) is what moves the vertices where the source is a skinned
+    character: ``read_mesh_animation`` reads it from a glTF file whose every mesh one skeleton
+    moves."""
 
     motion: Motion
     faces: np.ndarray = attrs.field(converter=faces_array)
     name: str = attrs.field(default="mesh", converter=str)
     up_axis: str = attrs.field(default=FLOCKKIT_UP_AXIS, converter=_up_axis_field)
     meters_per_unit: float | None = attrs.field(default=FLOCKKIT_METERS_PER_UNIT, converter=_unit_field)
+    skin: MeshSkin | None = attrs.field(default=None, converter=_skin_field)
 
     def __attrs_post_init__(self):
         if not isinstance(self.motion, Motion):
             raise ValidationError(f"AnimatedMesh.motion must be a flockkit.Motion; got {type(self.motion).__name__}")
+        if self.skin is not None:
+            self.skin.check_fits(self.motion.n_agents, "AnimatedMesh.skin")
         if len(self.faces) and (self.faces.min() < 0 or self.faces.max() >= self.motion.n_agents):
             raise ValidationError(
                 f"AnimatedMesh.faces must index vertices 0..{self.motion.n_agents - 1}; got indices "
@@ -193,7 +328,7 @@ class AnimatedMesh:
         state instead where the mesh's are wrong (a glTF file is metres by its specification,
         but the Fox of the glTF samples is modelled in centimetres: ``meters_per_unit=0.01``, or
         "cm"). Faces, name and frame time are kept; heights are then along z, where the asset's
-        up axis pointed, and the asset's ground (its up coordinate 0) is z = 0.
+        up axis pointed, and the asset's ground (its up coordinate 0) is z = 0. The skin is kept.
 
         A ValidationError where no unit is known (an OBJ sequence read without one, a value made
         with None); a FlockkitWarning with :func:`unit_hint`'s hint where the converted mesh has
@@ -216,7 +351,8 @@ class AnimatedMesh:
         matrix = conversion_matrix(up, unit)
         positions = self.motion.positions @ matrix.T
         return AnimatedMesh(motion=Motion(positions=positions, dt=self.motion.dt), faces=self.faces, name=self.name,
-                            up_axis=FLOCKKIT_UP_AXIS, meters_per_unit=FLOCKKIT_METERS_PER_UNIT)  # fmt: skip
+                            up_axis=FLOCKKIT_UP_AXIS, meters_per_unit=FLOCKKIT_METERS_PER_UNIT,
+                            skin=self.skin)  # fmt: skip
 
     def __eq__(self, other):
         if not isinstance(other, AnimatedMesh):
@@ -227,16 +363,22 @@ class AnimatedMesh:
             and self.name == other.name
             and self.up_axis == other.up_axis
             and self.meters_per_unit == other.meters_per_unit
+            and self.skin == other.skin
         )
 
     __hash__ = None
 
     def save(self, path) -> None:
         """Write to one .npz of plain arrays with JSON metadata (atomic): the frame time, name, up
-        axis and unit (null where unknown) beside the arrays."""
+        axis and unit (null where unknown) beside the arrays, and the skin where there is one
+        (its joint names in the metadata, null where there is none)."""
         arrays = {**self.motion._to_arrays(), "faces": self.faces}
         metadata = {"dt": self.motion.dt, "name": self.name, "up_axis": self.up_axis,
-                    "meters_per_unit": self.meters_per_unit}  # fmt: skip
+                    "meters_per_unit": self.meters_per_unit, "skin_joint_names": None}  # fmt: skip
+        if self.skin is not None:
+            arrays.update({"skin_parents": self.skin.parents, "skin_joints": self.skin.joints,
+                           "skin_weights": self.skin.weights})  # fmt: skip
+            metadata["skin_joint_names"] = list(self.skin.joint_names)
         _npzfile.write(path, kind="mesh", version=MESH_FORMAT_VERSION, arrays=arrays, metadata=metadata)
 
     @classmethod
@@ -245,11 +387,16 @@ class AnimatedMesh:
         is not one. A file of format version 1 (no axes) loads as z up, metres."""
         arrays, header = _npzfile.read(path, kind="mesh", versions=MESH_FORMAT_VERSIONS)
         try:
-            axes = {}
+            axes, skin = {}, None
             if header["version"] >= 2:
                 axes = {"up_axis": header["up_axis"], "meters_per_unit": header["meters_per_unit"]}
+            if header["version"] >= 3 and header["skin_joint_names"] is not None:
+                if not isinstance(header["skin_joint_names"], list):
+                    raise ValidationError("skin_joint_names must be a list of joint names")
+                skin = MeshSkin(joint_names=header["skin_joint_names"], parents=arrays["skin_parents"],
+                                joints=arrays["skin_joints"], weights=arrays["skin_weights"])  # fmt: skip
             return cls(motion=Motion._from_arrays(arrays, header.get("dt")), faces=arrays["faces"],
-                       name=header.get("name", "mesh"), **axes)  # fmt: skip
+                       name=header.get("name", "mesh"), skin=skin, **axes)  # fmt: skip
         except (KeyError, ValidationError) as exc:
             raise FileFormatError(f"{path}: invalid animated mesh: {type(exc).__name__}: {exc}") from None
 

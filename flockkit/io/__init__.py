@@ -21,6 +21,7 @@ from ..motion import Motion
 from ..skeleton import Channel, Pose, SkeletalClip, Skeleton
 from . import bvh, gltf, obj, usd
 from .gltf import write_gltf
+from .skin import mesh_skin
 from .tables import DEFAULT_MAX_GAP, fill_gaps, read_long, read_npy, read_wide, write_csv, write_json
 from .usd import USD_FPS, write_usd
 
@@ -92,6 +93,11 @@ def read_mesh_animation(path, *, clip=None, fps: float = 30.0, allow_outside: bo
 
     Faces are triangles or quads (larger polygons are split into a fan of triangles).
 
+    Skins: a glTF character whose every mesh one skeleton moves (skinned by it, or hung under one
+    of its nodes) is read with its skin (``AnimatedMesh.skin``, a ``flockkit.MeshSkin``: the
+    skeleton's joints and parents as ``read_clips`` gives them, each vertex's joints and weights),
+    which skin-aware segmenters read. Other meshes have none (None).
+
     Axes: glTF is y up in metres (its specification, whatever scale an asset was modelled at);
     a USD stage says its upAxis and metersPerUnit (USD's fallbacks, y and 0.01, where it does
     not); an OBJ sequence says neither: y up by convention, and no unit (None). `up_axis` ("x",
@@ -107,17 +113,20 @@ def read_mesh_animation(path, *, clip=None, fps: float = 30.0, allow_outside: bo
     stated = _stated_axes(up_axis, meters_per_unit, "read_mesh_animation")
     path = Path(path)
     suffix = _format(path)
+    skin = None
     if suffix in GLTF_SUFFIXES:
-        name, positions, faces, clip_name = gltf.mesh_animation(path, clip, fps, allow_outside=allow_outside)
+        document = gltf.Document(path, allow_outside=allow_outside)
+        name, positions, faces, clip_name = gltf.mesh_animation(path, clip, fps, document=document)
         name = f"{name}:{clip_name}"
         axes = {"up_axis": gltf.UP_AXIS, "meters_per_unit": gltf.METERS_PER_UNIT}
+        skin = mesh_skin(document)
     elif suffix in USD_SUFFIXES:
         positions, faces, up, unit = usd.read_meshes(path, fps, allow_outside=allow_outside)
         name, axes = path.stem, {"up_axis": up, "meters_per_unit": unit}
     else:
         positions, faces, name = obj.read_sequence(str(path))
         axes = {"up_axis": obj.UP_AXIS, "meters_per_unit": None}
-    return AnimatedMesh(motion=_motion(positions, fps, path), faces=faces, name=name, **{**axes, **stated})
+    return AnimatedMesh(motion=_motion(positions, fps, path), faces=faces, name=name, skin=skin, **{**axes, **stated})
 
 
 def _stated_axes(up_axis, meters_per_unit, owner: str) -> dict:

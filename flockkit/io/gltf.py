@@ -713,11 +713,13 @@ def _frames(duration: float, fps: float, per_frame: float, what: str) -> int:
     return max(math.ceil(count), 1)
 
 
-def mesh_animation(path, clip, fps, *, allow_outside: bool = False):
+def mesh_animation(path, clip, fps, *, allow_outside: bool = False, document: Document | None = None):
     """(name, positions (T, V, 3), faces (F, 3), clip name) of every mesh in the default scene,
     animated by `clip` and sampled at `fps`: morph targets weighted, then skinned (linear blend
-    skinning, spec 3.7.3) or placed by the node's world transform."""
-    document = Document(path, allow_outside=allow_outside)
+    skinning, spec 3.7.3) or placed by the node's world transform. The vertices are each mesh
+    node's primitives' in the scene's order (``flockkit.io.skin.mesh_skin`` gives their skin).
+    `document`: the file already opened (and checked) as a Document, read instead of `path`."""
+    document = Document(path, allow_outside=allow_outside) if document is None else document
     animation = document.animation(clip)
     name = document.clip_names()[animation]
     nodes, meshes, skins = document._list("nodes"), document._list("meshes"), document._list("skins")

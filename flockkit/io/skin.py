@@ -24,9 +24,10 @@ import numpy as np
 from .. import validate
 from .._arrays import readonly_float, readonly_int
 from ..errors import ValidationError
+from ..mesh import MeshSkin
 from . import gltf
 
-__all__ = ["SkinnedMesh", "read_skin", "BIND_TOLERANCE"]
+__all__ = ["SkinnedMesh", "read_skin", "mesh_skin", "BIND_TOLERANCE"]
 
 # Two skins of one skeleton may give a joint different inverse bind matrices (each mesh bound in
 # its own space); a vertex is then moved into the first skin's bind space, which needs the same
@@ -317,6 +318,73 @@ def read_skin(path, *, skin=None, allow_outside: bool = False) -> SkinnedMesh:
         normals=np.concatenate(normals) if every_normal else None,
         name=title if isinstance(title, str) and title else Path(path).stem,
     )
+
+
+def mesh_skin(document) -> MeshSkin | None:
+    """The skin (a ``flockkit.MeshSkin``) of the vertices ``gltf.mesh_animation`` reads from the
+    opened, checked `document` (every mesh node of the default scene, in its order): the joints of
+    the first skeleton (in the order of the skins) that moves every one of those meshes (skinned
+    by a skin of its joints, or hung under one of its nodes, weight 1 on that node: see the
+    module), with their parents, as ``read_clips`` names and orders them. None where the file
+    has no skin, or no one skeleton moves every mesh (a prop no joint carries).
+
+    Every joint index is checked against its skin's joints and every weight read and normalized as
+    :func:`read_skin` does (FileFormatError naming the file and the JSON path)."""
+    skins, nodes = document._list("skins"), document._list("nodes")
+    placed = [n for n in document.order if "mesh" in nodes[n]]
+    seen = set()
+    for s, spec in enumerate(skins):
+        joints = frozenset(spec["joints"])
+        if joints in seen or not placed:
+            continue
+        seen.add(joints)
+        chosen, names = _skeleton_nodes(document, s)
+        column = {node: k for k, node in enumerate(chosen)}
+        group = {k for k, other in enumerate(skins) if frozenset(other["joints"]) == joints}
+        found = _influences_of(document, placed, column, group)
+        if found is None:
+            continue
+        if len(set(names)) != len(names):  # a node named like another's "name (index)"
+            names = [f"node {n}" for n in chosen]
+        parents = [column.get(int(document.parent[n]), -1) for n in chosen]
+        return MeshSkin(joint_names=names, parents=parents, joints=found[0], weights=found[1])
+    return None
+
+
+def _influences_of(document, placed: list, column: dict, group: set):
+    """(joints (V, K), weights (V, K)) of the primitives of the mesh nodes `placed`, in order,
+    each vertex's joints as indices of the skeleton `column` (node -> joint) whose skins are
+    `group`; None where some mesh is neither skinned by one of them nor hung under the skeleton."""
+    skins, nodes, meshes = document._list("skins"), document._list("nodes"), document._list("meshes")
+    joints, weights, width = [], [], 1
+    for node in placed:
+        spec = nodes[node]
+        anchor = node
+        if "skin" in spec:
+            if spec["skin"] not in group:
+                return None
+        else:
+            while anchor >= 0 and anchor not in column:
+                anchor = int(document.parent[anchor])
+            if anchor < 0:
+                return None
+        for p, primitive in enumerate(meshes[spec["mesh"]]["primitives"]):
+            where = f"meshes[{spec['mesh']}].primitives[{p}]"
+            attributes = primitive["attributes"]
+            if "POSITION" not in attributes:
+                document.fail(f"{where}.attributes", "have no POSITION")
+            count = document._accessor_count(attributes["POSITION"])
+            if "skin" in spec:
+                k = spec["skin"]
+                local, vw = _influences(document, where, attributes, len(skins[k]["joints"]), k)
+                vj = np.array([column[j] for j in skins[k]["joints"]])[local]
+            else:
+                vj, vw = np.full((count, 1), column[anchor]), np.ones((count, 1))
+            width = max(width, vj.shape[1])
+            joints.append(vj)
+            weights.append(vw)
+    pad = lambda arrays: np.concatenate([np.pad(a, ((0, 0), (0, width - a.shape[1]))) for a in arrays])  # noqa: E731
+    return pad(joints), pad(weights)
 
 
 def _influences(document, where: str, attributes: dict, n: int, s: int):

@@ -5,28 +5,47 @@ motion of three groups of points, one still and two rigid ones that swing at dif
 rigid bodies that turn as they travel; and motions whose points all move alike
 (``inputs.degenerate_configurations`` gliding or swaying), so every segmenter has an answer that is
 clearly right.
+
+A segmenter declaring ``Capabilities(skin=True)`` is given a skin with each input
+(``inputs.chain_skin``: each group of points on a chain of joints of its own, which the segmenter
+must merge where the group moves as one), and is also checked on ``inputs.limbs``, a skinned body
+with two limbs whose parts are known, and for refusing a missing or ill-fitting skin.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from ..interfaces import capabilities
 from ..motion import Motion
 from ..scene.segmentation import Segmentation, same_partition
-from ._expect import dims_of, expect_validation_error, fixed_by, on_input
-from .inputs import parts
+from ._expect import applies_when, dims_of, expect_validation_error, fixed_by, on_input
+from .inputs import chain_skin, limbs, parts
 
 
-def _segment(segmenter, motion, seed=0):
-    return segmenter.segment(motion, np.random.default_rng(seed))
+def _skin(segmenter, motion, groups=None):
+    """The kit's skin of `motion` (its points in `groups`, None: one group) for a segmenter that
+    declares ``Capabilities.skin``; None for others."""
+    if not capabilities(segmenter).skin:
+        return None
+    return chain_skin(motion.positions[0], np.zeros(motion.n_agents, dtype=np.int64) if groups is None else groups)
+
+
+def _segment(segmenter, motion, seed=0, groups=None, skin=None):
+    """`segmenter`'s segmentation of `motion`, given `skin` (else the kit's skin of `groups`)
+    where it declares ``Capabilities.skin``."""
+    rng = np.random.default_rng(seed)
+    if not capabilities(segmenter).skin:
+        return segmenter.segment(motion, rng)
+    return segmenter.segment(motion, rng, skin=_skin(segmenter, motion, groups) if skin is None else skin)
 
 
 def check_labels_cover_every_point(name, segmenter):
     """segment returns a Segmentation with one label per point, every part non-empty."""
     for dims in dims_of(segmenter):
-        motion, _ = parts(dims=dims)
+        motion, truth = parts(dims=dims)
         with on_input(name, segmenter, dims, "the kit's parts"):
-            result = _segment(segmenter, motion)
+            result = _segment(segmenter, motion, groups=truth)
         assert isinstance(result, Segmentation), f"{name}.segment returned {type(result).__name__}, not a Segmentation"
         assert result.n_points == motion.n_agents, (
             f"{name}.segment labels {result.n_points} points; the motion has {motion.n_agents}"
@@ -38,7 +57,7 @@ def _kit_parts(name, segmenter):
     for dims in dims_of(segmenter):
         motion, truth = parts(dims=dims)
         with on_input(name, segmenter, dims, "the kit's parts"):
-            yield _segment(segmenter, motion).labels, truth
+            yield _segment(segmenter, motion, groups=truth).labels, truth
 
 
 @fixed_by("label by how points move (energies, velocities), never by where they are or by their index")
@@ -102,11 +121,11 @@ def check_rigid_body_is_one_part(name, segmenter):
 def check_deterministic(name, segmenter):
     """The same seed gives the same labels, part names included (three runs of each of three
     seeds, so that randomness not drawn from `rng` cannot agree by chance)."""
-    motion, _ = parts(dims=dims_of(segmenter)[0])
+    motion, truth = parts(dims=dims_of(segmenter)[0])
     for seed in (3, 4, 5):
-        first = _segment(segmenter, motion, seed)
+        first = _segment(segmenter, motion, seed, truth)
         for _ in range(2):
-            again = _segment(segmenter, motion, seed)
+            again = _segment(segmenter, motion, seed, truth)
             assert np.array_equal(first.labels, again.labels), (
                 f"{name}.segment gives other labels for the same seed ({seed}): draw every random choice from rng"
             )
@@ -134,28 +153,33 @@ def check_order_of_points_does_not_matter(name, segmenter):
     on the kit's rigid parts and on a waving sheet where part boundaries are a free choice."""
     dims = dims_of(segmenter)[0]
     for label, motion in (("the kit's parts", parts(dims=dims)[0]), ("a waving sheet", _waving_sheet(dims))):
-        labels = _segment(segmenter, motion).labels
+        skin = _skin(segmenter, motion, parts(dims=dims)[1] if label == "the kit's parts" else None)
+        labels = _segment(segmenter, motion, skin=skin).labels
         for seed in (5, 6):
             order = np.random.default_rng(seed).permutation(motion.n_agents)
             shuffled = Motion(positions=motion.positions[:, order], dt=motion.dt)
-            again = _segment(segmenter, shuffled).labels
+            again = _segment(segmenter, shuffled, skin=None if skin is None else skin.take(order)).labels
             assert same_partition(labels[order], again), (
                 f"{name}.segment depends on the order of the points (on {label} in {dims}D)"
             )
 
 
 def check_inputs_unchanged(name, segmenter):
-    """segment leaves the motion as it was."""
-    motion, _ = parts(dims=dims_of(segmenter)[0])
+    """segment leaves the motion (and a skin) as it was."""
+    motion, truth = parts(dims=dims_of(segmenter)[0])
     before = motion.positions.copy()
-    _segment(segmenter, motion)
+    skin = _skin(segmenter, motion, truth)
+    weights = None if skin is None else skin.weights.copy()
+    _segment(segmenter, motion, skin=skin)
     assert np.array_equal(before, motion.positions), f"{name}.segment changed its motion"
+    assert skin is None or np.array_equal(weights, skin.weights), f"{name}.segment changed its skin"
 
 
 def check_rejects_bad_motion(name, segmenter):
     """Something that is not a Motion raises flockkit.errors.ValidationError."""
-    motion, _ = parts(dims=dims_of(segmenter)[0])
-    expect_validation_error(lambda: segmenter.segment(motion.positions, np.random.default_rng(0)),
+    motion, truth = parts(dims=dims_of(segmenter)[0])
+    extra = {"skin": _skin(segmenter, motion, truth)} if capabilities(segmenter).skin else {}
+    expect_validation_error(lambda: segmenter.segment(motion.positions, np.random.default_rng(0), **extra),
                             f"{name}.segment(an array, not a Motion)")  # fmt: skip
 
 
@@ -192,6 +216,37 @@ def check_identical_motion_is_one_part(name, segmenter):
                 )
 
 
+@applies_when("skin")
+def check_rejects_missing_or_unfitting_skin(name, segmenter):
+    """A segmenter that needs a skin raises flockkit.errors.ValidationError without one (skin=None)
+    and for a skin of another number of points."""
+    motion, truth = parts(dims=dims_of(segmenter)[0])
+    rng = np.random.default_rng(0)
+    expect_validation_error(lambda: segmenter.segment(motion, rng, skin=None), f"{name}.segment(skin=None)")
+    fewer = chain_skin(motion.positions[0, :-1], truth[:-1])
+    expect_validation_error(lambda: segmenter.segment(motion, rng, skin=fewer),
+                            f"{name}.segment(a skin of {fewer.n_vertices} points for {motion.n_agents})")  # fmt: skip
+
+
+@applies_when("skin")
+@fixed_by(
+    "start from the skin's joints and join joints whose vertices move together (rigidly, over the whole "
+    "motion); keep apart joints that move independently of each other"
+)
+def check_skinned_limbs_found(name, segmenter):
+    """On ``inputs.limbs`` (a body and two limbs, each rigid on joints of its own, swinging
+    independently), the parts are exactly the body and each limb."""
+    for dims in dims_of(segmenter):
+        mesh, truth = limbs(dims=dims)
+        with on_input(name, segmenter, dims, "the kit's skinned limbs"):
+            labels = _segment(segmenter, mesh.motion, skin=mesh.skin).labels
+        found = [sorted(set(truth[labels == k].tolist())) for k in np.unique(labels)]
+        assert same_partition(labels, truth), (
+            f"{name}.segment finds {len(found)} parts holding the kit's groups {found}; expected the body, the left "
+            "limb and the right limb apart (3 parts)"
+        )
+
+
 CHECKS = (
     check_labels_cover_every_point,
     check_still_points_apart_from_moving_ones,
@@ -202,4 +257,6 @@ CHECKS = (
     check_order_of_points_does_not_matter,
     check_inputs_unchanged,
     check_rejects_bad_motion,
+    check_rejects_missing_or_unfitting_skin,
+    check_skinned_limbs_found,
 )

@@ -21,7 +21,7 @@ from hypothesis.extra import numpy as hnp
 
 from .. import rigid
 from ..constrained.problem import ComConstraint
-from ..mesh import AnimatedMesh
+from ..mesh import AnimatedMesh, MeshSkin
 from ..motion import Alignment, Configuration, Motion, State
 from ..scene.features import Features
 from ..scene.segmentation import Segmentation
@@ -55,6 +55,7 @@ __all__ = [
     "pose_times",
     "time_windows",
     "animated_meshes",
+    "skinned_meshes",
     "guides",
     "group_guides",
     "regions",
@@ -647,6 +648,50 @@ def animated_meshes(*, min_frames=1, max_frames=10, max_vertices=12, max_faces=8
         return AnimatedMesh(motion=motion, faces=faces, name=draw(st.sampled_from(["mesh", "flag", "plant"])))
 
     return draw_mesh()
+
+
+def skinned_meshes(*, min_frames=1, max_frames=8, max_joints=5, max_vertices=16, max_influences=4,
+                   max_coordinate=10.0):  # fmt: skip
+    """Skinned animated meshes (``AnimatedMesh`` with a ``MeshSkin``): a skeleton of 1 to
+    `max_joints` joints (a tree, or a forest, every parent before its children) posed in T in
+    [min_frames, max_frames] frames (the first is the bind pose), V in [1, `max_vertices`]
+    vertices each following 1 to `max_influences` joints with weights summing to 1, placed by
+    linear blend skinning; rest positions and joint offsets in [-max_coordinate, max_coordinate].
+    Faces (triangles of distinct vertices) where V >= 3, none otherwise."""
+    _check_range("min_frames", min_frames, "max_frames", max_frames)
+    _check_count("max_joints", max_joints)
+    _check_count("max_vertices", max_vertices)
+    _check_count("max_influences", max_influences)
+    _check_positive("max_coordinate", max_coordinate)
+
+    @st.composite
+    def draw_skinned(draw):
+        t, j = draw(st.integers(min_frames, max_frames)), draw(st.integers(1, max_joints))
+        parents = [-1] + [draw(st.integers(-1, k - 1)) for k in range(1, j)]
+        rest_pose = Pose(rotations=np.tile([0.0, 0, 0, 1], (j, 1)), translations=np.zeros((j, 3)))
+        skeleton = Skeleton(names=[f"joint{k}" for k in range(j)], parents=parents, rest=rest_pose)
+        offsets = draw(_vectors((j, 3), max_coordinate))
+        rotations = draw(_unit_quaternions((t, j)))
+        rotations[0] = [0.0, 0.0, 0.0, 1.0]  # frame 0 is the bind pose
+        world = skeleton.world(Pose(rotations=rotations, translations=np.broadcast_to(offsets, (t, j, 3))))
+        matrices = world @ np.linalg.inv(world[0])  # (T, J, 4, 4): joint world @ inverse bind
+        v = draw(st.integers(1, max_vertices))
+        k = draw(st.integers(1, min(max_influences, j)))
+        joints = draw(hnp.arrays("int64", (v, k), elements=st.integers(0, j - 1)))
+        weights = draw(hnp.arrays("float64", (v, k), elements=st.floats(0, 1)))
+        weights[:, 0] += 0.5  # every vertex follows some joint
+        weights /= weights.sum(axis=1, keepdims=True)
+        rest = draw(_vectors((v, 3), max_coordinate))
+        blended = np.einsum("vk,tvkij->tvij", weights, matrices[:, joints])
+        positions = np.einsum("tvij,vj->tvi", blended[..., :3, :3], rest) + blended[..., :3, 3]
+        faces = np.zeros((0, 3), dtype=np.int64)
+        if v >= 3:
+            face = st.lists(st.integers(0, v - 1), min_size=3, max_size=3, unique=True)
+            faces = np.array(draw(st.lists(face, min_size=1, max_size=4)))
+        skin = MeshSkin(joint_names=skeleton.names, parents=parents, joints=joints, weights=weights)
+        return AnimatedMesh(motion=Motion(positions=positions, dt=0.1), faces=faces, skin=skin)
+
+    return draw_skinned()
 
 
 def motion_graphs(*, dims=None, max_agents=6):

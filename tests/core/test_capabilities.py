@@ -27,7 +27,7 @@ from ..testing.fakes import (
 )
 
 ROOT = Path(__file__).resolve().parents[2]
-BUILTIN_PLUGINS = "boids,icp,kovar,walks,objectives,proposals,ica,windowed,controllers"
+BUILTIN_PLUGINS = "boids,icp,kovar,walks,objectives,proposals,ica,skinparts,windowed,controllers"
 
 
 pytestmark = pytest.mark.usefixtures("fresh_registry")

@@ -874,6 +874,31 @@ BROKEN_BY_KIND["segmenter"] = {
     "check_rejects_bad_motion": AcceptsArrays,
 }
 
+# segmenters that need a skin: the built-in skin-parts is the correct base
+
+from flockkit_skinparts import SkinParts  # noqa: E402
+
+
+class IgnoresBadSkin(SkinParts):
+    """Segments without a skin, or with one that does not fit, as one part instead of refusing."""
+
+    def segment(self, motion, rng, *, skin=None):
+        if skin is None or skin.n_vertices != motion.n_agents:
+            return flockkit.Segmentation(labels=np.zeros(motion.n_agents, dtype=int), n_parts=1)
+        return super().segment(motion, rng, skin=skin)
+
+
+class MergesEveryJoint(SkinParts):
+    """Merges joints along the skeleton whatever their motion: one part."""
+
+    def __init__(self):
+        super().__init__(n_parts=1)
+
+
+BROKEN_BY_KIND["segmenter"].update(
+    {"check_rejects_missing_or_unfitting_skin": IgnoresBadSkin, "check_skinned_limbs_found": MergesEveryJoint}
+)
+
 
 # -- controllers: the built-in clip player is the correct base ------------------------------
 
