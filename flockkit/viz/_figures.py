@@ -184,7 +184,17 @@ def save_animation(figure, draw, frames, path, rate: float, progress: bool) -> N
                     report(done + 1, len(frames), stage)
 
         images = quantized()
-        next(images).save(tmp, format="GIF", save_all=True, append_images=images, duration=int(1000 / rate), loop=0)
+        durations = gif_durations(len(frames), rate)
+        next(images).save(tmp, format="GIF", save_all=True, append_images=images, duration=durations, loop=0)
+
+
+def gif_durations(n_frames: int, rate: float) -> list[int]:
+    """Milliseconds each of `n_frames` GIF frames shows at `rate` frames per second. GIF keeps
+    hundredths of a second, so one delay for all (1000 / 24 -> 40 ms) runs fast or slow; instead
+    frame k shows from its true start time rounded to 10 ms until the next's (24 fps: 40, 40, 50,
+    ...), so every frame starts within 5 ms of its time and the whole lasts n_frames / rate."""
+    ticks = np.round(np.arange(n_frames + 1) * (100.0 / rate)).astype(np.int64)  # hundredths of a second
+    return [int(d) * 10 for d in np.diff(ticks)]
 
 
 def shared_palette(images):

@@ -33,10 +33,38 @@ def test_a_gif_plays_in_real_time_at_its_size(tmp_path, solved):
     fast = flockkit.Motion(positions=np.cumsum(np.ones((90, 3, 2)), axis=0), dt=1 / 30)
     viz.animate(fast, tmp_path / "fast.gif", trail=0)
     with Image.open(tmp_path / "fast.gif") as image:  # 30 Hz: every other frame, 1/15 s each, 3 s in all
-        assert image.n_frames == 45 and image.info["duration"] in (60, 70)  # GIF keeps hundredths of a second
+        assert image.n_frames == 45 and _gif_seconds(image) == pytest.approx(3.0, abs=0.005)
     viz.animate(fast, tmp_path / "slow.gif", fps=5)
     with Image.open(tmp_path / "slow.gif") as image:  # 5 fps asked: every 6th frame, still real time
         assert image.n_frames == 15 and image.info["duration"] == 200
+
+
+def _gif_seconds(image) -> float:
+    """How long a GIF plays: the sum of its frames' delays."""
+    total = 0
+    for k in range(image.n_frames):
+        image.seek(k)
+        total += image.info["duration"]
+    return total / 1000
+
+
+@pytest.mark.parametrize("rate", [24.0, 15.0, 30.0, 25.0, 12.0, 7.0])
+def test_a_gif_lasts_its_motion_whatever_the_rate(tmp_path, rate):
+    from PIL import Image
+
+    # a motion whose every frame differs (Pillow merges equal frames, adding their delays)
+    n = 37
+    motion = flockkit.Motion(positions=np.cumsum(np.ones((n, 2, 2)), axis=0) * [1.0, 0.3], dt=1 / rate)
+    viz.animate(motion, tmp_path / "timed.gif", trail=0, fps=rate)
+    with Image.open(tmp_path / "timed.gif") as image:
+        assert image.n_frames == n
+        assert abs(_gif_seconds(image) - n / rate) <= 0.005  # GIF keeps hundredths of a second
+        delays = []
+        for k in range(n):
+            image.seek(k)
+            delays.append(image.info["duration"])
+    starts = np.cumsum([0, *delays[:-1]]) / 1000
+    assert np.abs(starts - np.arange(n) / rate).max() <= 0.005 + 1e-9  # every frame within 5 ms of its time
 
 
 def test_arrows_scale_with_the_scene_whatever_its_units(tmp_path):
