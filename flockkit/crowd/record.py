@@ -255,7 +255,7 @@ def export_usd(source, path, seconds: float, *, mesh=None, agents=None, cluster=
     `agents` (default all) of `cluster` (default the driver's, or the crowd's first) to the USD
     stage `path` (.usda/.usdc) as skinned characters that share their streams' animations.
 
-    The layout (``flockkit.io.usd.write_crowd``): /Crowd/Prototypes, a class, holds the character
+    The layout (``flockkit.io.usd.write_crowd``): /CrowdPrototypes, a class beside /Crowd, holds the character
     once (the Skeleton; ``Body``, the skinned `mesh` from ``read_skin`` bound to its joints, where
     given) and ``Streams``, one SkelAnimation per run of each stream the agents read (a Stopped
     stream that starts again starts a new run), its time code j holding the stream's j-th frame

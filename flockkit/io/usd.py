@@ -111,7 +111,7 @@ def write_crowd(path, *, names, joints, rest, bind, scales, fps: float, n_frames
     """A USD crowd under /Crowd, written as UsdSkel lays a crowd out (one Sdf layer, saved atomically).
 
     Every pose the file holds is a row of the pose table `rotations` (M, J, 4; x, y, z, w) and
-    `translations` (M, J, 3), float32. /Crowd/Prototypes (a class: abstract, drawn by no one)
+    `translations` (M, J, 3), float32. /CrowdPrototypes (a class: abstract, drawn by no one)
     holds the character once: ``Skeleton`` (`joints` as UsdSkel paths, `bind` model-space and
     `rest` local transforms (J, 4, 4), column vectors), ``Body`` (where `mesh` is given: a Mesh
     of ``points`` (V, 3), ``faces`` (F, 3), ``joint_indices`` / ``joint_weights`` (V, K), optional
@@ -129,7 +129,8 @@ def write_crowd(path, *, names, joints, rest, bind, scales, fps: float, n_frames
     prototype's (one copy of the mesh in the file), instanceable where `instanceable` (readers that
     skin instance proxies share it in memory too; Blender 5.0 then imports it undeformed). `roots`
     (translations (F, N, 3), orientations (F, N, 4) x, y, z, w, uniform scales (F, N)) place each
-    agent (translate, orient, scale ops; constant ones as a default value, not per frame).
+    agent by translate, rotateZ (where it only turns about z) and orient, and scale ops, each a
+    default value where it never changes, else a time sample per frame.
 
     Frame f is time code f (integers, frame 0 at 0): startTimeCode 0, endTimeCode n_frames - 1,
     timeCodesPerSecond = framesPerSecond = `fps`; up axis z, metersPerUnit `meters_per_unit`,
@@ -155,7 +156,7 @@ def write_crowd(path, *, names, joints, rest, bind, scales, fps: float, n_frames
     half_scales = Vt.Vec3hArray.FromNumpy(np.asarray(scales).astype(np.float16))
     with _layer(path, "Crowd", n_frames=n_frames, fps=fps, meters_per_unit=meters_per_unit,
                 metadata=metadata) as (layer, crowd):  # fmt: skip
-        prototypes = Sdf.PrimSpec(crowd, "Prototypes", Sdf.SpecifierClass)
+        prototypes = Sdf.PrimSpec(layer, "CrowdPrototypes", Sdf.SpecifierClass)
         skeleton = Sdf.PrimSpec(prototypes, "Skeleton", Sdf.SpecifierDef, "Skeleton")
         _attribute(skeleton, "joints", Sdf.ValueTypeNames.TokenArray, token_joints, uniform=True)
         _attribute(skeleton, "bindTransforms", Sdf.ValueTypeNames.Matrix4dArray, matrices(bind), uniform=True)
@@ -172,8 +173,7 @@ def write_crowd(path, *, names, joints, rest, bind, scales, fps: float, n_frames
             animation = Sdf.PrimSpec(streams, name, Sdf.SpecifierDef, "SkelAnimation")
             _animation(animation, token_joints, half_scales, enumerate(np.asarray(rows).tolist(), first), row, Sdf)
             entries.append(animation.path)
-        if roots is not None:
-            moves, turns, sizes = roots
+        placements = _placements(*roots) if roots is not None else None
         for k, name in enumerate(names):
             agent = Sdf.PrimSpec(crowd, name, Sdf.SpecifierDef, "SkelRoot")
             bones = Sdf.PrimSpec(agent, "Skeleton", Sdf.SpecifierDef, "Skeleton")
@@ -195,8 +195,8 @@ def write_crowd(path, *, names, joints, rest, bind, scales, fps: float, n_frames
                 part = Sdf.PrimSpec(agent, "Body", Sdf.SpecifierDef, "Xform")
                 part.referenceList.Prepend(Sdf.Reference(primPath=body.path))
                 part.SetInfo("instanceable", bool(instanceable))
-            if roots is not None:
-                _place(agent, moves[:, k], turns[:, k], sizes[:, k], Sdf, Gf)
+            if placements is not None:
+                _place(agent, next(placements), Sdf, Gf, Vt)
 
 
 def _attribute(prim, name: str, type_name, value=None, *, uniform: bool = False, samples=None):
@@ -208,7 +208,7 @@ def _attribute(prim, name: str, type_name, value=None, *, uniform: bool = False,
     if value is not None:
         spec.default = value
     for time, sample in samples or ():
-        spec.SetTimeSample(time, sample)
+        spec.SetTimeSample(float(time), sample)
     return spec
 
 
@@ -264,23 +264,46 @@ def _mesh(prim, mesh: dict, joints, Sdf, Gf, Vt) -> None:
     _api(prim, "SkelBindingAPI")
 
 
-def _place(prim, moves, turns, sizes, Sdf, Gf) -> None:
-    """Translate, orient and scale ops on `prim` from one agent's per-frame values: a default
-    value where a value never changes, else a time sample per frame."""
-    types = Sdf.ValueTypeNames
-    ops = []
-    for name, type_name, values, make in (
-        ("xformOp:translate", types.Float3, np.asarray(moves, np.float32), lambda v: Gf.Vec3f(*v)),
-        ("xformOp:orient", types.Quatf, np.asarray(turns, np.float32), lambda q: Gf.Quatf(q[3], q[0], q[1], q[2])),
-        ("xformOp:scale", types.Float3, np.repeat(np.asarray(sizes, np.float32)[:, None], 3, 1),
-         lambda v: Gf.Vec3f(*v)),
-    ):  # fmt: skip
-        ops.append(name)
-        if np.all(values == values[0]):
-            _attribute(prim, name, type_name, make(values[0].tolist()))
+def _placements(moves, turns, sizes):
+    """Per agent, its xform ops as (name, type, values (F, ...)) from translations (F, N, 3),
+    unit quaternions (F, N, 4) x, y, z, w and uniform scales (F, N): translate; where an agent
+    only turns about z from its first orientation (as a Driver turns a character to its heading),
+    rotateZ (degrees, unwrapped, so that USD interpolates the short way) and a fixed orient, else
+    orient per frame; scale. A float per frame costs a third of a quaternion in a .usdc."""
+    from scipy.spatial.transform import Rotation
+
+    moves = np.asarray(moves, np.float32)
+    turns = np.asarray(turns, np.float64)
+    frames, agents = turns.shape[:2]
+    first = Rotation.from_quat(np.broadcast_to(turns[:1], turns.shape).reshape(-1, 4))
+    relative = (Rotation.from_quat(turns.reshape(-1, 4)) * first.inv()).as_rotvec().reshape(frames, agents, 3)
+    about_z = np.all(np.abs(relative[..., :2]) <= 1e-7, axis=(0, 2))
+    yaw = np.degrees(np.unwrap(relative[..., 2], axis=0)).astype(np.float32)
+    scales = np.repeat(np.asarray(sizes, np.float32)[..., None], 3, axis=2)
+    for k in range(agents):
+        ops = [("xformOp:translate", "Float3", moves[:, k])]
+        if about_z[k]:
+            ops += [("xformOp:rotateZ", "Float", yaw[:, k]), ("xformOp:orient", "Quatf", turns[:1, k])]
         else:
-            _attribute(prim, name, type_name, samples=enumerate(map(make, values.tolist())))
-    _attribute(prim, "xformOpOrder", types.TokenArray, ops, uniform=True)
+            ops.append(("xformOp:orient", "Quatf", turns[:, k]))
+        ops.append(("xformOp:scale", "Float3", scales[:, k]))
+        yield ops
+
+
+def _place(prim, ops, Sdf, Gf, Vt) -> None:
+    """The xform ops `ops` on `prim`: a default value where a value never changes, else a time
+    sample per frame (values read out of one Vt array: no Python object per number)."""
+    arrays = {"Float3": Vt.Vec3fArray, "Quatf": Vt.QuatfArray}
+    for name, type_name, values in ops:
+        if type_name == "Float":
+            values = values.tolist()
+        else:
+            values = arrays[type_name].FromNumpy(np.ascontiguousarray(values, dtype=np.float32))
+        if all(v == values[0] for v in values):
+            _attribute(prim, name, getattr(Sdf.ValueTypeNames, type_name), values[0])
+        else:
+            _attribute(prim, name, getattr(Sdf.ValueTypeNames, type_name), samples=enumerate(values))
+    _attribute(prim, "xformOpOrder", Sdf.ValueTypeNames.TokenArray, [name for name, _, _ in ops], uniform=True)
 
 
 def require_usd_core() -> None:
