@@ -96,7 +96,8 @@ def _build_arguments(parser) -> None:
     add_components(
         parser, "build", Component("builder", shown="kovar; windowed with --layers"),
         Component("metric", "icp-hungarian"),
-        Component("segmenter", shown="ica-kmeans; it splits the source for --layers without --parts"),
+        Component("segmenter", shown="skin-parts for a skinned mesh, else ica-kmeans; it splits the source for "
+                  "--layers without --parts"),
     )  # fmt: skip
     add_quiet(parser)
 

@@ -21,6 +21,9 @@ from ._options import (
     staged_folder,
 )
 
+# How --help states the segmenter chosen where none is named (flockkit.segment chooses it).
+SEGMENTER_SHOWN = "skin-parts for a mesh read with a skin (a skinned glTF character), else ica-kmeans"
+
 # Frames of the scene animation the CLI draws at most (frames are skipped evenly beyond): a
 # minute-long scene stays a GIF of about a megabyte, drawn in seconds.
 SCENE_GIF_FRAMES = 150
@@ -78,7 +81,7 @@ def _segment_arguments(parser) -> None:
     parser.add_argument("--parts", type=int, help="number of parts (default: chosen by the segmenter)")
     parser.add_argument("--seed", type=int, default=None, help="random seed")
     add_mesh_options(parser)
-    add_components(parser, "segment", Component("segmenter", "ica-kmeans"))
+    add_components(parser, "segment", Component("segmenter", shown=SEGMENTER_SHOWN))
 
 
 def _scene_arguments(parser) -> None:
