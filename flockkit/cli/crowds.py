@@ -7,9 +7,30 @@ import json
 from ._options import add_allow_outside, add_quiet, check_folder, staged_folder
 
 
+def _character_mesh(scene_path, allow_outside: bool):
+    """The skinned mesh of the scene's [character] clips where they are a glTF character with a
+    skin (``read_skin``), else None (a BVH take, a skeleton without a mesh)."""
+    import tomllib
+    from pathlib import Path
+
+    from .._files import confined
+    from ..errors import ValidationError
+    from ..io.skin import read_skin
+
+    path = Path(scene_path)
+    clips = tomllib.loads(path.read_text())["character"]["clips"]
+    source = confined(path.parent, clips, source=path, where="character.clips", allow_outside=allow_outside, uri=False)
+    if source.suffix.lower() not in (".glb", ".gltf"):
+        return None
+    try:
+        return read_skin(source, allow_outside=allow_outside)
+    except ValidationError:  # no skin, or no mesh the skeleton moves
+        return None
+
+
 def _cmd_crowd(args) -> int:
     from ..crowd.file import read_crowd_scene
-    from ..crowd.record import record
+    from ..crowd.record import export_usd, record
 
     folder = check_folder(args.output)
     scene = read_crowd_scene(args.scene, allow_outside=args.allow_outside)
@@ -17,6 +38,7 @@ def _cmd_crowd(args) -> int:
         from ..io.usd import require_usd_core
 
         require_usd_core()
+    mesh = None if args.no_usd else _character_mesh(args.scene, args.allow_outside)
     driver = scene.driver()
     recording = record(driver, scene.seconds, agents=range(scene.record))
     names = ([] if args.no_usd else ["crowd.usdc"]) + ([] if args.no_pictures else ["crowd.gif"]) + ["crowd.json"]
@@ -29,8 +51,8 @@ def _cmd_crowd(args) -> int:
         "memory (bytes)": driver.crowd.pool.memory(),
     }
     with staged_folder(folder) as staging:  # every file, or none
-        if not args.no_usd:
-            recording.export_usd(staging / "crowd.usdc")
+        if not args.no_usd:  # the same run again, its streams shared by the agents that read them
+            export_usd(scene.driver(), staging / "crowd.usdc", scene.seconds, agents=range(scene.record), mesh=mesh)
         if not args.no_pictures:
             from ..viz import animate_recording
 
@@ -54,7 +76,8 @@ def _crowd_arguments(parser) -> None:
 # command -> (help, arguments, run)
 COMMANDS = {
     "crowd": (
-        "drive a crowd of skeletal characters along trajectories (.toml); write USD, animation, summary",
+        "drive a crowd of skeletal characters along trajectories (.toml); write USD (skinned where the character "
+        "is a glTF skin), animation, summary",
         _crowd_arguments,
         _cmd_crowd,
     ),

@@ -267,7 +267,9 @@ def _foxes(tour: _Tour, folder: Path) -> dict:
     """Paper 003 driven by paper 004's model: a few thousand Foxes follow a boids flock."""
     from .. import viz
     from ..crowd import Crowd, Cue, Driver, Gait, StateMachine, Stream, StreamPool, ground_speed, plant_feet, record
+    from ..crowd.record import export_usd
     from ..io import read_clips
+    from ..io.skin import read_skin
     from ..registry import get
 
     fps, seconds, n = 24.0, 10.0, 2000
@@ -285,10 +287,15 @@ def _foxes(tour: _Tour, folder: Path) -> dict:
     machine = StateMachine([Gait(name="idle", streams=0, high=0.2), walking])
     runners = np.arange(0, n, 2)
     cue = Cue(time=4.0, agents=runners, stream=4, duration=3.0, time_to_dilate=2.0, name="run")
-    with tour.step("2 000 Foxes driven by a boids flock for 10 s"):
-        flock = simulate(n_agents=n, steps=int(seconds * fps), dt=1 / fps, seed=3)
+    flock = simulate(n_agents=n, steps=int(seconds * fps), dt=1 / fps, seed=3)
+
+    def foxes():
         crowd = Crowd(StreamPool(streams, fps=fps), n_agents=n, clusters={"body": 1}, seed=4)
-        driver = Driver(crowd, flock, machine, scale=scale, cues=[cue])
+        return Driver(crowd, flock, machine, scale=scale, cues=[cue])
+
+    with tour.step("2 000 Foxes driven by a boids flock for 10 s"):
+        driver = foxes()
+        crowd = driver.crowd
         synchrony = {}
 
         def watch(crowd, frame):
@@ -297,8 +304,9 @@ def _foxes(tour: _Tour, folder: Path) -> dict:
 
         shown = record(driver, seconds, agents=np.arange(64), on_frame=watch)
     usd = "skipped: usd-core is not installed (pip install 'flockkit[usd]')"
-    try:
-        shown.export_usd(tour.path("foxes.usdc"))
+    try:  # every Fox, skinned, the same run again
+        with tour.step("2 000 skinned Foxes written to USD"):
+            export_usd(foxes(), tour.path("foxes.usdc"), seconds, mesh=read_skin(folder / FOX))
         usd = "foxes.usdc"
     except MissingDependencyError:
         tour.written.pop()
@@ -310,7 +318,7 @@ def _foxes(tour: _Tour, folder: Path) -> dict:
         "streams": [s.name for s in streams],
         "stream switches": driver.switches,
         "runners in step with another (just after the cue, 2 s later)": [round(v, 3) for v in synchrony.values()],
-        "roots on their trajectories": bool(np.allclose(root, flock.positions[-1, :, :2], atol=1e-9)),
+        "roots on their trajectories": bool(np.allclose(root, flock.positions[shown.n_frames - 1, :, :2], atol=1e-9)),
         "usd": usd,
         "memory (bytes)": crowd.pool.memory(),
     }
