@@ -5,7 +5,7 @@ from ..skeleton import Channel, Event, Pose, SkeletalClip, Skeleton, sample_keys
 from .drive import Cue, Driver, Gait, StateMachine
 from .feet import driven_sliding, foot_sliding, ground_speed, plant_feet
 from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
-from .record import CrowdRecording, export_usd, record, write_engine_buffers
+from .record import CrowdRecording, export_gltf, export_usd, record, write_engine_buffers
 from .runtime import INSTANCE, Crowd, CrowdEvent
 from .textures import (
     TEXTURE_INSTANCE,
@@ -40,6 +40,7 @@ __all__ = [
     "CrowdRecording",
     "record",
     "export_usd",
+    "export_gltf",
     "write_engine_buffers",
     "Driver",
     "ground_speed",

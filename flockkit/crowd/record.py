@@ -291,17 +291,85 @@ def export_usd(source, path, seconds: float, *, mesh=None, agents=None, cluster=
     from ..io.usd import require_usd_core
 
     require_usd_core()  # before the run, not after it
-    crowd, driver, frames = _run(source, seconds, on_frame, "export_usd", initial=True)
+    crowd, driver, c, ids, capture, placed = _capture(source, seconds, agents, cluster, on_frame, "export_usd")
+    plan = capture.plan()
+    library, entry, taken = [], {}, {}
+    for run in plan["used"]:
+        start, stop, first, name = plan["runs"][run]
+        name = _prim_name(name)
+        taken[name] = taken.get(name, -1) + 1
+        entry[run] = len(library)
+        library.append((f"{name}_{taken[name]}", first, np.arange(start, stop)))
+    references = {k: (entry[run], -j0 / slope, 1.0 / slope) for k, (run, j0, slope) in plan["references"].items()}
+    _write(path, crowd.skeletons[c], mesh, fps=crowd.pool.fps, names=[f"Agent_{int(k)}" for k in ids],
+           rotations=plan["rotations"], translations=plan["translations"], library=library,
+           references=references, samples=plan["samples"], roots=placed, n_frames=capture.n_frames,
+           axes=driver.axes if driver is not None else None, meters_per_unit=meters_per_unit,
+           instanceable=instanceable)  # fmt: skip
+    return {"agents": len(ids), "frames": capture.n_frames, "referencing": len(plan["references"]),
+            "sampled": len(plan["samples"]), "streams": len(library),
+            "poses": len(plan["rotations"])}  # fmt: skip
+
+
+def export_gltf(source, path, seconds: float, *, mesh, agents=None, cluster=None, on_frame=None) -> dict:
+    """Run `source` (a ``flockkit.Crowd`` or a ``flockkit.crowd.Driver``) for `seconds` and write
+    `agents` (default all) of `cluster` as one binary glTF 2.0 file `path` (.glb) that engines,
+    three.js and Blender load: the skinned `mesh` (``read_skin``) and its inverse bind matrices
+    once; per agent a root node (``Agent_k``, placed by the driver's root: translation, rotation,
+    scale, animated where they change) above its own joint nodes, a skin of them and a root node
+    drawing the shared mesh with that skin; one animation, "crowd", keying every agent's joints
+    (rotation, translation; LINEAR) and roots at every frame, frame f at f / fps seconds (frame 0
+    the crowd before its first update).
+
+    An agent that reads one stream at one whole offset for the whole export keys its joints with
+    accessors into that stream's frames (stored once, joint by joint), starting at its offset:
+    the stored poses themselves. Every other agent keys its own frames, ``Crowd.poses`` as they
+    are. Between frames, engines slerp and lerp the keys (the crowd's own interpolation for a
+    dilating part reads the same two frames). A file larger than
+    ``flockkit.io.gltf_crowd.GLTF_CROWD_LIMIT`` (256 MiB) is refused with a ValidationError
+    naming it, before the run; ``export_usd`` shares more (dilating agents too, and readers load
+    references lazily). Returns counts: ``agents``, ``frames``, ``sharing`` (agents keyed by
+    their stream's frames), ``own`` and ``bytes``. Written atomically."""
+    from ..io.gltf_crowd import write_gltf_crowd
+    from ..io.skin import SkinnedMesh
+
+    if not isinstance(mesh, SkinnedMesh):
+        raise ValidationError(f"export_gltf: mesh must be a flockkit.crowd.SkinnedMesh (read_skin); "
+                              f"got {type(mesh).__name__}")  # fmt: skip
+    crowd, driver, c, ids, capture, placed = _capture(source, seconds, agents, cluster, on_frame, "export_gltf",
+                                                      mesh=mesh)  # fmt: skip
+    plan = capture.plan(lines=False)
+    skeleton = crowd.skeletons[c]
+    windows = {k: (run, int(j0) - plan["runs"][run][2]) for k, (run, j0, _) in plan["references"].items()}
+    shape = {"points": mesh.positions, "faces": mesh.faces, "joint_indices": mesh.joints,
+             "joint_weights": mesh.weights, "normals": mesh.normals, "inverse_bind": mesh.inverse_bind,
+             "name": mesh.name}  # fmt: skip
+    size = write_gltf_crowd(path, names=[f"Agent_{int(k)}" for k in ids], joints=skeleton.names,
+                            parents=skeleton.parents, rest_translations=skeleton.rest.translations,
+                            rest_rotations=skeleton.rest.rotations, scales=skeleton.scales, mesh=shape,
+                            fps=crowd.pool.fps, n_frames=capture.n_frames, rotations=plan["rotations"],
+                            translations=plan["translations"], runs=[r[:2] for r in plan["runs"]], windows=windows,
+                            samples=plan["samples"], roots=placed)  # fmt: skip
+    return {"agents": len(ids), "frames": capture.n_frames, "sharing": len(windows), "own": len(plan["samples"]),
+            "bytes": size}  # fmt: skip
+
+
+def _capture(source, seconds, agents, cluster, on_frame, what: str, mesh=None):
+    """Run `source` for `seconds`, keeping what an export needs: (crowd, driver or None, cluster
+    index, agent ids, the _Capture, the roots as (translations, quaternions, scales) or None)."""
+    crowd, driver, frames = _run(source, seconds, on_frame, what, initial=True)
     if crowd.pool.xp is not np:
-        raise ValidationError("export_usd reads the pose store with numpy: use a pool without xp")
+        raise ValidationError(f"{what} reads the pose store with numpy: use a pool without xp")
     if cluster is None:
         cluster = driver.cluster if driver is not None else crowd.clusters[0]
     c = crowd.cluster_index(cluster)
     from .runtime import _agent_ids
 
+    if mesh is not None:
+        mesh.check_skeleton(crowd.skeletons[c], field=f"{what}: mesh")
     ids = np.arange(crowd.n_agents) if agents is None else _agent_ids(agents, crowd.n_agents)
     if np.any(crowd.instance_buffer()["kind"][ids, c] == 0):
-        raise ValidationError(f"export_usd: agent {int(ids[crowd.instance_buffer()['kind'][ids, c] == 0][0])} has "
+        raise ValidationError(f"{what}: agent {int(ids[crowd.instance_buffer()['kind'][ids, c] == 0][0])} has "
                               f"no {cluster!r} cluster")  # fmt: skip
     capture = _Capture(crowd, c, ids)
     roots = []
@@ -309,18 +377,8 @@ def export_usd(source, path, seconds: float, *, mesh=None, agents=None, cluster=
         capture.frame()
         if driver is not None:
             roots.append(_similarities(driver.roots[ids], "Driver.roots"))
-    plan = capture.plan()
-    placed = None
-    if roots:
-        placed = tuple(np.array([r[k] for r in roots]) for k in range(3))
-    _write(path, crowd.skeletons[c], mesh, fps=crowd.pool.fps, names=[f"Agent_{int(k)}" for k in ids],
-           rotations=plan["rotations"], translations=plan["translations"], library=plan["library"],
-           references=plan["references"], samples=plan["samples"], roots=placed, n_frames=capture.n_frames,
-           axes=driver.axes if driver is not None else None, meters_per_unit=meters_per_unit,
-           instanceable=instanceable)  # fmt: skip
-    return {"agents": len(ids), "frames": capture.n_frames, "referencing": len(plan["references"]),
-            "sampled": len(plan["samples"]), "streams": len(plan["library"]),
-            "poses": len(plan["rotations"])}  # fmt: skip
+    placed = tuple(np.array([r[k] for r in roots]) for k in range(3)) if roots else None
+    return crowd, driver, c, ids, capture, placed
 
 
 class _Capture:
@@ -397,16 +455,17 @@ class _Capture:
             self.n_own += int(own.sum())
         self.own.append(rows)
 
-    def plan(self) -> dict:
-        """The pose table (every run's frames, then the poses of parts that read none), the run
-        animations agents reference, each agent's reference (run, layer offset, scale) or rows."""
+    def plan(self, lines: bool = True) -> dict:
+        """The pose table (every run's frames, then the poses of parts that read none), the runs
+        (first row, stop row, first frame index, stream name), each agent's reference (run, first
+        frame index read, frames a frame) or rows, and the runs referenced. A reference is a part
+        reading one run along a straight line of frames; without `lines`, at one whole offset."""
         from ..crowd.pool import entries_pose
 
         reads, frames, own = np.array(self.reads), np.array(self.frames), np.array(self.own)
         n_frames = len(reads)
         sizes = [sum(len(chunk) for chunk in run[3]) for run in self.runs]
         base = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
-        names = [self.crowd.pool.streams[run[0]].name for run in self.runs]
         rotations, translations = [], []
         for run in self.runs:
             for chunk in run[3]:
@@ -426,22 +485,19 @@ class _Capture:
             read, frame = reads[:, k], frames[:, k]
             if read[0] >= 0 and np.all(read == read[0]):
                 slope = (frame[-1] - frame[0]) / (n_frames - 1) if n_frames > 1 else 1.0
-                if slope > 0 and np.abs(frame[0] + slope * time - frame).max() <= LINE_TOLERANCE:
-                    entry = used.setdefault(int(read[0]), len(used))
-                    references[k] = (entry, -frame[0] / slope, 1.0 / slope)
+                straight = slope > 0 and np.abs(frame[0] + slope * time - frame).max() <= LINE_TOLERANCE
+                if straight and (lines or (slope == 1 and frame[0] == np.floor(frame[0]))):
+                    used.setdefault(int(read[0]), len(used))
+                    references[k] = (int(read[0]), float(frame[0]), float(slope))
                     continue
             whole = own[:, k] < 0
             rows = np.where(whole, 0, base[-1] + own[:, k])
             rows[whole] = base[read[whole]] + (frame[whole].astype(np.int64) - first[read[whole]])
             samples[k] = rows
-        library = []
-        taken: dict = {}
-        for run in sorted(used, key=used.get):
-            name = _prim_name(names[run])
-            taken[name] = taken.get(name, -1) + 1
-            library.append((f"{name}_{taken[name]}", int(first[run]), np.arange(base[run], base[run + 1])))
-        return {"rotations": rotations, "translations": translations, "library": library, "references": references,
-                "samples": samples}  # fmt: skip
+        names = [self.crowd.pool.streams[run[0]].name for run in self.runs]
+        return {"rotations": rotations, "translations": translations, "references": references, "samples": samples,
+                "runs": [(int(base[r]), int(base[r + 1]), int(first[r]), names[r]) for r in range(len(self.runs))],
+                "used": sorted(used, key=used.get)}  # fmt: skip
 
 
 def _prim_name(name: str) -> str:
