@@ -4,7 +4,8 @@
 and skinned mesh once, one SkelAnimation per stream run that agents reference at their own time
 offsets, and per-agent time samples only for agents whose motion is not one stream at one offset
 (see its docstring for what is exact). ``CrowdRecording.export_usd`` writes a recording, every
-agent's poses as time samples that share every pose they repeat.
+agent's poses as time samples that share every pose they repeat. ``export_gltf`` writes a crowd
+as one .glb of skinned characters that engines load.
 """
 
 from __future__ import annotations
@@ -327,7 +328,7 @@ def export_gltf(source, path, seconds: float, *, mesh, agents=None, cluster=None
     are. Between frames, engines slerp and lerp the keys (the crowd's own interpolation for a
     dilating part reads the same two frames). A file larger than
     ``flockkit.io.gltf_crowd.GLTF_CROWD_LIMIT`` (256 MiB) is refused with a ValidationError
-    naming it, before the run; ``export_usd`` shares more (dilating agents too, and readers load
+    naming it, before anything is written; ``export_usd`` shares more (dilating agents too, and readers load
     references lazily). Returns counts: ``agents``, ``frames``, ``sharing`` (agents keyed by
     their stream's frames), ``own`` and ``bytes``. Written atomically."""
     from ..io.gltf_crowd import write_gltf_crowd
