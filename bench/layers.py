@@ -97,7 +97,7 @@ def cracks(data: Path) -> None:
     for mesh in meshes:
         figures = []
         for weld in (False, None):
-            layers = flockkit.build_layers(mesh, seed=0, weld=weld)
+            layers = flockkit.build_layers(mesh, segmenter="ica-kmeans", seed=0, weld=weld)
             played = flockkit.synthesize(layers, flockkit.walk(layers, duration=60, seed=1))
             figures += [crack_width(played, mesh), crack_width(played, mesh, statistic="mean")]
         copies = int(np.sum(weld_map(mesh) != np.arange(mesh.motion.n_agents)))
@@ -157,7 +157,7 @@ def cycles(data: Path) -> None:
 
         def read(path=path, clip=clip):
             mesh = flockkit.io.read_mesh_animation(data / path, clip=clip)
-            return mesh, flockkit.segment(mesh, seed=0)
+            return mesh, flockkit.segment(mesh, segmenter="ica-kmeans", seed=0)
 
         sources.append((f"{Path(path).stem} {clip}", read, 20))
     print(f"\n{'source':>24} {'builder':>8} {'frames':>6} {'parts':>5} {'loops':>5} {'shifts':>6} {'objects':>7} "
@@ -220,12 +220,12 @@ def main():
           f"{'no seams':>8}")  # fmt: skip
     for name, read in cases:
         mesh, reading = timed(read)
-        parts, segmenting = timed(lambda mesh=mesh: flockkit.segment(mesh, seed=0))
+        parts, segmenting = timed(lambda mesh=mesh: flockkit.segment(mesh, segmenter="ica-kmeans", seed=0))
         layers, building = timed(lambda mesh=mesh, parts=parts: flockkit.build_layers(mesh, segmentation=parts, seed=0))
         # peak memory in a second pass: tracing every allocation slows the first's Python-heavy parts
         tracemalloc.start()
         traced = read()
-        flockkit.build_layers(traced, segmentation=flockkit.segment(traced, seed=0), seed=0)
+        flockkit.build_layers(traced, segmentation=flockkit.segment(traced, segmenter="ica-kmeans", seed=0), seed=0)
         peak = tracemalloc.get_traced_memory()[1] / 2**20
         tracemalloc.stop()
         walk = flockkit.walk(layers, duration=60, seed=1)
