@@ -40,7 +40,10 @@ first frame. Where the graph is too sparse to vary (fewer than `min_transitions`
 blend can hide, as a short cycle, which has none, gives), phase shifts are added
 (``flockkit.graphs.phase_shifts``): from every frame (at most SHIFT_NODES of them, evenly
 spread), transitions to the frame 1 or 2 frames on and back, blended over `shift_blend` seconds,
-so that walks start at any phase, drift in time and play out of step with each other.
+so that walks start at any phase, drift in time and play out of step with each other. On a
+cycle shorter than `shift_blend` the shifts blend over the cycle less one frame (a blend as long as
+the cycle would mix a phase with itself one loop on), and only the sizes such a blend hides are
+added (3 |shift| <= blend + 1: a 4-frame cycle gets shifts of one frame, a 2-frame cycle none).
 """
 
 from __future__ import annotations
@@ -227,6 +230,9 @@ class Windowed:
         longest of them, and are left out if the graph would keep fewer of them."""
         blend = max(self.min_blend, round(self.shift_blend / motion.dt))
         if period is not None:
+            # at most one cycle less a frame: a longer blend would mix a phase with itself shifted
+            # once more around the loop, and the graph holds no blend of n_frames or more
+            blend = min(blend, period - 1, motion.n_frames - 1)
             first, last = 0, period - 1
         else:
             if not transitions:

@@ -1,5 +1,7 @@
 """The windowed builder and graph layers on real meshes (paper 002, section 4)."""
 
+import warnings
+
 import numpy as np
 import pytest
 
@@ -33,6 +35,38 @@ def test_the_cost_is_the_papers_on_a_hand_computed_case():
         for k in (-1, 0, 1)
     )
     assert total[p, q] == pytest.approx(expected)
+
+
+@pytest.mark.parametrize("period", [4, 5, 12, 17])
+def test_a_cycle_shorter_than_the_shift_blend_gets_shifts_blended_over_the_cycle(period):
+    """A looping clip shorter than shift_blend (0.6 s: 18 frames at 30 fps) is built: its phase
+    shifts blend over the cycle less one frame, with only the sizes such a blend hides, and a
+    minute of it plays without a step larger than the blend's bound."""
+    phase = 2 * np.pi * np.arange(period)[:, None] / period
+    s = np.linspace(0.2, 1.0, 6)[None, :]
+    wing = np.stack(np.broadcast_arrays(s, 0 * s, 0.4 * s * np.sin(phase + s)), axis=2)
+    motion = flockkit.Motion(positions=wing, dt=1 / 30)
+    graph = flockkit.build_graph(motion, builder="windowed")
+    assert graph.period == period
+    blend = period - 1
+    shifts = [t for t, shift in zip(graph.transitions, graph.shifts) if shift]
+    assert shifts and all(t.blend == blend for t in shifts)
+    hidden = [size for size in (1, 2) if 3 * size <= blend + 1]
+    assert sorted(set(graph.shifts[graph.shifts != 0].tolist())) == sorted(hidden + [-h for h in hidden])
+    walk = flockkit.walk(graph, duration=60, seed=1)
+    played = flockkit.synthesize(graph, walk)
+    assert played.n_frames >= 1800
+    largest = np.linalg.norm(np.diff(np.concatenate([wing, wing[:1]]), axis=0), axis=2).max()
+    worst = max(hidden)
+    assert largest_step(played) <= largest * (1 + 1.5 * 2 * worst / (blend + 1)) + 1e-12
+    # built into layers and played in a scene of duplicates, as any short loop is
+    layers = flockkit.build_layers(motion, segmentation=flockkit.Segmentation(labels=np.zeros(6, int), n_parts=1),
+                                   features=flockkit.Features(vectors=np.zeros((period, 3)), dt=1 / 30))  # fmt: skip
+    region = flockkit.Polygon(vertices=[[0, 0], [20, 0], [20, 20], [0, 20]])
+    scene = flockkit.Scene(templates=[layers], region=region, counts=[4], duration=10, seed=2)
+    with warnings.catch_warnings():  # a 4-frame cycle has too few phases for 3 close neighbours: warned
+        warnings.simplefilter("ignore", flockkit.errors.FlockkitWarning)
+        assert scene.synthesize().n_frames == 300
 
 
 def test_the_walk_clip_loops(shared_data):
