@@ -187,10 +187,14 @@ def limbs(*, dims: int = 3, seconds: float = 6.0, dt: float = 0.1) -> tuple[Anim
     independently, so a skin-aware segmenter must find exactly these three."""
     rng = np.random.default_rng(21)
     t = np.arange(round(seconds / dt) + 1) * dt
-    body = rng.uniform([-1.0, -0.5, -0.5], [1.0, 0.5, 0.5], (40, 3))
     shoulders = np.array([[0.0, 0.5, 0.0], [0.0, -0.5, 0.0]])
+    body = rng.uniform([-1.0, -0.5, -0.5], [1.0, 0.5, 0.5], (40, 3))
+    body[:2, 1], body[2:4, 1] = 0.45, -0.45  # where the limbs meet it, a point each side of each shoulder
+    body[:4, [0, 2]] = np.tile([[0.05, 0.0], [-0.05, 0.0]], (2, 1))
     limb = [np.column_stack([rng.uniform(-0.2, 0.2, 24), side * rng.uniform(0.05, 1.5, 24), rng.uniform(-0.2, 0.2, 24)])
             + [0.0, side * 0.5, 0.0] for side in (1.0, -1.0)]  # fmt: skip
+    for side, points in zip((1.0, -1.0), limb):
+        points[:2] = [[0.05, side * 0.55, 0.0], [-0.05, side * 0.55, 0.0]]  # touching the body at the shoulder
     rest = np.concatenate([body, *limb])[:, :dims]
     truth = np.repeat([0, 1, 2], [40, 24, 24])
 
@@ -204,7 +208,7 @@ def limbs(*, dims: int = 3, seconds: float = 6.0, dt: float = 0.1) -> tuple[Anim
     heading, travel = turn(0.4 * np.sin(2 * np.pi * t / seconds), 2), np.zeros((len(t), dims))
     travel[:, 0] = 0.5 * t
     positions = np.empty((len(t), len(rest), dims))
-    for part, swing in ((0, None), (1, 0.7 * np.sin(2 * np.pi * 0.9 * t)), (2, 0.5 * np.sin(2 * np.pi * 1.7 * t + 1))):
+    for part, swing in ((0, None), (1, 1.2 * np.sin(2 * np.pi * 0.9 * t)), (2, 1.0 * np.sin(2 * np.pi * 1.7 * t + 1))):
         local = np.broadcast_to(rest[truth == part], (len(t), int(np.sum(truth == part)), dims))
         if swing is not None:
             pivot = shoulders[part - 1, :dims]
