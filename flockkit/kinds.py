@@ -149,7 +149,7 @@ KINDS: Mapping[str, Kind] = _frozen(
             fields={"skin"},
             optional={"skin": interfaces.Skinned},
             kit="flockkit.testing.segmenter",
-            receives=("flockkit.motion.Motion",),
+            receives=("flockkit.motion.Motion", "flockkit.mesh.MeshSkin"),
             returns=("flockkit.scene.Segmentation",),
         ),
         Kind(
