@@ -28,6 +28,7 @@ DRAWN_BY = {
     "Proposal": "proposals",
     "Problem": "problems",
     "Segmentation": "segmentations",
+    "MeshSkin": "skinned_meshes",
     "Pose": "poses",
     "Event": "events",
     "Skeleton": "skeletons",
