@@ -20,7 +20,21 @@ from ._arrays import readonly_float, readonly_int
 from .errors import ValidationError
 from .mesh import FLOCKKIT_METERS_PER_UNIT, FLOCKKIT_UP_AXIS, check_meters_per_unit, check_up_axis
 
-__all__ = ["Pose", "Skeleton", "SkeletalClip", "Channel", "Event", "sample_keys", "stream_times", "INTERPOLATIONS"]
+__all__ = [
+    "Pose",
+    "Skeleton",
+    "SkeletalClip",
+    "Channel",
+    "Event",
+    "RootMotion",
+    "extract_root_motion",
+    "carries_root_motion",
+    "sample_keys",
+    "stream_times",
+    "INTERPOLATIONS",
+    "ROOT_MOTION_TOLERANCE",
+    "ROOT_TURN_TOLERANCE",
+]
 
 # Quaternions whose length is this close to 1 are normalized (file formats store float32 and
 # round); farther ones are refused, since they are not rotations somebody meant.
@@ -526,6 +540,10 @@ class SkeletalClip:
     events : sequence of Event, optional
         Tags on the timeline, at times within the clip.
     name : str
+    root_motion : RootMotion, optional
+        The ground motion taken out of the clip (``extract_root_motion``): a clip played in place
+        whose root advances by this track as it plays (``Driver(root_motion="clip")``). It spans
+        the clip: its last time is the clip's duration.
     """
 
     skeleton: Skeleton = attrs.field()
@@ -537,6 +555,7 @@ class SkeletalClip:
     channels: tuple = attrs.field(default=(), converter=tuple, repr=lambda c: f"<{len(c)} channels>")
     events: tuple = attrs.field(default=(), converter=tuple)
     name: str = attrs.field(default="clip")
+    root_motion: RootMotion | None = attrs.field(default=None, repr=False)
     _tracks: tuple = attrs.field(init=False, repr=False)
     _plan: tuple = attrs.field(init=False, repr=False)
     _duration: float = attrs.field(init=False, repr=False)
@@ -563,6 +582,18 @@ class SkeletalClip:
                     f"SkeletalClip.events[{k}] at {event.time} s is past the clip's end ({self.duration:.6g} s)"
                 )
         object.__setattr__(self, "events", tuple(sorted(self.events, key=lambda e: e.time)))
+        track = self.root_motion
+        if track is not None:
+            if not isinstance(track, RootMotion):
+                raise ValidationError(
+                    f"SkeletalClip.root_motion must be a flockkit.crowd.RootMotion; got {type(track).__name__}"
+                )
+            if track.up_axis != self.skeleton.up_axis:
+                raise ValidationError(f"SkeletalClip.root_motion is on the ground of up axis {track.up_axis!r}; the "
+                                      f"skeleton's up axis is {self.skeleton.up_axis!r}")  # fmt: skip
+            if abs(track.duration - self.duration) > 1e-6 * max(1.0, self.duration):
+                raise ValidationError(f"SkeletalClip.root_motion lasts {track.duration:.6g} s; the clip lasts "
+                                      f"{self.duration:.6g} s (a track spans its clip)")  # fmt: skip
 
     def _from_frames(self) -> None:
         if self.rotations is None or self.translations is None or self.fps is None:
@@ -718,9 +749,296 @@ class SkeletalClip:
         validate.allocation(frames * self.skeleton.n_joints * 14,
                             f"clip {self.name!r} ({self.duration:g} s) resampled at {fps:g} fps")  # fmt: skip
         pose = self._evaluate(np.arange(frames) / fps)
+        track = None if self.root_motion is None else self.root_motion.resampled(frames, fps)
         return SkeletalClip(skeleton=self.skeleton, fps=fps, rotations=pose.rotations, translations=pose.translations,
-                            events=self.events, name=self.name)  # fmt: skip
+                            events=self.events, name=self.name, root_motion=track)  # fmt: skip
 
     def pose(self, frame: int) -> Pose:
         """The pose of frame `frame` (J, ...)."""
         return Pose._adopt(self.rotations[frame], self.translations[frame])
+
+
+# -- root motion ------------------------------------------------------------------------------
+#
+# Root motion lives on the ground of the character's own model space: the plane across its up
+# axis, in its own units. A ground transform is (..., 4): a translation (x, y, z; its component
+# along the up axis is 0) and a heading (radians about the up axis, right-handed, unwrapped so
+# that turns accumulate). The two ground axes are the ones after the up axis in cyclic order
+# (y up: z then x), and a heading turns the first towards the second, so that a point of the
+# ground is a complex number first + i second and a heading is multiplication by exp(i heading).
+
+# A clip carries root motion when its motion joint ends its loop this share of the character's
+# height (its rest pose's spread along its up axis) away from where it began...
+ROOT_MOTION_TOLERANCE = 0.01
+# ...or turned by more than this (radians; one degree).
+ROOT_TURN_TOLERANCE = math.radians(1.0)
+_AXIS = {"x": 0, "y": 1, "z": 2}
+
+
+def _ground_axes(up: str) -> tuple[int, int]:
+    u = _AXIS[up]
+    return (u + 1) % 3, (u + 2) % 3
+
+
+def ground_complex(transforms, up: str) -> tuple[np.ndarray, np.ndarray]:
+    """Ground transforms (..., 4) as (complex positions, headings)."""
+    a, b = _ground_axes(up)
+    transforms = np.asarray(transforms, dtype=np.float64)
+    return transforms[..., a] + 1j * transforms[..., b], transforms[..., 3]
+
+
+def ground_array(position, heading, up: str) -> np.ndarray:
+    """(complex positions, headings) as ground transforms (..., 4)."""
+    a, b = _ground_axes(up)
+    position = np.asarray(position)
+    out = np.zeros(position.shape + (4,))
+    out[..., a], out[..., b], out[..., 3] = position.real, position.imag, heading
+    return out
+
+
+def compose_ground(first, second, up: str) -> np.ndarray:
+    """Ground transforms `first` then `second` in `first`'s frame (..., 4): ``first @ second`` as
+    matrices (``ground_matrices``)."""
+    p, h = ground_complex(first, up)
+    q, g = ground_complex(second, up)
+    return ground_array(p + np.exp(1j * h) * q, h + g, up)
+
+
+def relative_ground(first, second, up: str) -> np.ndarray:
+    """The ground transform taking `first` to `second` (..., 4): ``inv(first) @ second``."""
+    p, h = ground_complex(first, up)
+    q, g = ground_complex(second, up)
+    return ground_array(np.exp(-1j * h) * (q - p), g - h, up)
+
+
+def ground_matrices(transforms, up: str) -> np.ndarray:
+    """Ground transforms (..., 4) as 4 x 4 matrices (..., 4, 4) in the character's model space."""
+    a, b = _ground_axes(up)
+    transforms = np.asarray(transforms, dtype=np.float64)
+    c, s = np.cos(transforms[..., 3]), np.sin(transforms[..., 3])
+    m = np.zeros(transforms.shape[:-1] + (4, 4))
+    m[..., :3, :3] = np.eye(3)
+    m[..., a, a], m[..., a, b], m[..., b, a], m[..., b, b] = c, -s, s, c
+    m[..., :3, 3] = transforms[..., :3]
+    m[..., 3, 3] = 1.0
+    return m
+
+
+def _heading_of(rotations: np.ndarray, up: str) -> np.ndarray:
+    """The twist (radians) about the `up` axis of rotation matrices (..., 3, 3): of a unit
+    quaternion (v, w), 2 atan2(v . up, w)."""
+    from scipy.spatial.transform import Rotation
+
+    q = Rotation.from_matrix(rotations.reshape(-1, 3, 3)).as_quat()
+    return (2 * np.arctan2(q[:, _AXIS[up]], q[:, 3])).reshape(rotations.shape[:-2])
+
+
+@attrs.frozen(kw_only=True, eq=False)
+class RootMotion:
+    """The ground motion of a clip's motion joint (its hips, its root): per key time, where the
+    joint stands on the ground and how far it has turned about the up axis, in the character's
+    model space and units.
+
+    Parameters
+    ----------
+    times : (F,)
+        Key times in seconds from 0, strictly increasing; the last is the clip's duration.
+    translations : (F, 3)
+        The joint's ground position (its component along `up_axis` is 0), keyed at `times` and
+        linear between them.
+    headings : (F,)
+        Its turn about `up_axis` since time 0 (radians, unwrapped, right-handed: y up turns z
+        towards x), linear between keys.
+    up_axis : str
+        The character's up axis (its skeleton's).
+    joint : str
+        The joint it was taken from.
+
+    Attributes
+    ----------
+    loop : (4,)
+        The ground transform from the clip's start to its end (``relative_ground`` of the first
+        and last keys): what one loop of the clip adds to an agent's root.
+    """
+
+    times: np.ndarray = attrs.field(converter=lambda v: _key_times(v, field="RootMotion.times"))
+    translations: np.ndarray = attrs.field(
+        converter=lambda v: _finite(v, field="RootMotion.translations", shape_tail=(3,))
+    )
+    headings: np.ndarray = attrs.field(converter=lambda v: readonly_float(v, field="RootMotion.headings"))
+    up_axis: str = attrs.field(converter=lambda v: check_up_axis(v, "RootMotion.up_axis"))
+    joint: str = attrs.field(default="")
+    loop: np.ndarray = attrs.field(init=False, repr=False)
+
+    def __attrs_post_init__(self):
+        f = len(self.times)
+        if self.times[0] != 0:
+            raise ValidationError(f"RootMotion.times must start at 0; got {self.times[0]}")
+        if self.translations.shape != (f, 3) or self.headings.shape != (f,):
+            raise ValidationError(f"RootMotion.translations must be ({f}, 3) and headings ({f},), one per time; got "
+                                  f"{self.translations.shape} and {self.headings.shape}")  # fmt: skip
+        if not np.all(np.isfinite(self.headings)):
+            raise ValidationError("RootMotion.headings must be finite")
+        if np.abs(self.translations[:, _AXIS[self.up_axis]]).max() > 0:
+            raise ValidationError(f"RootMotion.translations must lie on the ground: 0 along the up axis "
+                                  f"{self.up_axis!r}")  # fmt: skip
+        keys = self.keys
+        loop = relative_ground(keys[0], keys[-1], self.up_axis)
+        loop.setflags(write=False)
+        object.__setattr__(self, "loop", loop)
+
+    @property
+    def keys(self) -> np.ndarray:
+        """The keys as ground transforms (F, 4)."""
+        return np.concatenate([self.translations, self.headings[:, None]], axis=1)
+
+    @property
+    def duration(self) -> float:
+        return float(self.times[-1])
+
+    def sample(self, times) -> np.ndarray:
+        """Ground transforms (T, 4) at `times` in seconds: linear between keys, the end keys held
+        outside them."""
+        t = np.atleast_1d(np.asarray(times, dtype=np.float64))
+        keys = self.keys
+        return np.stack([np.interp(t, self.times, keys[:, k]) for k in range(4)], axis=-1)
+
+    def played(self, times, *, start: float = 0.0, rate: float = 1.0, loop: bool = True) -> np.ndarray:
+        """Where the root has gone (T, 4) after playing the clip for `times` seconds from `start`
+        seconds into it at `rate`: ground transforms relative to the root at time 0, each loop
+        adding ``loop`` (so a turning clip walks a circle), or held at the end without `loop`."""
+        u = start + rate * np.atleast_1d(np.asarray(times, dtype=np.float64))
+        return relative_ground(self._unwrapped(np.array([start]), loop), self._unwrapped(u, loop), self.up_axis)
+
+    def _unwrapped(self, u: np.ndarray, loop: bool) -> np.ndarray:
+        """The root at clip time `u` (any number of loops on), relative to the first key."""
+        period, first = self.duration, self.keys[0]
+        if not loop or period <= 0:
+            return relative_ground(first, self.sample(np.clip(u, 0, period)), self.up_axis)
+        k = np.floor(u / period)
+        within = relative_ground(first, self.sample(u - k * period), self.up_axis)
+        step, turn = ground_complex(self.loop, self.up_axis)
+        # k loops: turned k turn, moved step (1 + e^(i turn) + ... + e^(i (k - 1) turn))
+        half = np.sin(turn / 2)
+        series = np.where(abs(half) < 1e-12, k, np.exp(1j * (k - 1) * turn / 2) * np.sin(k * turn / 2)
+                          / np.where(abs(half) < 1e-12, 1.0, half))  # fmt: skip
+        loops = ground_array(step * series, k * turn, self.up_axis)
+        return compose_ground(loops, within, self.up_axis)
+
+    def resampled(self, frames: int, fps: float) -> RootMotion:
+        """The track at ``k / fps``, k < `frames` (the end held), as ``SkeletalClip.resampled``
+        keys the clip."""
+        times = np.arange(frames) / fps
+        keys = self.sample(times)
+        return RootMotion(times=times, translations=keys[:, :3], headings=keys[:, 3], up_axis=self.up_axis,
+                          joint=self.joint)  # fmt: skip
+
+
+def _moving(clip: SkeletalClip) -> np.ndarray:
+    """A mask (J,) of the joints whose rotation or translation the clip changes."""
+    return (np.ptp(clip.rotations, axis=0).max(axis=1) > 1e-9) | (np.ptp(clip.translations, axis=0).max(axis=1) > 1e-9)
+
+
+def _motion_joint(clip: SkeletalClip, joint) -> int:
+    """The joint whose ground motion is the clip's root motion: `joint` by name, or the shallowest
+    joint the clip moves (rotation or translation), of those the one with most joints below it
+    (a body's hips, not a foot's target beside them); the first root if nothing moves."""
+    skeleton = clip.skeleton
+    if joint is not None:
+        return skeleton.index(joint)
+    moving = _moving(clip)
+    if not moving.any():
+        return int(np.flatnonzero(skeleton.parents < 0)[0])
+    shallowest = np.flatnonzero(moving & (skeleton.depth == skeleton.depth[moving].min()))
+    below = [int(skeleton.descendants(skeleton.names[j]).sum()) for j in shallowest]
+    return int(shallowest[int(np.argmax(below))])
+
+
+def _root_track(clip: SkeletalClip, joint: int) -> tuple[RootMotion, np.ndarray, np.ndarray]:
+    """(the track, the key times, the joint's model-space matrices there)."""
+    skeleton, up = clip.skeleton, clip.skeleton.up_axis
+    times = np.minimum(np.arange(clip.n_frames) / clip.fps, clip.duration)
+    if len(times) > 1 and times[-1] <= times[-2]:
+        times = times[:-1]
+    if times[-1] < clip.duration:
+        times = np.append(times, clip.duration)
+    world = skeleton.world(clip.sample(times))
+    matrix = world[:, joint]
+    a, b = _ground_axes(up)
+    translations = np.zeros((len(times), 3))
+    translations[:, a], translations[:, b] = matrix[:, a, 3], matrix[:, b, 3]
+    linear = matrix[:, :3, :3] / np.linalg.norm(matrix[:, :3, :3], axis=1, keepdims=True)  # the joint's own scale out
+    rotation = linear @ linear[0].T  # the turn since time 0, in model space
+    headings = np.unwrap(_heading_of(rotation, up))
+    track = RootMotion(times=times, translations=translations, headings=headings, up_axis=up,
+                       joint=skeleton.names[joint])  # fmt: skip
+    return track, times, world
+
+
+def carries_root_motion(clip: SkeletalClip, *, joint=None, tolerance: float = ROOT_MOTION_TOLERANCE,
+                        turn_tolerance: float = ROOT_TURN_TOLERANCE) -> bool:  # fmt: skip
+    """Whether `clip` moves its character across the ground: its motion joint (`joint`, or as
+    ``extract_root_motion`` chooses it) ends the clip more than `tolerance` times the
+    character's height (its rest pose's spread along its up axis) from where it began, or
+    turned by more than `turn_tolerance` radians. A loop played in place (a treadmill walk) does
+    not, whatever its hips sway within the loop."""
+    if not isinstance(clip, SkeletalClip):
+        raise ValidationError(f"carries_root_motion needs a flockkit.SkeletalClip; got {type(clip).__name__}")
+    track, _, _ = _root_track(clip, _motion_joint(clip, joint))
+    heights = clip.skeleton.positions(clip.skeleton.rest)[:, _AXIS[clip.skeleton.up_axis]]
+    height = float(np.ptp(heights)) or 1.0
+    distance = float(np.linalg.norm(track.loop[:3]))
+    return distance > tolerance * height or abs(float(track.loop[3])) > turn_tolerance
+
+
+def extract_root_motion(clip: SkeletalClip, *, joint=None) -> SkeletalClip:
+    """`clip` played in place, with the ground motion taken out as its ``root_motion``.
+
+    The motion joint (`joint` by name; by default the shallowest joint the clip moves, of those
+    the one with most joints below it: the Fox's and a BVH take's hips, the robot's body) has,
+    at each key, a ground position (its model-space position with the component along the
+    skeleton's up axis dropped) and a heading (its turn about the up axis since the first key).
+    The in-place clip keeps the joint over the origin, facing as at the first key: the joint's
+    model-space transform is ``inv(G(t)) @ W(t)``, G the ground transform of the track
+    (``ground_matrices``), so that ``G(t) @`` the in-place pose gives the clip's pose back
+    (exactly at the keys). Only the motion joint changes: it is keyed (LINEAR) at the clip's
+    frames and its end; every other joint keeps its keys. Its parents must scale uniformly (as
+    a similarity does), or the turn could not be taken out rigidly.
+    """
+    if not isinstance(clip, SkeletalClip):
+        raise ValidationError(f"extract_root_motion needs a flockkit.SkeletalClip; got {type(clip).__name__}")
+    skeleton, j = clip.skeleton, _motion_joint(clip, joint)
+    track, times, world = _root_track(clip, j)
+    parent = skeleton.parents[j]
+    pose = clip.sample(times)
+    # the joint and the siblings the clip moves with it (a robot's foot targets beside its body)
+    moving = _moving(clip)
+    rewritten = np.flatnonzero((skeleton.parents == parent) & (moving | (np.arange(skeleton.n_joints) == j)))
+    above = world[:, parent] if parent >= 0 else np.broadcast_to(np.eye(4), world[:, j].shape)
+    # X = inv(P) inv(G) P: inv(G) applied in model space, seen from the parent
+    change = np.linalg.solve(above, np.linalg.solve(ground_matrices(track.keys, skeleton.up_axis), above))
+    linear = change[:, :3, :3]
+    if np.abs(linear @ np.swapaxes(linear, 1, 2) - np.eye(3)).max() > 1e-6:
+        raise ValidationError(f"extract_root_motion: the joints above {skeleton.names[j]!r} scale unevenly; a turn "
+                              "cannot be taken out of them rigidly")  # fmt: skip
+    from scipy.spatial.transform import Rotation
+
+    keyed = {}
+    for k in rewritten.tolist():
+        local = change @ rigid.trs(pose.translations[:, k], pose.rotations[:, k], np.ones(3))
+        q = Rotation.from_matrix(local[:, :3, :3]).as_quat()
+        flips = np.cumprod(np.where(np.sum(q[1:] * q[:-1], axis=-1) < 0, -1.0, 1.0))  # one hemisphere, key to key
+        q[1:] *= flips[:, None]
+        keyed[k] = (q, local[:, :3, 3])
+    if not clip.channels:
+        rotations, translations = clip.rotations.copy(), clip.translations.copy()
+        for k, (q, t) in keyed.items():
+            rotations[:, k], translations[:, k] = q[: clip.n_frames], t[: clip.n_frames]
+        return SkeletalClip(skeleton=skeleton, fps=clip.fps, rotations=rotations, translations=translations,
+                            events=clip.events, name=clip.name, root_motion=track)  # fmt: skip
+    kept = [c for c in clip.channels if (skeleton.index(c.joint) if isinstance(c.joint, str) else c.joint) not in keyed]
+    for k, (q, t) in keyed.items():
+        kept += [Channel(joint=k, path="rotation", times=times, values=q),
+                 Channel(joint=k, path="translation", times=times, values=t)]  # fmt: skip
+    return SkeletalClip(skeleton=skeleton, fps=clip.fps, channels=kept, events=clip.events, name=clip.name,
+                        root_motion=track)  # fmt: skip
