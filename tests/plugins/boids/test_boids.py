@@ -64,6 +64,26 @@ def test_dense_and_kdtree_neighbors_agree():
     np.testing.assert_allclose(tree.positions, dense.positions, rtol=0, atol=1e-9)
 
 
+@pytest.mark.parametrize("dims", [2, 3])
+@pytest.mark.parametrize("fov", [120.0, 300.0, 360.0])
+def test_compiled_pair_loop_steers_as_the_kdtree_pairs_do(dims, fov):
+    """The compiled loop over every pair of a frame (small flocks, many frames at once) and the
+    cKDTree pair list (large flocks, a frame at a time) are two implementations of the rules: they
+    agree on every frame, forward and backward, with a stationary agent that sees all round and
+    agents closer than the separation radius."""
+    motion = flockkit.simulate(n_agents=30, dims=dims, steps=25, seed=7)
+    x = np.array(motion.positions[1:])
+    v = np.diff(motion.positions, axis=0) / motion.dt
+    v[4, 2] = 0.0
+    x[6, 1] = x[6, 0] + 0.1  # inside the separation radius
+    compiled, tree = Boids(field_of_view=fov), Boids(field_of_view=fov, kdtree_above=0)
+    for perception in (1.0, -1.0):
+        expected = np.stack([tree._steering(a, b, perception) for a, b in zip(x, v)])
+        np.testing.assert_allclose(compiled._steering(x, v, perception), expected, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(compiled._steering(x[6], v[6], perception), expected[6], rtol=0, atol=1e-9)
+    assert np.abs(expected).max() > 1.0
+
+
 def test_backward_reverses_perception():
     """With a narrow field of view, the agent behind sees the one ahead going forward; backward,
     perception turns round, so the agent ahead sees the one behind."""
