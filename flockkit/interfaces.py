@@ -40,6 +40,7 @@ __all__ = [
     "PairsWithin",
     "Pairwise",
     "Skinned",
+    "RootMotionSource",
 ]
 
 
@@ -136,6 +137,10 @@ class Capabilities:
     clip_player : bool
         Controller: the factory takes ``clip`` (a ``flockkit.SkeletalClip``) and ``rate`` (its
         playback speed): what crowd files and ``flockkit.crowd.ground_speed`` make per stream.
+    root_motion : bool
+        Controller: it offers ``root_motion(times)``, where the stream's root has gone on the
+        ground at each time (``RootMotionSource``): what a crowd's agents advance by when their
+        motion comes from their clips (``Crowd(root_motion=...)``, ``Driver(root_motion="clip")``).
     skin : bool
         Segmenter: it needs the skin of what it segments: ``segment`` takes ``skin``, a
         ``flockkit.mesh.MeshSkin`` with one row per point of the motion (joints, hierarchy and
@@ -156,6 +161,7 @@ class Capabilities:
     pairwise: bool = attrs.field(default=False, validator=_flag("pairwise"))
     targets: bool = attrs.field(default=False, validator=_flag("targets"))
     clip_player: bool = attrs.field(default=False, validator=_flag("clip_player"))
+    root_motion: bool = attrs.field(default=False, validator=_flag("root_motion"))
     skin: bool = attrs.field(default=False, validator=_flag("skin"))
 
     def __attrs_post_init__(self):
@@ -358,6 +364,21 @@ class Controller(Protocol):
     def pose(self, times): ...
 
     def events(self, start: float, stop: float): ...
+
+
+class RootMotionSource(Protocol):
+    """The operation a controller declaring ``Capabilities(root_motion=True)`` offers.
+
+    ``root_motion(times)``
+        A float array (len(times), 4): at each time (seconds >= 0 on the stream's clock, checked
+        as ``pose`` checks them), the ground transform from the root at time 0 to the root then,
+        in the skeleton's model space and units: a translation (x, y, z, 0 along the skeleton's
+        up axis) and a heading (radians about the up axis, unwrapped: turns accumulate), as
+        ``flockkit.crowd.RootMotion.played`` gives them. Zero at time 0; a function of time
+        alone; continuous where the poses are (a loop adds its motion, it does not jump back).
+    """
+
+    def root_motion(self, times): ...
 
 
 class Skinned(Protocol):

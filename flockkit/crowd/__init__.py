@@ -1,7 +1,18 @@
 """Massive crowds (paper 003): skeletons and clips, shared streams of poses, the crowd runtime."""
 
 from ..io.skin import SkinnedMesh, read_skin
-from ..skeleton import Channel, Event, Pose, SkeletalClip, Skeleton, sample_keys, stream_times
+from ..skeleton import (
+    Channel,
+    Event,
+    Pose,
+    RootMotion,
+    SkeletalClip,
+    Skeleton,
+    carries_root_motion,
+    extract_root_motion,
+    sample_keys,
+    stream_times,
+)
 from .drive import Cue, Driver, Gait, StateMachine
 from .feet import driven_sliding, foot_sliding, ground_speed, plant_feet
 from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
@@ -26,6 +37,9 @@ __all__ = [
     "Pose",
     "Skeleton",
     "stream_times",
+    "RootMotion",
+    "extract_root_motion",
+    "carries_root_motion",
     "Stream",
     "StreamPool",
     "UniquePool",

@@ -285,6 +285,40 @@ def walker(*, fps: float = 30.0, seconds: float = 2.0, swing: float = 30.0):
     )
 
 
+def strider(*, fps: float = 30.0, seconds: float = 2.0, speed: float = 1.0, turn: float = 0.3, up: str = "z"):
+    """The ``walker`` carrying root motion in closed form: its hips travel forward at `speed`
+    units per second while the whole figure turns `turn` radians per second about its up axis
+    (an arc), starting at the origin facing its forward axis; so its motion joint ("hips") is at
+    ground position (speed / turn) (cos(turn t) - 1, sin(turn t)) (z up, facing y; a straight
+    line (0, speed t) without a turn) with heading turn t. `up` "y" gives the same figure in a
+    y-up model space (x to -x, y to z, z to y: facing z, as a glTF character does)."""
+    from ..skeleton import Pose, SkeletalClip, Skeleton
+
+    base = walker(fps=fps, seconds=seconds)
+    t = np.arange(base.n_frames) / fps
+    heading = turn * t
+    if turn == 0:
+        ground = np.stack([np.zeros_like(t), speed * t], axis=1)
+    else:
+        ground = speed / turn * np.stack([np.cos(heading) - 1, np.sin(heading)], axis=1)
+    rotations = base.rotations.copy()
+    rotations[:, 0] = np.stack([0 * t, 0 * t, np.sin(heading / 2), np.cos(heading / 2)], axis=1)
+    translations = base.translations.copy()
+    translations[:, 0, :2] = ground
+    rest = base.skeleton.rest
+    axes = np.eye(3) if up == "z" else np.array([[-1.0, 0, 0], [0, 0, 1], [0, 1, 0]])
+    if up not in ("z", "y"):
+        raise ValueError(f"strider: up must be 'z' or 'y'; got {up!r}")
+
+    def turned(q):
+        return np.concatenate([q[..., :3] @ axes.T, q[..., 3:]], axis=-1)
+
+    rest = Pose(rotations=turned(rest.rotations), translations=rest.translations @ axes.T)
+    skeleton = Skeleton(names=base.skeleton.names, parents=base.skeleton.parents, up_axis=up, rest=rest)
+    return SkeletalClip(skeleton=skeleton, fps=fps, rotations=turned(rotations), translations=translations @ axes.T,
+                        events=base.events, name="strider")  # fmt: skip
+
+
 def bird(*, flapping: bool = True, fps: float = 30.0, seconds: float = 0.5):
     """A bird's skeletal clip in closed form (z up, facing y): a body with a head, a tail and two
     two-joint wings that beat 50 degrees each way (`flapping`, 2 beats a second at the default

@@ -45,9 +45,11 @@ def _same_skeleton(children, owner: str):
 @attrs.frozen(kw_only=True)
 class ClipPlayer:
     """Plays `clip` from `start` seconds into it, at `rate` times its speed, looping (`loop`) or
-    holding its last pose."""
+    holding its last pose. Its root motion is the clip's ``root_motion`` played alike (each loop
+    adds the clip's), none for a clip without one."""
 
-    capabilities = flockkit.Capabilities(dims=(3,), clip_player=True)  # takes clip and rate
+    # takes clip and rate; offers root_motion(times)
+    capabilities = flockkit.Capabilities(dims=(3,), clip_player=True, root_motion=True)
 
     clip: SkeletalClip = attrs.field(converter=_clip)
     loop: bool = validate.parameter("clip", default=True, kind="flag")
@@ -65,6 +67,12 @@ class ClipPlayer:
         u = self._unwrapped(stream_times(times, owner="clip"))
         period = self.clip.duration
         return self.clip.sample(np.mod(u, period) if self.loop and period > 0 else u)
+
+    def root_motion(self, times) -> np.ndarray:
+        t = stream_times(times, owner="clip")
+        if self.clip.root_motion is None:
+            return np.zeros((len(t), 4))
+        return self.clip.root_motion.played(t, start=self.start, rate=self.rate, loop=self.loop)
 
     def events(self, start: float, stop: float) -> list[Event]:
         low, high = float(self._unwrapped(start)), float(self._unwrapped(stop))

@@ -954,6 +954,39 @@ class SortsTimesInPlace(Walker):
         return super().pose(times)
 
 
+class Strider(ClipPlayer):
+    """Plays the kit's strider in place with its root motion taken out: a correct root-motion source."""
+
+    def __init__(self, **params):
+        from flockkit.crowd import extract_root_motion
+
+        super().__init__(clip=extract_root_motion(inputs.strider()), **params)
+
+
+class RootMotionOffTheGround(Strider):
+    """Lifts its root along the up axis as it goes."""
+
+    def root_motion(self, times):
+        found = super().root_motion(times)
+        found[:, 2] += 0.1 * np.asarray(times)
+        return found
+
+
+class RootMotionRemembersTheLastCall(Strider):
+    def root_motion(self, times):
+        offset = getattr(self, "_root_offset", 0.0)
+        object.__setattr__(self, "_root_offset", offset + 0.1)
+        return super().root_motion(times) + offset
+
+
+class RootMotionWrapsEachLoop(Strider):
+    """Gives the root's motion within the current loop only: each loop jumps back to the start."""
+
+    def root_motion(self, times):
+        t = np.atleast_1d(np.asarray(times, dtype=float))
+        return super().root_motion(np.mod(t, self.clip.duration))
+
+
 BROKEN_BY_KIND["controller"] = {
     "check_interface": type("NoPose", (), {"events": lambda self, a, b: []}),
     "check_poses_fit_the_skeleton": DropsAJoint,
@@ -961,4 +994,7 @@ BROKEN_BY_KIND["controller"] = {
     "check_events_split_by_windows": RepeatsEventsAtCuts,
     "check_rejects_bad_times": AcceptsNegativeTimes,
     "check_times_unchanged": SortsTimesInPlace,
+    "check_root_motion_on_the_ground": RootMotionOffTheGround,
+    "check_root_motion_is_a_function_of_time": RootMotionRemembersTheLastCall,
+    "check_root_motion_is_continuous": RootMotionWrapsEachLoop,
 }

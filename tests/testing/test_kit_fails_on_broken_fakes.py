@@ -23,6 +23,7 @@ from .fakes import (
     RandomVelocity,
     RandomWalk,
     Retime,
+    Strider,
     Walker,
 )
 
@@ -49,6 +50,7 @@ def test_every_check_has_a_broken_fake(kind):
         ("proposal", Retime()),
         ("segmenter", IcaKmeans()),
         ("controller", Walker()),
+        ("controller", Strider()),
     ]
 )
 def test_correct_components_pass(component, check):
