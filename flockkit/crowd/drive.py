@@ -241,10 +241,24 @@ class Driver:
         slower than `still` keeps its facing.
     cues : sequence of Cue
         Scene events; each must fall within the trajectories' time.
+    root_motion : {"trajectory", "clip"}
+        Where the roots go. "trajectory" (the default): on the trajectories, facing their
+        velocity, the clips played in place. "clip": each agent starts where and as its
+        trajectory starts, then advances by its clips' root motion (``Crowd.roots``: the crowd
+        must be made with ``root_motion=`` this driver's cluster, and its streams' controllers
+        offer root motion, as the clip player of a clip from ``extract_root_motion`` does); the
+        trajectories still choose each agent's gait by their speed, and cues still apply.
+
+    Attributes
+    ----------
+    roots : (N, 4, 4)
+        Each agent's root in the world after the last step; also written to the crowd's
+        ``placement``.
     """
 
     def __init__(self, crowd: Crowd, motion: Motion, machine: StateMachine, *, cluster=None, up=None, forward=None,
-                 scale=None, turn_time: float = 0.25, still: float = 1e-3, cues=()):  # fmt: skip
+                 scale=None, turn_time: float = 0.25, still: float = 1e-3, cues=(),
+                 root_motion="trajectory"):  # fmt: skip
         if not isinstance(crowd, Crowd):
             raise ValidationError(f"Driver needs a flockkit.Crowd; got {type(crowd).__name__}")
         if not isinstance(motion, Motion):
@@ -257,6 +271,14 @@ class Driver:
             raise ValidationError(f"Driver needs a flockkit.crowd.StateMachine; got {type(machine).__name__}")
         self.crowd, self.motion, self.machine = crowd, motion, machine
         self.cluster = crowd.clusters[0] if cluster is None else cluster
+        if root_motion not in ("trajectory", "clip"):
+            raise ValidationError(f"Driver root_motion must be 'trajectory' or 'clip'; got {root_motion!r}")
+        if root_motion == "clip" and crowd.root_motion != self.cluster:
+            raise ValidationError(
+                f"Driver root_motion='clip' moves agents by cluster {self.cluster!r}'s root motion: make the Crowd "
+                f"with root_motion={self.cluster!r} (it has {crowd.root_motion!r})"
+            )
+        self.root_motion = root_motion
         machine.check(crowd, self.cluster)
         skeleton = crowd.skeletons[crowd.cluster_index(self.cluster)]
         self.up, self.forward, self.scale = character_axes(skeleton, up=up, forward=forward, scale=scale,
@@ -313,6 +335,14 @@ class Driver:
         moving = speed > self.still
         measure = speed if self.machine.on == "speed" else velocity[:, 2]
         target = np.arctan2(velocity[:, 1], velocity[:, 0])
+        if self.root_motion == "clip" and not first:
+            # the start, then the clips' ground motion in the character's model space (the
+            # character's up axis is the world's z, so its heading adds to the start's)
+            self.roots = self._start @ self.crowd.roots()
+            self.heading = self._start_heading + self.crowd._ground[:, 3]
+            self.crowd.placement = self.roots
+            self._choose(measure, first=first)
+            return
         if first:
             self.heading = np.where(moving, target, 0.0)
         else:
@@ -324,6 +354,9 @@ class Driver:
         yaw = rigid.quaternion_matrix(np.stack([zero, zero, np.sin(half), np.cos(half)], axis=1))
         self.roots[:, :3, :3] = yaw @ self.frame_to_world
         self.roots[:, :3, 3] = position
+        if first:
+            self._start, self._start_heading = self.roots.copy(), self.heading.copy()
+        self.crowd.placement = self.roots.copy()
         self._choose(measure, first=first)
 
     def _choose(self, value: np.ndarray, *, first: bool) -> None:
@@ -387,8 +420,10 @@ class Driver:
             elif cue.duration is not None and abs(now - cue.time - cue.duration) <= half:
                 self.pinned[cue.agents[self.pinned[cue.agents] == k]] = -1
 
-    def world(self, agents=None) -> np.ndarray:
-        """World joint matrices (n, J, 4, 4) of `agents` (default all): each root times its pose."""
+    def world(self, agents=None, cluster=None) -> np.ndarray:
+        """World joint matrices (n, J, 4, 4) of `agents` (default all) in `cluster` (default the
+        driver's): each root times its pose (a hooked cluster where its hook places it)."""
         ids = np.arange(self.crowd.n_agents) if agents is None else np.asarray(agents)
-        poses = self.crowd.poses(ids, self.cluster, space="world").astype(np.float64)
+        cluster = self.cluster if cluster is None else cluster
+        poses = self.crowd.poses(ids, cluster, space="world").astype(np.float64)
         return self.roots[ids][:, None] @ poses

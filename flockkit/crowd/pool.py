@@ -14,6 +14,10 @@ extracted text lost the history factor; with histories of one frame it is the pr
 
     Total_new = 48 * (U * MaxBones + sum over streams A of M_A * Bones_A) bytes.
 
+A stream whose controller offers root motion (``Capabilities.root_motion``) keeps, beside each
+pose, where its root had gone by then (a ground transform, float64: it accumulates over hours):
+what the agents of a crowd that takes its motion from its clips advance by.
+
 Streams evaluate their controllers PREFETCH_FRAMES frames ahead (a controller's pose is a function
 of time alone), a few streams each frame, so that a frame does not call a thousand controllers.
 """
@@ -25,6 +29,7 @@ import numpy as np
 
 from .. import validate
 from ..errors import PluginError, UnknownPluginError, ValidationError
+from ..interfaces import capabilities
 from ..registry import resolve
 from ..skeleton import Pose, Skeleton
 
@@ -200,6 +205,10 @@ class StreamPool:
         self._events: dict[int, dict] = {}  # stream -> {frame: events} ahead, for streams that have some
         self._stops = np.array([st.default == "Stopped" for st in self.streams])
         self._scales = [st.skeleton.scales.astype(np.float32) for st in self.streams]
+        # root motion: which streams have it, their roots per ring slot and prefetched ahead
+        self.rooted = np.array([capabilities(st.controller).root_motion for st in self.streams])
+        self.roots = np.zeros((s, longest if self.rooted.any() else 0, 4))
+        self._ahead_roots = np.zeros((s, PREFETCH_FRAMES if self.rooted.any() else 0, 4))
         self._restart(np.flatnonzero(self.running))
 
     # -- lookups --------------------------------------------------------------------------------
@@ -231,6 +240,22 @@ class StreamPool:
             )
         return entries_pose(self.gather(np.array([k]), np.array([offset]), int(self.bones[k]))[0])
 
+    def root_at(self, streams: np.ndarray, offsets: np.ndarray) -> np.ndarray:
+        """Where each stream's root had gone (n, 4; ``RootMotionSource``) at the frame `offsets`
+        behind its head: between the two frames either side of a fractional offset, linearly
+        (as a dilating part reads its poses); zero for streams without root motion."""
+        out = np.zeros((len(streams), 4))
+        rooted = self.rooted[streams]
+        if not rooted.any():
+            return out
+        streams, offsets = streams[rooted], np.asarray(offsets, dtype=np.float64)[rooted]
+        whole = np.floor(offsets)
+        share = (offsets - whole)[:, None]
+        newer = self.roots[streams, (self.head[streams] - whole.astype(np.int64)) % self.history[streams]]
+        older = self.roots[streams, (self.head[streams] - whole.astype(np.int64) - 1) % self.history[streams]]
+        out[rooted] = np.where(share > 0, (1 - share) * newer + share * older, newer)
+        return out
+
     def is_running(self, stream: int) -> bool:
         (k,) = self.check_streams(stream)
         return bool(self.running[k])
@@ -247,7 +272,7 @@ class StreamPool:
         ahead = sum(int(a.nbytes) for a in self._ahead.values())
         tables = [self.lookup, self.history, self.bones, self.head, self.filled, self.clock, self.running,
                   self.users, self._place, self._first, self._count, self._stops, *self._group.values(),
-                  *self._scales]  # fmt: skip
+                  *self._scales, self.rooted, self.roots, self._ahead_roots]  # fmt: skip
         store = int(self.store.size) * 4  # float32, in whatever namespace holds it
         return {"store": store, "prefetch": ahead, "bookkeeping": sum(int(a.nbytes) for a in tables)}
 
@@ -323,6 +348,9 @@ class StreamPool:
             else:
                 for row, entry in zip(rows[mine].tolist(), entries):
                     self.store[row : row + entry.size] = self.xp.asarray(entry.ravel())
+        rooted = live[self.rooted[live]]
+        if len(rooted):
+            self.roots[rooted, self.head[rooted]] = self._ahead_roots[rooted, self.clock[rooted] - self._first[rooted]]
         self.filled[live] = np.minimum(self.filled[live] + 1, self.history[live])
         self.clock[live] += 1
         return events
@@ -341,6 +369,12 @@ class StreamPool:
                 f"{count} times and a skeleton of {self.bones[k]}"
             )
         self._ahead[int(self.bones[k])][self._place[k], :count] = _entries(pose, self._scales[k])
+        if self.rooted[k]:
+            roots = np.asarray(controller.root_motion((frame + np.arange(count)) / self.fps), dtype=np.float64)
+            if roots.shape != (count, 4) or not np.all(np.isfinite(roots)):
+                raise ValidationError(f"stream {k}'s controller gave root motion of shape {roots.shape} for {count} "
+                                      "times (finite, 4 per time: a ground translation and a heading)")  # fmt: skip
+            self._ahead_roots[k, :count] = roots
         self._first[k], self._count[k] = frame, count
         found = {}
         for e in controller.events(frame / self.fps, (frame + count) / self.fps):

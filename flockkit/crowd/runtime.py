@@ -1,6 +1,13 @@
 """The crowd runtime (paper 003, sections 4.2-4.4): agents split into part clusters, each reading
 a shared stream at its own offset (or a unique slot), transitions with blends, time dilation.
 
+Agents may take their motion from their clips (``root_motion``): each frame an agent's root
+advances by what its part in that cluster read since the frame before (the stream's root motion
+between the two frames it read, so offsets, dilation and blends count). Part clusters may hang on
+a joint of another (``Hook``: a flag in a hand, a head on a neck), and procedural overrides
+(``LookAt``) change declared joints of the blended local pose, per agent, after blending (section
+4.6), before anything reads it.
+
 The state of every agent part is its instance-buffer record (what a skinning shader reads,
 Listing 3): the stream it reads and its offset, the stream it blends to and that offset, when the
 blend started and how long it lasts, and the agent's visibility mask. Each ``update`` advances
@@ -9,15 +16,18 @@ one frame; work per frame grows with the parts that change (dilating, blending),
 
 from __future__ import annotations
 
+import math
+
 import attrs
 import numpy as np
 
-from .. import validate
+from .. import rigid, validate
 from ..errors import ValidationError
-from ..skeleton import Event, Pose
+from ..skeleton import Event, Pose, compose_ground, ground_matrices, relative_ground
 from .pool import StreamPool, UniquePool, blend_entries, entries_pose, namespace
 
-__all__ = ["Crowd", "CrowdEvent", "INSTANCE", "NONE", "STREAMED", "UNIQUE", "DILATION_RATE", "MAX_DILATION_RATE"]
+__all__ = ["Crowd", "CrowdEvent", "Hook", "LookAt", "INSTANCE", "NONE", "STREAMED", "UNIQUE", "DILATION_RATE",
+           "MAX_DILATION_RATE"]  # fmt: skip
 
 NONE, STREAMED, UNIQUE = 0, 1, 2  # what an agent part reads (kind, target_kind)
 INSTANCE = np.dtype(
@@ -98,6 +108,146 @@ def _agent_ids(agents, n_agents: int) -> np.ndarray:
     return ids
 
 
+def _offset(value) -> np.ndarray:
+    m = np.eye(4) if value is None else np.array(value, dtype=np.float64)
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)) or not np.allclose(m[3], [0, 0, 0, 1]):
+        raise ValidationError(f"Hook.offset must be a finite 4 x 4 affine matrix (last row 0 0 0 1); got {value!r}")
+    m.setflags(write=False)
+    return m
+
+
+@attrs.frozen(kw_only=True)
+class Hook:
+    """Part cluster `part` hangs on joint `joint` of cluster `parent` (section 4.2: each part's
+    static hook on its parent): the part's model space is placed at that joint's world transform
+    times `offset` (4 x 4, default the identity), whatever either part plays, so that a flag stays
+    in the hand that waves it."""
+
+    part: str = attrs.field()
+    parent: str = attrs.field()
+    joint: str = attrs.field()
+    offset: np.ndarray = attrs.field(default=None, converter=_offset, eq=False)
+
+
+class PoseOverride:
+    """What a procedural per-bone override offers (paper 003, section 4.6), declared rather than
+    found out: ``joints``, the names of the joints it changes (the crowd takes only those from
+    it), and ``apply(pose, *, skeleton, agents, origins, time)``, which returns the local Pose
+    (n, J) of `agents` (ids) given their blended local `pose` (n, J, float32), `origins` (n, 4,
+    4) the world transforms of their part's model space (``Crowd.placement`` times the part's
+    hook) and the crowd's `time`. It must be a function of those: poses are read any number of
+    times a frame. ``LookAt`` is one."""
+
+    joints: tuple = ()
+
+    def apply(self, pose, *, skeleton, agents, origins, time):  # pragma: no cover - the protocol
+        raise NotImplementedError
+
+
+def _smoothstep(u):
+    u = np.clip(u, 0.0, 1.0)
+    return u * u * (3 - 2 * u)
+
+
+class LookAt(PoseOverride):
+    """Turn joint `joint` (a head) so that its `forward` axis (in the joint's own frame) points at
+    each agent's target, by the smallest rotation, at most `max_angle` radians from where the
+    blended pose points it (a cone: beyond it the joint turns `max_angle` towards the target),
+    times each agent's weight, which eases (smoothstep) to its new value over `blend_time`
+    seconds of crowd time. Targets are world points; ``origins`` bring them into the agent's
+    model space. Every agent starts with weight 0 (not looking).
+
+    Parameters
+    ----------
+    joint : str
+    n_agents : int
+    forward : (3,)
+        The joint's axis that should point at the target, in the joint's local frame.
+    max_angle : float
+        Radians, in (0, pi].
+    blend_time : float
+        Seconds (>= 0) over which a weight eases to its new value.
+    """
+
+    def __init__(self, joint: str, *, n_agents: int, forward=(0.0, 0.0, 1.0), max_angle: float = math.radians(60),
+                 blend_time: float = 0.3):  # fmt: skip
+        if not isinstance(joint, str) or not joint:
+            raise ValidationError(f"LookAt.joint must be a joint name; got {joint!r}")
+        self.joint = joint
+        self.joints = (joint,)
+        self.n_agents = validate.integer(n_agents, "LookAt.n_agents", minimum=1)
+        axis = np.asarray(forward, dtype=np.float64)
+        if axis.shape != (3,) or not np.all(np.isfinite(axis)) or np.linalg.norm(axis) < 1e-9:
+            raise ValidationError(f"LookAt.forward must be a non-zero 3-vector; got {forward!r}")
+        self.forward = axis / np.linalg.norm(axis)
+        self.max_angle = validate.number(max_angle, "LookAt.max_angle", minimum=0, maximum=math.pi, strict=True)
+        self.blend_time = validate.number(blend_time, "LookAt.blend_time", minimum=0)
+        self.targets = np.zeros((self.n_agents, 3))
+        self._from = np.zeros(self.n_agents)
+        self._to = np.zeros(self.n_agents)
+        self._since = np.zeros(self.n_agents)
+
+    def weights(self, time: float) -> np.ndarray:
+        """Each agent's weight (N,) at crowd `time`."""
+        if self.blend_time == 0:
+            return self._to.copy()
+        return self._from + (self._to - self._from) * _smoothstep((time - self._since) / self.blend_time)
+
+    def look(self, agents, targets, *, time: float, weight: float = 1.0) -> None:
+        """From crowd `time` on, `agents` look at world `targets` ((3,) or (n, 3)), their weights
+        easing from where they are to `weight`."""
+        ids = _agent_ids(agents, self.n_agents)
+        points = np.broadcast_to(np.asarray(targets, dtype=np.float64), (len(ids), 3))
+        if not np.all(np.isfinite(points)):
+            raise ValidationError("LookAt.look: targets must be finite world points")
+        weight = validate.number(weight, "LookAt.look: weight", minimum=0, maximum=1)
+        self._ease(ids, weight, time)
+        self.targets[ids] = points
+
+    def release(self, agents, *, time: float) -> None:
+        """From crowd `time` on, `agents`' weights ease to 0 (their joint back to its animation)."""
+        self._ease(_agent_ids(agents, self.n_agents), 0.0, time)
+
+    def _ease(self, ids, weight, time) -> None:
+        time = validate.number(time, "LookAt: time")
+        self._from[ids] = self.weights(time)[ids]
+        self._to[ids], self._since[ids] = weight, time
+
+    def apply(self, pose, *, skeleton, agents, origins, time):
+        j = skeleton.index(self.joint)
+        chain = []  # the joint's ancestors, root first
+        k = skeleton.parents[j]
+        while k >= 0:
+            chain.insert(0, k)
+            k = skeleton.parents[k]
+        n = len(agents)
+        above = np.broadcast_to(np.eye(4), (n, 4, 4))
+        for k in chain:  # the parent's model-space transform, down the chain only
+            local = rigid.trs(pose.translations[:, k], pose.rotations[:, k], skeleton.scales[k])
+            above = above @ local
+        turn = above[:, :3, :3] / np.linalg.norm(above[:, :3, :3], axis=1, keepdims=True)  # the parent's rotation
+        head = above @ np.append(pose.translations[:, j].astype(np.float64), np.ones((n, 1)), axis=1)[..., None]
+        rotation = rigid.quaternion_matrix(pose.rotations[:, j].astype(np.float64))
+        facing = turn @ rotation @ self.forward  # (n, 3) in model space
+        target = np.linalg.solve(origins, np.append(self.targets[agents], np.ones((n, 1)), axis=1)[..., None])
+        wanted = (target - head)[:, :3, 0]
+        wanted /= np.maximum(np.linalg.norm(wanted, axis=1, keepdims=True), 1e-12)
+        axis = np.cross(facing, wanted)
+        sine, cosine = np.linalg.norm(axis, axis=1), np.sum(facing * wanted, axis=1)
+        angle = np.arctan2(sine, cosine)
+        # opposite directions: any axis across the facing; none: no turn
+        across = np.cross(facing, np.eye(3)[np.argmin(np.abs(facing), axis=1)])
+        axis = np.where((sine < 1e-12)[:, None], across, axis)
+        axis /= np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-12)
+        angle = np.minimum(angle, self.max_angle) * self.weights(time)[agents]
+        local_axis = np.einsum("nji,nj->ni", turn, axis)  # into the parent's frame
+        half = angle[:, None] / 2
+        change = np.concatenate([np.sin(half) * local_axis, np.cos(half)], axis=1)
+        rotations = np.array(pose.rotations, dtype=np.float32)
+        rotations[:, j] = rigid.quaternion_product(change, pose.rotations[:, j].astype(np.float64))
+        return Pose._adopt(rotations, pose.translations)
+
+
 class Crowd:
     """Agents whose part clusters read shared streams (sections 4.2-4.4).
 
@@ -112,12 +262,35 @@ class Crowd:
         Slots for per-agent animations (``transition_to_unique``).
     seed : int, optional
         For the agents' starting offsets and the targets of time dilation.
+    root_motion : str, optional
+        The cluster whose streams move the agents (``roots``): each frame an agent's root
+        advances by the root motion (``Capabilities.root_motion``) of what its part in that
+        cluster read since the frame before, between the two frames read in the stream (so a
+        part's offset, time dilation and playback rate count, and loops accumulate), and while
+        blending by both streams' motion mixed by α. Parts reading a unique slot, or streams whose
+        controller offers none, do not move. None (the default): agents do not move (a ``Driver``
+        places them on trajectories).
+    hooks : sequence of Hook
+        Clusters hung on a joint of another (``poses(space="world")`` places them there). A
+        cluster hangs on one parent at most, hooks form no cycle, and every agent with a hooked
+        part has its parent part.
+    overrides : mapping of str to sequence of PoseOverride
+        Per cluster, procedural overrides (``LookAt``) applied in order to the blended local pose
+        of every agent whenever it is read (``entries``, ``poses``), changing only the joints each
+        declares (section 4.6; the GPU path of ``flockkit.crowd.textures`` does not run them).
 
     The pool is run until every Running stream has its whole history, then each part gets a
     random offset in it, so that agents sharing a stream differ from the first frame.
+
+    Attributes
+    ----------
+    placement : (N, 4, 4) float64
+        Each agent's model space in the world (identity until set; a ``Driver`` sets its roots
+        there every frame): what ``LookAt`` turns world targets into model space with.
     """
 
-    def __init__(self, pool: StreamPool, *, n_agents: int, clusters, unique: UniquePool | None = None, seed=None):
+    def __init__(self, pool: StreamPool, *, n_agents: int, clusters, unique: UniquePool | None = None, seed=None,
+                 root_motion=None, hooks=(), overrides=None):  # fmt: skip
         if not isinstance(pool, StreamPool):
             raise ValidationError(f"Crowd needs a flockkit.crowd.StreamPool; got {type(pool).__name__}")
         if unique is not None and not isinstance(unique, UniquePool):
@@ -167,6 +340,99 @@ class Crowd:
         streams = buffer["stream"][reading]
         available = np.minimum(pool.filled[streams], pool.history[streams])
         buffer["offset"][reading] = self.rng.integers(0, available)
+        self.placement = np.tile(np.eye(4), (n, 1, 1))
+        self._set_hooks(tuple(hooks))
+        self._set_overrides({} if overrides is None else overrides)
+        # root motion: the cluster (index) that moves agents, each agent's root (a ground
+        # transform) and what its part read last frame in its source and target streams
+        self.root_motion = None if root_motion is None else self.clusters[self.cluster_index(root_motion)]
+        self._ground = np.zeros((n, 4))
+        self._read_source = np.zeros((n, 4))
+        self._read_target = np.zeros((n, 4))
+        if self.root_motion is not None:
+            r = self.cluster_index(self.root_motion)
+            self._read_source = self._root_reads(buffer["kind"][:, r], buffer["stream"][:, r], buffer["offset"][:, r])
+
+    def _set_hooks(self, hooks) -> None:
+        self.hooks = {}
+        for hook in hooks:
+            if not isinstance(hook, Hook):
+                raise ValidationError(f"Crowd hooks must be flockkit.crowd.Hook; got {type(hook).__name__}")
+            c, p = self.cluster_index(hook.part), self.cluster_index(hook.parent)
+            if c == p or hook.part in self.hooks:
+                raise ValidationError(f"Crowd hooks: cluster {hook.part!r} hangs on itself or on two parents")
+            self.skeletons[p].index(hook.joint)
+            lacking = np.flatnonzero((self._buffer["kind"][:, c] != NONE) & (self._buffer["kind"][:, p] == NONE))
+            if len(lacking):
+                raise ValidationError(f"Crowd hooks: agent {int(lacking[0])} has a {hook.part!r} part hung on "
+                                      f"{hook.parent!r} but no {hook.parent!r} part")  # fmt: skip
+            self.hooks[hook.part] = hook
+        for start in self.hooks:
+            seen, part = {start}, start
+            while part in self.hooks:
+                part = self.hooks[part].parent
+                if part in seen:
+                    raise ValidationError(f"Crowd hooks form a cycle through cluster {part!r}")
+                seen.add(part)
+
+    def _set_overrides(self, overrides) -> None:
+        if not isinstance(overrides, dict):
+            raise ValidationError("Crowd overrides must be a mapping of cluster names to sequences of overrides")
+        self.overrides = {}
+        for name, found in overrides.items():
+            c = self.cluster_index(name)
+            found = tuple(found) if isinstance(found, (list, tuple)) else (found,)
+            for override in found:
+                joints = getattr(override, "joints", None)
+                if not callable(getattr(override, "apply", None)) or not isinstance(joints, tuple) or not joints:
+                    raise ValidationError(
+                        f"Crowd overrides[{name!r}]: {type(override).__name__} is not a pose override (a non-empty "
+                        "tuple `joints` of the joints it changes and `apply`)"
+                    )
+                for joint in joints:
+                    self.skeletons[c].index(joint)
+                n = getattr(override, "n_agents", self.n_agents)
+                if n != self.n_agents:
+                    raise ValidationError(f"Crowd overrides[{name!r}]: made for {n} agents; the crowd has "
+                                          f"{self.n_agents}")  # fmt: skip
+            self.overrides[name] = found
+
+    # -- root motion ----------------------------------------------------------------------------
+
+    def _root_reads(self, kind, stream, offset) -> np.ndarray:
+        """Where the stream each part reads had taken its root by the frame it reads (n, 4); zero
+        for parts that read no stream."""
+        out = np.zeros((len(kind), 4))
+        streamed = np.flatnonzero(kind == STREAMED)
+        out[streamed] = self.pool.root_at(stream[streamed], offset[streamed])
+        return out
+
+    def _advance_roots(self) -> None:
+        """Each agent's root moves by what its root-motion part read since the last frame."""
+        r = self.cluster_index(self.root_motion)
+        record = self._buffer[:, r]
+        up = self.skeletons[r].up_axis
+        now = self._root_reads(record["kind"], record["stream"], record["offset"])
+        step = relative_ground(self._read_source, now, up)
+        self._read_source = now
+        blending = np.flatnonzero(record["blend_time"] > 0)
+        if len(blending):
+            b = record[blending]
+            target = self._root_reads(b["target_kind"], b["target"], b["target_offset"])
+            into = relative_ground(self._read_target[blending], target, up)
+            self._read_target[blending] = target
+            alpha = np.clip((self.time - b["blend_start"]) / b["blend_time"], 0, 1)[:, None]
+            step[blending] = (1 - alpha) * step[blending] + alpha * into
+        step[record["kind"] == NONE] = 0
+        self._ground = compose_ground(self._ground, step, up)
+
+    def roots(self) -> np.ndarray:
+        """Each agent's root (N, 4, 4) float64 in its character's model space and units: where the
+        root motion of its ``root_motion`` cluster has taken it since the start (the identity
+        there, and for a crowd without root motion)."""
+        if self.root_motion is None:
+            return np.tile(np.eye(4), (self.n_agents, 1, 1))
+        return ground_matrices(self._ground, self.skeletons[self.cluster_index(self.root_motion)].up_axis)
 
     # -- checks ---------------------------------------------------------------------------------
 
@@ -301,6 +567,8 @@ class Crowd:
         self._start_blend(ids, c, UNIQUE, k, np.zeros(len(ids), dtype=np.float32), blend_time)
 
     def _start_blend(self, ids, c, kind, target, offsets, blend_time) -> None:
+        if self.root_motion is not None and self.clusters[c] == self.root_motion:
+            self._read_target[ids] = self._root_reads(np.full(len(ids), kind), np.full(len(ids), target), offsets)
         self._changing = np.union1d(self._changing, ids * len(self.clusters) + c)
         record = self._buffer[ids, c]
         record["target_kind"], record["target"], record["target_offset"] = kind, target, offsets
@@ -327,6 +595,9 @@ class Crowd:
         record["blend_start"], record["blend_time"] = 0, 0
         self._buffer[agents, clusters] = record
         self.pool.release(leaving)
+        if self.root_motion is not None:
+            rooted = agents[clusters == self.cluster_index(self.root_motion)]
+            self._read_source[rooted] = self._read_target[rooted]
 
     # -- frames ---------------------------------------------------------------------------------
 
@@ -345,6 +616,8 @@ class Crowd:
         self.time += dt
         flat = self._changing
         if not len(flat):
+            if self.root_motion is not None:
+                self._advance_roots()
             return events
         agents, clusters = np.divmod(flat, len(self.clusters))
         buffer = self._buffer  # field by field: gathering whole records is slower
@@ -367,6 +640,8 @@ class Crowd:
             arrived = moved >= target
             self._dilate_to[a[arrived], c[arrived]] = np.nan
             goal[np.flatnonzero(which)[arrived]] = np.nan
+        if self.root_motion is not None:
+            self._advance_roots()
         finished = blending & (
             self.time - buffer["blend_start"][agents, clusters] >= buffer["blend_time"][agents, clusters] - 1e-6
         )
@@ -452,7 +727,35 @@ class Crowd:
         sphere), in the pool's array namespace. Agents without the cluster are refused."""
         c = self.cluster_index(cluster if cluster is not None else self.clusters[0])
         ids = np.arange(self.n_agents) if agents is None else _agent_ids(agents, self.n_agents)
-        return self._entries(ids, c)
+        entries = self._entries(ids, c)
+        overrides = self.overrides.get(self.clusters[c], ())
+        if overrides:
+            if self.pool.xp is not np:
+                raise ValidationError("pose overrides run on numpy: read a store on a device without them")
+            skeleton = self.skeletons[c]
+            origins = self._origins(ids, c)
+            for override in overrides:
+                joints = [skeleton.index(j) for j in override.joints]
+                changed = override.apply(entries_pose(entries), skeleton=skeleton, agents=ids, origins=origins,
+                                         time=self.time)  # fmt: skip
+                entries[:, joints, 0:4] = np.asarray(changed.rotations)[:, joints]
+                entries[:, joints, 4:7] = np.asarray(changed.translations)[:, joints]
+        return entries
+
+    def _anchors(self, ids, c) -> np.ndarray | None:
+        """Where cluster `c` of agents `ids` hangs in their model space (n, 4, 4): its parent
+        joint's world transform times the hook's offset; None for a cluster on no hook."""
+        hook = self.hooks.get(self.clusters[c])
+        if hook is None:
+            return None
+        parent = self.poses(ids, hook.parent, space="world")[:, self.skeletons[self.cluster_index(hook.parent)]
+                                                            .index(hook.joint)]  # fmt: skip
+        return parent.astype(np.float64) @ hook.offset
+
+    def _origins(self, ids, c) -> np.ndarray:
+        """The world transforms (n, 4, 4) of cluster `c`'s model space for agents `ids`."""
+        anchors = self._anchors(ids, c)
+        return self.placement[ids] if anchors is None else self.placement[ids] @ anchors
 
     def _entries(self, ids, c, lag: int = 0):
         """`entries` of parts `ids` in cluster index `c`, as they were `lag` frames ago (offsets
@@ -490,7 +793,9 @@ class Crowd:
     def poses(self, agents=None, cluster=None, *, space: str = "local"):
         """The poses of `agents` (default all) in `cluster`, vectorized: ``space="local"`` a
         float32 Pose (n, J) of local rotations and translations; ``"world"`` world (model-space)
-        joint matrices (n, J, 4, 4) float32 by forward kinematics."""
+        joint matrices (n, J, 4, 4) float32 by forward kinematics: in the agent's model space
+        (what ``placement`` or a Driver's roots take into the scene), a hooked cluster placed at
+        its parent joint (``Hook``)."""
         if space not in ("local", "world"):
             raise ValidationError(f"space must be 'local' or 'world'; got {space!r}")
         entries = self.entries(agents, cluster)
@@ -500,7 +805,10 @@ class Crowd:
         if self.pool.xp is not np:
             raise ValidationError("world poses are computed with numpy: read local poses from a store on a device")
         c = self.cluster_index(cluster if cluster is not None else self.clusters[0])
-        return self.skeletons[c].world(Pose._adopt(pose.rotations, pose.translations), dtype=np.float32)
+        world = self.skeletons[c].world(Pose._adopt(pose.rotations, pose.translations), dtype=np.float32)
+        ids = np.arange(self.n_agents) if agents is None else _agent_ids(agents, self.n_agents)
+        anchors = self._anchors(ids, c)
+        return world if anchors is None else (anchors[:, None] @ world).astype(np.float32)
 
     def instance_buffer(self) -> np.ndarray:
         """What a skinning shader needs per agent part (N, C), a structured array of INSTANCE
