@@ -93,10 +93,24 @@ def pair(size):
     return width, height
 
 
-def fit_view(ax, low, high) -> float:
+def unit_name(meters_per_unit) -> str:
+    """The unit a length is in, for an axis label: "m", "cm", "mm", "in", "ft", "km", other
+    factors as "× 0.3 m", and "units" where none is stated (None)."""
+    if meters_per_unit is None:
+        return "units"
+    named = {1.0: "m", 0.01: "cm", 0.001: "mm", 0.0254: "in", 0.3048: "ft", 1000.0: "km"}
+    found = next((name for factor, name in named.items() if math.isclose(meters_per_unit, factor, rel_tol=1e-9)), None)
+    return found or f"× {meters_per_unit:g} m"
+
+
+def fit_view(ax, low, high, *, names=("x", "y"), unit: str | None = "m") -> float:
     """Axis limits holding the box from `low` to `high` with a margin, widened along one axis to
-    the axes' own proportions so that scales are equal and the scene fills them; returns the
-    extent (the larger side) of the view in data units."""
+    the axes' own proportions so that scales are equal and the scene fills them; the axes are
+    labelled with their `names` and `unit` (flockkit's world is in metres; None: no labels).
+    Returns the extent (the larger side) of the view in data units."""
+    if unit is not None:
+        ax.set_xlabel(f"{names[0]} ({unit})", fontsize=8)
+        ax.set_ylabel(f"{names[1]} ({unit})", fontsize=8)
     extent = max(float(np.max(high - low)), 1e-9)
     margin = 0.06 * extent + 1e-9
     low, high = np.asarray(low, dtype=float) - margin, np.asarray(high, dtype=float) + margin

@@ -15,6 +15,7 @@ from ._figures import (
     save_animation,
     scene_figure,
     timeline,
+    unit_name,
 )
 
 
@@ -27,9 +28,11 @@ def animate_recording(recording, path, *, layout="world", axes=None, fps=None, s
     path = movie_path(path)
     if layout not in ("world", "grid"):
         raise ValidationError(f"animate_recording: layout must be 'world' or 'grid'; got {layout!r}")
-    joints = recording.world()[..., :3, 3][..., _crowd_axes(axes or ("xy" if layout == "world" else "xz"))]
+    axes = axes or ("xy" if layout == "world" else "xz")
+    joints = recording.world()[..., :3, 3][..., _crowd_axes(axes)]
     if layout == "world":
-        return _animate_skeletons(recording, joints, path, fps=fps, size=size, progress=progress, ticks=True)
+        return _animate_skeletons(recording, joints, path, fps=fps, size=size, progress=progress, ticks=True,
+                                  names=tuple(axes))  # fmt: skip
     agents = joints.shape[1]  # (frames, agents, J, 2)
     extent = np.ptp(joints.reshape(-1, 2), axis=0).max() if joints.size else 1.0
     spacing = 0.8 * max(float(np.ptp(joints[..., 0], axis=-1).max()), 1e-9) + 0.4 * extent / max(agents, 1) ** 0.5
@@ -47,8 +50,9 @@ def _crowd_axes(axes) -> list[int]:
     return ["xyz".index(a) for a in axes]
 
 
-def _animate_skeletons(recording, placed, path, *, fps, size, progress, ticks: bool):
-    """Draw `placed` (frames, agents, J, 2) joint positions of `recording` as stick figures."""
+def _animate_skeletons(recording, placed, path, *, fps, size, progress, ticks: bool, names=("x", "y")):
+    """Draw `placed` (frames, agents, J, 2) joint positions of `recording` as stick figures, on
+    axes named `names` (in metres) where `ticks`."""
     parents = recording.skeleton.parents
     frames, rate = timeline(1.0 / recording.fps, recording.n_frames, fps, None, "animate_recording")
     plt = pyplot()
@@ -56,7 +60,9 @@ def _animate_skeletons(recording, placed, path, *, fps, size, progress, ticks: b
 
     low, high = placed.reshape(-1, 2).min(axis=0), placed.reshape(-1, 2).max(axis=0)
     figure, ax = scene_figure(plt, low, high, size, keyed=False, longer=640)
-    fit_view(ax, low, high)
+    # a driven crowd's roots place it in metres; otherwise joints are in the skeleton's own unit
+    length = "m" if recording.axes else unit_name(recording.skeleton.meters_per_unit)
+    fit_view(ax, low, high, names=names, unit=length if ticks else None)
     if not ticks:
         ax.set_xticks([])
         ax.set_yticks([])

@@ -15,6 +15,7 @@ from ._figures import (
     save_animation,
     scene_figure,
     timeline,
+    unit_name,
 )
 
 
@@ -45,7 +46,7 @@ def _mesh_drawing(mesh, segmentation, axes, size, *, title: str):
     flat = mesh.motion.positions[..., [horizontal, vertical]]
     low, high = flat.reshape(-1, 2).min(axis=0), flat.reshape(-1, 2).max(axis=0)
     figure, ax = scene_figure(plt, low, high, size, keyed=segmentation is not None)
-    fit_view(ax, low, high)
+    fit_view(ax, low, high, names=("xyz"[horizontal], "xyz"[vertical]), unit=unit_name(mesh.meters_per_unit))
     palette = plt.get_cmap("tab10" if segmentation is None or segmentation.n_parts <= 10 else "tab20")
     labels = np.zeros(mesh.motion.n_agents, dtype=int) if segmentation is None else segmentation.labels
     face_part = labels[mesh.faces[:, 0]]

@@ -248,3 +248,13 @@ def test_a_gif_frame_is_the_figure_drawn_whole(tmp_path):
     white = (whole == 255).all(axis=2)
     assert frame.shape == whole.shape and (frame[white] == 255).all()
     assert np.abs(frame - whole).mean() < 1.0
+
+
+def test_every_world_axis_says_its_unit(solved):
+    from flockkit.viz._figures import unit_name
+
+    problem, solution = solved
+    figure = viz.plot_motion(solution.motion, problem=problem)
+    ax = figure.axes[0]
+    assert (ax.get_xlabel(), ax.get_ylabel()) == ("x (m)", "y (m)")
+    assert [unit_name(f) for f in (1.0, 0.01, 0.0254, None, 0.3)] == ["m", "cm", "in", "units", "× 0.3 m"]
