@@ -17,7 +17,7 @@ from .drive import Cue, Driver, Gait, StateMachine
 from .feet import driven_sliding, foot_sliding, ground_speed, plant_feet
 from .pool import Stream, StreamPool, UniquePool, equation_4, equation_5
 from .record import CrowdRecording, export_gltf, export_usd, record, write_engine_buffers
-from .runtime import INSTANCE, Crowd, CrowdEvent
+from .runtime import INSTANCE, Crowd, CrowdEvent, Hook, LookAt, PoseOverride
 from .textures import (
     TEXTURE_INSTANCE,
     AnimationTextures,
@@ -47,6 +47,9 @@ __all__ = [
     "equation_5",
     "Crowd",
     "CrowdEvent",
+    "Hook",
+    "LookAt",
+    "PoseOverride",
     "INSTANCE",
     "Gait",
     "StateMachine",
