@@ -894,6 +894,7 @@ class RootMotion:
 
     @property
     def duration(self) -> float:
+        """Seconds from the first key to the last: the clip's duration."""
         return float(self.times[-1])
 
     def sample(self, times) -> np.ndarray:
