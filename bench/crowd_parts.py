@@ -122,10 +122,13 @@ def main():
     offset = np.eye(4)
     offset[:3, 3] = [0.0, 5.0, 2.0]
     clusters = {"body": np.arange(n) % 2, "flag": 2}
-    crowd = Crowd(StreamPool(streams, fps=30), n_agents=n, clusters=clusters, seed=0, overrides={"body": [look]},
+    # one crowd with the hook, one with the look-at: each measured alone
+    crowd = Crowd(StreamPool(streams, fps=30), n_agents=n, clusters=clusters, seed=0,
                   hooks=[Hook(part="flag", parent="body", joint=head_name, offset=offset)])  # fmt: skip
+    looking = Crowd(StreamPool(streams, fps=30), n_agents=n, clusters={"body": np.arange(n) % 2}, seed=0,
+                    overrides={"body": [look]})  # fmt: skip
     rng = np.random.default_rng(1)
-    crowd.placement[:, :2, 3] = rng.uniform(-500, 500, (n, 2))
+    looking.placement[:, :2, 3] = rng.uniform(-500, 500, (n, 2))
     targets = rng.uniform(-500, 500, (n, 3))
     look.look(np.arange(n), targets, time=0.0)
     plain = Crowd(StreamPool(streams, fps=30), n_agents=n, clusters={"body": np.arange(n) % 2}, seed=0)
@@ -134,6 +137,7 @@ def main():
     timings = {key: [] for key in ("hook", "hook peer", "look", "look peer", "plain poses")}
     for _ in range(frames):
         crowd.update()
+        looking.update()
         t0 = time.perf_counter()
         flags = crowd.poses(cluster="flag", space="world")
         t1 = time.perf_counter()
@@ -141,11 +145,12 @@ def main():
         anchor = forward_kinematics(body, body_local)[:, head] @ offset
         peer_flags = anchor[:, None] @ forward_kinematics(crowd.skeletons[1], flag_local)
         t2 = time.perf_counter()
-        looked = crowd.poses(cluster="body")
+        looked = looking.poses(cluster="body")
         t3 = time.perf_counter()
-        base = crowd._entries(np.arange(n), 0)  # the blended pose before the override
+        base = looking._entries(np.arange(n), 0)  # the blended pose before the override
         base_pose = Pose._adopt(base[..., 0:4], base[..., 4:7])
-        peer_look = look_peer(body, base_pose, head, forward, targets, crowd.placement, limit, look.weights(crowd.time))
+        weights = look.weights(looking.time)
+        peer_look = look_peer(body, base_pose, head, forward, targets, looking.placement, limit, weights)
         t4 = time.perf_counter()
         plain.update()
         t5 = time.perf_counter()

@@ -748,8 +748,17 @@ class Crowd:
         hook = self.hooks.get(self.clusters[c])
         if hook is None:
             return None
-        parent = self.poses(ids, hook.parent, space="world")[:, self.skeletons[self.cluster_index(hook.parent)]
-                                                            .index(hook.joint)]  # fmt: skip
+        p = self.cluster_index(hook.parent)
+        skeleton = self.skeletons[p]
+        pose = entries_pose(self.entries(ids, hook.parent))
+        chain, k = [], skeleton.index(hook.joint)
+        while k >= 0:  # the joint and its ancestors: forward kinematics down that chain only
+            chain.insert(0, k)
+            k = skeleton.parents[k]
+        parent = self._anchors(ids, p)
+        for k in chain:
+            local = rigid.trs(pose.translations[:, k], pose.rotations[:, k], skeleton.scales[k])
+            parent = local if parent is None else parent @ local
         return parent.astype(np.float64) @ hook.offset
 
     def _origins(self, ids, c) -> np.ndarray:
