@@ -29,7 +29,7 @@ LAYERS = [
     ("viz", ["viz"]),
     ("convenience", ["convenience"]),
     ("api", ["flockkit"]),
-    ("cli", ["cli"]),
+    ("cli", ["cli", "blender"]),  # blender: the Blender add-on, which runs flockkit through the command line's worker
 ]  # fmt: skip
 # The imports that run back up, each with the reason it must.
 UPWARD = {}

@@ -21,7 +21,7 @@ import flockkit
 
 from .._atomic import TERMINATED
 from ..errors import FlockkitError
-from . import crowds, demo, flocks, graphs, plugins, scenes, solve
+from . import blender, crowds, demo, flocks, graphs, plugins, scenes, solve
 from .solve import Unmet
 
 __all__ = ["main", "build_parser"]
@@ -44,8 +44,9 @@ ORDER = (
     "import",
     "check",
     "new-plugin",
+    "blender-addon",
 )
-GROUPS = (flocks, graphs, scenes, crowds, solve, plugins, demo)
+GROUPS = (flocks, graphs, scenes, crowds, solve, plugins, demo, blender)
 COMMANDS = {name: group.COMMANDS[name] for name in ORDER for group in GROUPS if name in group.COMMANDS}
 
 
