@@ -300,7 +300,11 @@ class _Shared:
             targets = np.array([node] * len(clip) + [int(self.trans_target[i]) for i in out], dtype=np.int64)
             fixed = np.array([0.0] * len(clip) + [self.trans_cost[i] + beta * (not self.shift[i]) for i in out])
             self.choices.append((edges, targets, fixed))
+        # per node: which of its edges are phase shifts (what _monotony weighs)
+        self.shifts_here = [np.array([kind == "transition" and bool(self.shift[i]) for kind, i in edges], dtype=bool)
+                            for edges, _, _ in self.choices]  # fmt: skip
         self._memos = {}
+        self._arrows = None  # the graph's distinct source arrows (see _Problem._tables)
 
     def remembered(self, features: np.ndarray, alpha: float) -> dict:
         """The memo of errors under constant targets for these source arrows and alpha."""
@@ -361,6 +365,7 @@ class _Problem:
             shared.trans_source,
         )
         self.rotating, self.out, self.choices = shared.rotating, shared.out, shared.choices
+        self.shifts_here, self.shared = shared.shifts_here, shared
         self.period, self.shift, self.n_clips = shared.period, shared.shift, shared.n_clips
         self.clip_target = shared.clip_target
         self.vary, self.drift = strategy.vary, strategy.drift
@@ -400,6 +405,53 @@ class _Problem:
             raise ValidationError(
                 f"walk parameter avoid covers {self.avoid.shape[1]} frames; the walk needs {self.needed}"
             )
+        self._tables()
+
+    def _tables(self) -> None:
+        """Where the graph does not turn, the played arrow of a source frame is its own arrow, so
+        frame_error is a table over (source frame, output frame), made once per walk: the error
+        of each distinct source arrow against each distinct target arrow, gathered, and where in
+        step with an avoided walk (within one frame, around the loop). Each entry is the value
+        frame_error computes (the same norm of the same difference), so walks are the same."""
+        self.error_table = self.step_table = None
+        if self.rotating or self.needed == 0:
+            return
+        if self.shared._arrows is None or not np.array_equal(self.shared._arrows[0], self.features):
+            arrows, arrow_of = np.unique(self.features, axis=0, return_inverse=True)
+            self.shared._arrows = (self.features, arrows, arrow_of.ravel())
+        _, arrows, self.arrow_of = self.shared._arrows
+        targets = self.track[np.flatnonzero(np.append(True, np.diff(self.run)))]  # one per run of one arrow
+        distinct = np.linalg.norm(arrows[:, None, :] - targets[None, :, :], axis=2)
+        self.error_table = np.take(distinct, self.run, axis=1)  # (distinct arrows, output frames)
+        if self.avoid is None:
+            return
+        frames = len(self.features)
+        others = self.avoid[:, : self.needed]
+        valid = others >= 0
+        if np.any(others >= (frames if self.period is None else self.period)):
+            return  # frames no walk of this graph plays: left to in_step_frames
+        table = np.zeros((frames, self.needed), dtype=bool)
+        columns = np.broadcast_to(np.arange(self.needed), others.shape)[valid]
+        for step in (-1, 0, 1):
+            near = others[valid] + step
+            if self.period is not None:
+                near %= self.period
+            inside = (near >= 0) & (near < frames)
+            table[near[inside], columns[inside]] = True
+        self.step_table = table
+
+    def _table_error(self, frames, t) -> np.ndarray:
+        """frame_error of `frames` (..., m) played from output frame t, from the tables."""
+        columns = t + np.arange(frames.shape[-1])
+        error = self.error_table[self.arrow_of[frames], columns]
+        if self.avoid is not None:
+            error += self.in_step * self._in_step_table(frames, columns)
+        return error
+
+    def _in_step_table(self, frames, columns) -> np.ndarray:
+        if self.step_table is None:
+            return self.in_step_frames(frames, int(columns[0]) if len(columns) else 0)
+        return self.step_table[frames, columns]
 
     def wrap(self, frames: np.ndarray) -> np.ndarray:
         """Source frames for frames counted on across the loop of a looping graph."""
@@ -417,6 +469,8 @@ class _Problem:
 
     def frame_error(self, played, frames, t) -> np.ndarray:
         """Per output frame from t: the feature error, plus in_step where in step with an avoided walk."""
+        if self.error_table is not None:
+            return self._table_error(frames[: len(played)], t)
         error = np.linalg.norm(played - self.track[t : t + len(played)], axis=1)
         if self.avoid is not None:
             error += self.in_step * self.in_step_frames(frames, t)
@@ -460,6 +514,13 @@ class _Problem:
         output frame t (frame_error summed over the look-ahead, times dt)."""
         track = self.track[t : t + self.ahead]
         frames = self.straight[targets][:, : len(track)]
+        if self.error_table is not None and rotations is None:
+            columns = t + np.arange(frames.shape[1])
+            error = self.error_table[self.arrow_of[frames], columns]
+            if self.avoid is not None:
+                react = frames.shape[1] if self.react is None else self.react
+                error[:, :react] += self.in_step * self._in_step_table(frames[:, :react], columns[:react])
+            return error.sum(axis=1) * self.dt
         played = self.features[frames]
         if rotations is not None:
             played = np.einsum("kij,khj->khi", rotations, played)
@@ -507,7 +568,7 @@ class _Problem:
                     if key not in memo:
                         memo[key] = self.alpha * self._lookahead(all_targets, None, t) + all_fixed
                     cost = memo[key][keep]
-                cost = cost + self._monotony(edges_here, shifted)
+                cost = cost + self._monotony(edges_here, shifted, self.shifts_here[node][keep])
                 edge = edges_here[int(np.argmin(cost + self.noise * rng.random(len(cost))))]
                 if edge[0] == "transition" and self.shift[edge[1]]:
                     shifted.add(edge[1])
@@ -538,12 +599,13 @@ class _Problem:
         good = np.flatnonzero(cost <= cost.min() + 0.1)
         return int(rng.choice(good))
 
-    def _monotony(self, edges, shifted) -> np.ndarray | float:
+    def _monotony(self, edges, shifted, shift=None) -> np.ndarray | float:
         """`vary` on each of `edges` that takes a phase shift in `shifted` (taken before), and on
         going straight on where a phase shift not taken yet is among them; else 0 (going straight
         on plays a clip and finds other phase shifts at its end, where a blend taken again would
-        replay all its frames)."""
-        shift = np.array([kind == "transition" and bool(self.shift[i]) for kind, i in edges])
+        replay all its frames). `shift`: which of `edges` are phase shifts, if known."""
+        if shift is None:
+            shift = np.array([kind == "transition" and bool(self.shift[i]) for kind, i in edges])
         if not shift.any():
             return 0.0
         taken = np.array([kind == "transition" and i in shifted for kind, i in edges])
@@ -648,6 +710,9 @@ class _Problem:
         """frame_error summed over clip `node` played from output frame t, turned by `rotation`;
         remembered when the graph does not turn (searches meet the same clip under the same
         target again and again)."""
+        if self.error_table is not None:  # the tables are as quick as the memo, and hold the same errors
+            frames = self.wrap(self.nodes[node] + np.arange(max(min(self.clip_frames[node], self.needed - t), 0)))
+            return float(self._table_error(frames, t).sum())
         memo, window = self._memo(t, self.clip_frames[node])
         key = ("clip", node, window)
         if not self.rotating and key in memo:

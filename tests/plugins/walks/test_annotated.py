@@ -54,3 +54,42 @@ def test_arrows_only_in_frames_the_graph_dropped_are_out_of_reach():
         ValidationError, match=r"closest arrow the graph plays .* at source frame (\d{1,2}|10\d|11[0-3])\)"
     ):
         strategy.walk(graph, np.random.default_rng(0), 5.0)
+
+
+@pytest.mark.parametrize("avoiding", [False, True])
+@pytest.mark.parametrize("source", ["cycle", "plants"])
+def test_walks_from_the_error_tables_equal_walks_that_compute_every_error(monkeypatch, source, avoiding):
+    """The per-walk tables of frame errors (graphs that do not turn) give the very walks that
+    computing each error from the arrows gives: a looping cycle with phase shifts and a recording
+    of plants in a turning wind, a ramping target, with walks to avoid (rows of -1 among them)."""
+    from flockkit_walks import annotated
+
+    if source == "cycle":
+        phase = 2 * np.pi * np.arange(30)[:, None] / 30
+        s = np.linspace(0.2, 1.0, 5)[None, :]
+        motion = flockkit.Motion(positions=np.stack(np.broadcast_arrays(s, 0 * s, 0.4 * s * np.sin(phase + s)), axis=2),
+                                 dt=1 / 30)  # fmt: skip
+        features = flockkit.Features.from_keyframes([[0, [0.3, 0]], [0.5, [0.6, 0.1]], [0.9, [0.3, 0]]],
+                                                    n_frames=30, dt=1 / 30)  # fmt: skip
+    else:
+        motion, _, features = inputs.plants(dt=1 / 30, seconds=24.0, points=40, rates=(1.5, 3.0))
+    graph = flockkit.build_graph(motion, builder="windowed")
+    target = [[0, [0.4, 0]], [10, [0.6, 0.05]], [20, [0.35, 0]]]
+    rng = np.random.default_rng(5)
+    frames = round(20 / motion.dt)
+    avoid = None
+    if avoiding:
+        avoid = rng.integers(0, motion.n_frames if graph.period is None else graph.period, (3, frames))
+        avoid[2] = -1
+
+    def no_tables(problem):
+        problem.error_table = problem.step_table = None
+
+    walks = []
+    for tables in (True, False):
+        if not tables:
+            monkeypatch.setattr(annotated._Problem, "_tables", no_tables)
+        strategy = flockkit.get("walk", "annotated", target=target, features=features, avoid=avoid)
+        walks.append([strategy.walk(graph, np.random.default_rng(seed), 20.0) for seed in range(3)])
+    assert walks[0] == walks[1]
+    assert any(kind == "transition" for w in walks[0] for kind, _ in w.edges)  # choices were made

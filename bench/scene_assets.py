@@ -1,0 +1,132 @@
+"""Scenes of real assets (paper 002): N objects for 2 minutes at 30 fps, half Foxes walking in
+place (Fox.glb's Walk clip, in metres, parts by the default segmenter, each a looping graph with
+phase shifts, its arrow held: forward at 0.6) and half MorphStressTest's Individuals clip (its
+arrow keyframed 0.3 -> 0.9 -> 0.3 over the clip), built as ``flockkit build --layers`` and
+``flockkit scene`` build them, following a wind that blows east and changes strength (0.6, 0.4,
+0.8, 0.6 at each quarter), ``headings = "aligned"``, the region 3 footprint diagonals a side per
+object. Prints the seconds of each stage: reading and building the layers (once), placement,
+targets, the walks per template part (first pass), de-synchronisation (rounds of walks again),
+and the synthesis of vertices (SceneAnimation.motion, timed over a sample of objects and scaled
+to all of them; a scene is never held in memory whole), with ``--profile`` the functions where
+the walks spend their time (cProfile, one job).
+
+    python bench/scene_assets.py --objects 60 --jobs 2 [--data ../shared/data] [--profile]
+"""
+
+from __future__ import annotations
+
+import argparse
+import cProfile
+import pstats
+import time
+import warnings
+from pathlib import Path
+
+import attrs
+import numpy as np
+
+import flockkit
+from flockkit.scene import Arrow, FlowField
+from flockkit.scene.desync import largest_in_step, pairs_in_step, stacked
+from flockkit.scene.templates import footprint, template_view
+
+
+def templates(data: Path):
+    fox = flockkit.io.read_mesh_animation(data / "fox-gltf" / "Fox.glb", clip="Walk", fps=30.0)
+    fox = fox.to_flockkit_axes(meters_per_unit="cm")
+    fox_layers = flockkit.build_layers(fox, seed=0)
+    held = flockkit.Features.from_keyframes([[0, [0, -0.6]]], n_frames=fox.motion.n_frames, dt=fox.motion.dt)
+    morph = flockkit.io.read_mesh_animation(data / "morph-stress-test-gltf" / "MorphStressTest.gltf",
+                                            clip="Individuals", fps=30.0)  # fmt: skip
+    morph_layers = flockkit.build_layers(morph, seed=0)
+    swelling = flockkit.Features.from_keyframes([[0, [0.3, 0]], [4.6, [0.9, 0]], [9.3, [0.3, 0]]],
+                                                n_frames=morph.motion.n_frames, dt=morph.motion.dt)  # fmt: skip
+    return [attrs.evolve(fox_layers, features=held), attrs.evolve(morph_layers, features=swelling)]
+
+
+def scene_of(layers, count: int, jobs: int, duration: float = 120.0) -> flockkit.Scene:
+    diagonal = max(2 * np.linalg.norm(footprint(t)[1]) for t in layers)
+    side = 3.0 * diagonal * np.sqrt(count)
+    region = flockkit.Polygon(vertices=[[0, 0], [side, 0], [side, side], [0, side]])
+    q = duration / 4
+    keyframes = [(0, [0.6, 0]), (q, [0.4, 0]), (2 * q, [0.8, 0]), (3 * q, [0.6, 0])]
+    wind = FlowField(arrows=[Arrow(position=[side / 2, side / 2], keyframes=keyframes)])
+    return flockkit.Scene(templates=layers, region=region, counts=[count // 2, count - count // 2],
+                          duration=duration, constraints=[wind], seed=1, headings="aligned", n_jobs=jobs)  # fmt: skip
+
+
+def stages(scene: flockkit.Scene, sample: int) -> dict:
+    """Scene.synthesize's stages, timed one by one (the same calls, in the same order)."""
+    times = {}
+    clock = time.perf_counter()
+    placement = scene.place()
+    times["placement"], clock = time.perf_counter() - clock, time.perf_counter()
+    targets = scene.targets(placement)
+    times["targets"], clock = time.perf_counter() - clock, time.perf_counter()
+    seeds = np.random.SeedSequence(scene.seed).spawn(2)[1].spawn(placement.n_objects)
+    items = [(i, targets[i], int(seeds[i].generate_state(1)[0]), None) for i in range(placement.n_objects)]
+    walks, played = scene._walk_many(placement, items, None, "walks")
+    times["walks"], clock = time.perf_counter() - clock, time.perf_counter()
+    animation = flockkit.SceneAnimation(templates=scene.templates, placement=placement, walks=walks,
+                                        dt=scene.frame_time, n_frames=scene.n_frames, constraints=scene.constraints,
+                                        region=scene.region)  # fmt: skip
+    frames, neighbours = stacked(played, scene.n_frames), animation.neighbours()
+    before = largest_in_step(frames, neighbours), pairs_in_step(frames, neighbours)
+    redone = frames.copy()
+    walks = scene._desynchronise(animation, targets, seeds, frames, neighbours, None)
+    times["de-sync"], clock = time.perf_counter() - clock, time.perf_counter()
+    animation = attrs.evolve(animation, walks=walks)
+    picked = np.linspace(0, placement.n_objects - 1, min(sample, placement.n_objects)).round().astype(int)
+    vertices = 0
+    for i in picked:
+        vertices += animation.motion(int(i)).n_agents
+    took = time.perf_counter() - clock
+    times["synthesis (scaled)"] = took * placement.n_objects / len(picked)
+    times["walked again"] = int(np.any(redone != frames, axis=(1, 2)).sum())
+    times["in step before"], times["pairs before"] = before
+    times["in step after"], times["pairs after"] = (
+        largest_in_step(frames, neighbours),
+        pairs_in_step(frames, neighbours),
+    )
+    times["ms per output s per 1k vertices"] = took * 1000 / (scene.duration * vertices / 1000)
+    return times
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
+    parser.add_argument("--objects", type=int, nargs="+", default=[60])
+    parser.add_argument("--jobs", type=int, default=2)
+    parser.add_argument("--seconds", type=float, default=120.0)
+    parser.add_argument("--sample", type=int, default=10, help="objects whose vertices are synthesized")
+    parser.add_argument("--profile", action="store_true")
+    args = parser.parse_args()
+    warnings.simplefilter("ignore", flockkit.errors.FlockkitWarning)
+    clock = time.perf_counter()
+    layers = templates(Path(args.data))
+    print(f"templates read and built in {time.perf_counter() - clock:.1f} s: " + "; ".join(
+        f"{t.source.n_agents} points, {t.n_parts} parts of {[len(g.nodes) for g in t.graphs]} nodes"
+        for t in layers))  # fmt: skip
+    for count in args.objects:
+        scene = scene_of(layers, count, args.jobs, args.seconds)
+        if args.profile:
+            profile = cProfile.Profile()
+            profile.enable()
+        clock = time.perf_counter()
+        figures = stages(scene, args.sample)
+        total = time.perf_counter() - clock
+        if args.profile:
+            profile.disable()
+            pstats.Stats(profile).sort_stats("tottime").print_stats(25)
+        walking = figures["placement"] + figures["targets"] + figures["walks"] + figures["de-sync"]
+        print(f"{count} objects x {args.seconds:g} s, {args.jobs} jobs: " + ", ".join(
+            f"{k} {v:.3g}" + (" s" if isinstance(v, float) and k[0] not in "ipm" else "")
+            for k, v in figures.items()) + f"; scene (placement to de-sync) {walking:.1f} s = "
+              f"{1000 * walking / count:.0f} ms per object; all {total:.1f} s", flush=True)  # fmt: skip
+    parts = [(k, g) for k, t in enumerate(layers) for g in template_view(t).graphs]
+    shown = [(k, len(g.nodes), len(g.transitions), int(np.count_nonzero(g.shifts)), g.period) for k, g in parts]
+    print("template parts (template, nodes, transitions, phase shifts, period):", shown)
+
+
+if __name__ == "__main__":
+    main()
