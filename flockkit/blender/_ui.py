@@ -32,6 +32,7 @@ class FLOCKKIT_PT_flock(_Panel, bpy.types.Panel):
         for parameter in settings.parameters:
             column.prop(parameter, "value", text=parameter.name.replace("_", " "))
         layout.prop(settings, "seed")
+        layout.prop(settings, "folder")
         layout.operator("flockkit.simulate", icon="PLAY")
         _progress(layout, settings)
 
