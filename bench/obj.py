@@ -67,7 +67,7 @@ def main() -> None:
                         for text in texts]  # fmt: skip
 
             _, peer = timed(loadtxt, repeat=3)
-            lines, careful = timed(lambda texts=texts, files=files: [obj._parse_obj(f, t) for f, t in zip(files, texts)])
+            lines, careful = timed(lambda texts=texts, files=files: list(map(obj._parse_obj, files, texts)))
             np.testing.assert_array_equal(found, [points for points, _ in lines])  # the same numbers, bit for bit
             print(f"{name:>16} {len(files):>6} {frames.shape[1]:>8} {size / 1e6:>6.1f} {reading:>12.3f} "
                   f"{reader:>10.3f} {reader - reading:>14.3f} {size / 1e6 / reader:>6.0f} {peer:>9.3f} "
