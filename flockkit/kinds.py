@@ -161,7 +161,7 @@ KINDS: Mapping[str, Kind] = _frozen(
             optional={"root_motion": interfaces.RootMotionSource},
             factory_parameters={"clip_player": ("clip", "rate")},
             kit="flockkit.testing.controller",
-            receives=("flockkit.skeleton.SkeletalClip", "flockkit.skeleton.Channel", "flockkit.skeleton.RootMotion"),
+            receives=("flockkit.skeleton.SkeletalClip", "flockkit.skeleton.Channel"),
             returns=("flockkit.skeleton.Pose", "flockkit.skeleton.Event", "flockkit.skeleton.Skeleton"),
         ),
     )
