@@ -71,8 +71,9 @@ def initial_trajectories(problem: Problem, behavior, rng: np.random.Generator) -
 
 def regenerate(problem: Problem, behavior, current: Motion, start: int, stop: int, rng: np.random.Generator) -> Motion:
     """`current` with frames start..stop (window boundaries) built anew, window by window as in
-    ``initial_trajectories``: from `current`'s state at `start` (arriving velocity) to exactly
-    its positions and velocities at `stop` (temporary continuity constraints, 3.4.1)."""
+    ``initial_trajectories``: from `current`'s state at `start` (arriving velocity; at frame 0 the
+    starting state, frames 0 and 1, kept exactly) to exactly its positions and velocities at
+    `stop` (temporary continuity constraints, 3.4.1)."""
     builder = _Initial(problem, behavior, rng)
     last = current.n_frames - 1
     state = _arriving(current, start)
@@ -87,7 +88,10 @@ def regenerate(problem: Problem, behavior, current: Motion, start: int, stop: in
         state, prior = _state_at_end(piece, None), piece.state(-2)
     pieces.append(Motion(positions=current.positions[stop:], dt=current.dt))
     joined = builder._around_obstacles(_join(pieces, current.dt), start, stop)
-    return Motion(positions=joined.positions, dt=current.dt, channels=dict(current.channels))
+    positions = np.array(joined.positions)
+    if start == 0:  # the starting state: the simulation drifts to frame 1 up to rounding, a blend moves it
+        positions[1] = current.positions[1]
+    return Motion(positions=positions, dt=current.dt, channels=dict(current.channels))
 
 
 def _arriving(motion: Motion, t: int) -> State:

@@ -95,6 +95,8 @@ class _Refinement:
             simulated = np.asarray(behavior.plausibility_residuals(behavior.forward(motion.state(0), t - 1, rng)))
             unlikely = np.linalg.norm(self.targets, axis=-1) > LIKELY
             self.targets[unlikely] = simulated[unlikely]
+        # each agent's residuals weighed as the objective weighs its terms (Problem.keyframed_weight)
+        self.rows = np.sqrt(problem.agent_weights())
         self.coms = [(problem.frame(c.time), np.array(problem.agents_of(c)), np.asarray(c.position))
                      for c in problem.constraints if isinstance(c, ComConstraint)]  # fmt: skip
         self.shapes = [(problem.frame(c.time), np.array(problem.agents_of(c)), c.shape)
@@ -104,7 +106,8 @@ class _Refinement:
         return Motion(positions=positions, dt=self.motion.dt, channels=dict(self.motion.channels))
 
     def _model(self, positions) -> np.ndarray:
-        return np.asarray(self.behavior.plausibility_residuals(self._motion(positions))) - self.targets
+        residuals = np.asarray(self.behavior.plausibility_residuals(self._motion(positions))) - self.targets
+        return residuals * self.rows[None, :, None]
 
     def _cost(self, positions) -> tuple[float, np.ndarray]:
         """Half the squared residuals; infinite where an agent has left its shape."""
@@ -149,7 +152,8 @@ class _Refinement:
         above moved the neighbors with the agent, crediting it with their share."""
         t, n, d = self.shape
         coupling = self.behavior.plausibility_coupling(self._motion(positions)).tocoo()
-        row, column, value = coupling.row, coupling.col, coupling.data
+        row, column = coupling.row, coupling.col
+        value = coupling.data * self.rows[(row // k) % n]
         frame, dim = column // (n * d), column % d
         own = self.index.ravel()[(frame * n + (row // k) % n) * d + dim]
         other = self.index.ravel()[column]

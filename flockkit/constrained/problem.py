@@ -20,6 +20,8 @@ __all__ = ["PointConstraint", "ComConstraint", "ShapeConstraint", "Constraint", 
 # The most frames a Problem may have: a day at the paper's 10 Hz (86 400 s), rounded up. Beyond it
 # the sampler's Python loops over frames take hours before any result.
 MAX_FRAMES = 1_000_000
+# The default Problem.keyframed_weight (bench/README.md, "keyframed weight").
+KEYFRAMED_WEIGHT = 1.0
 
 
 def _time(value, *, field: str) -> float:
@@ -245,6 +247,15 @@ class Problem:
         How the initial trajectories move unconstrained agents: "nearest" (with the constrained
         agent nearest to them, smoother) or "random" (with a constrained agent drawn at random,
         livelier), as section 3.3.1 offers.
+    keyframed_weight : float
+        The weight (>= 0) in the objective of the behavior's plausibility terms of agents with a
+        point constraint: their paths are the director's, so where they move unlike the model
+        the rest of the flock should still move like it, not arrange itself to explain them. With
+        paper 004's weight 1, the most plausible motion as a whole tilts the free flock towards
+        the keyframed agents (a free flock's impulses then fail a KS test against a forward
+        simulation's); the default was chosen by measurement (bench/README.md, "keyframed
+        weight"). Applied where the behavior declares ``Capabilities(residuals=True)`` (its terms
+        split by agent); other models weigh every agent 1.
     """
 
     n_agents: int = attrs.field(converter=lambda v: integer(v, "Problem.n_agents", minimum=1))
@@ -272,6 +283,10 @@ class Problem:
         default=0.5, converter=functools.partial(number, field="Problem.clearance", minimum=0, maximum=EXTENT)
     )
     follow: str = attrs.field(default="nearest")
+    keyframed_weight: float = attrs.field(
+        default=KEYFRAMED_WEIGHT,
+        converter=functools.partial(number, field="Problem.keyframed_weight", minimum=0),
+    )
 
     def __attrs_post_init__(self):
         if self.dims not in (2, 3):
@@ -297,6 +312,13 @@ class Problem:
     def n_frames(self) -> int:
         """T, the number of frames: duration / dt + 1."""
         return round(self.duration / self.dt) + 1
+
+    def agent_weights(self) -> np.ndarray:
+        """(N,) the weight of each agent's plausibility terms in the objective: keyframed_weight
+        for agents with a point constraint, 1 for the others."""
+        weights = np.ones(self.n_agents)
+        weights[[c.agent for c in self.constraints if isinstance(c, PointConstraint)]] = self.keyframed_weight
+        return weights
 
     def frame(self, time: float) -> int:
         """The frame a constraint at `time` seconds applies to."""

@@ -8,6 +8,8 @@ halves if fewer than a fifth were accepted and doubles if more than half were; a
 whose last ADAPT_EVERY proposals was accepted is picked half as often (down to a RAREST share of
 its probability; back up as it is accepted again), so that moves which cannot improve the
 current motion, such as regenerate after a refined start, stop costing most of the time.
+No move may change a held agent-frame (``held_frames``: point constraints, and the starting
+state, frames 0 and 1, which no term scores); a proposal that does is refused.
 Scoring is incremental: a proposal reports the frames and agents it changed, and only frames
 within the behavior's ``plausibility_reach`` of them are re-scored (all of them for a model that
 does not declare one); objective terms depend on their own frame only.
@@ -61,11 +63,12 @@ class Proposal:
 class ProposalContext:
     """What a proposal move may read: the problem (in ``solve``, with its COM constraints at
     the aims the initial trajectories met, ``flockkit.constrained.com_aims``), the behavior model, the
-    windows of the initial trajectories, the current per-frame log g (`scores`), the
-    point-constrained agent-frames (`pinned`, boolean (T, N)), which a move must leave exactly
-    where they are, and `scale`, a factor for the size of a move's changes that the sampler adapts
-    to how often the move's proposals are accepted (a motion near its most plausible takes only
-    small changes)."""
+    windows of the initial trajectories, the current per-frame log g (`scores`), the agent-frames
+    a move must leave exactly where they are (`pinned`, boolean (T, N); in ``solve``, see
+    ``held_frames``: the point-constrained ones and the starting state, frames 0 and 1 of every
+    agent), and `scale`, a factor for the size of a move's changes that the sampler adapts to how
+    often the move's proposals are accepted (a motion near its most plausible takes only small
+    changes)."""
 
     problem: Problem
     behavior: object
@@ -75,8 +78,15 @@ class ProposalContext:
     scale: float = 1.0
 
     def free_agents(self, start: int, stop: int) -> np.ndarray:
-        """Agents without a point constraint at frames start <= t < stop."""
+        """Agents not pinned at any of the frames start <= t < stop."""
         return np.flatnonzero(~self.pinned[max(start, 0) : stop].any(axis=0))
+
+    @property
+    def first_movable(self) -> int:
+        """The first frame at which some agent is not pinned: the frames before it (in ``solve``,
+        the starting state) are held whole, so a move's changes begin here at the earliest."""
+        movable = ~self.pinned.all(axis=1)
+        return int(np.argmax(movable)) if movable.any() else len(movable)
 
 
 @attrs.frozen(kw_only=True, eq=False)
@@ -130,6 +140,23 @@ def pinned_frames(problem: Problem) -> np.ndarray:
     return pinned
 
 
+# Frames 0 and 1 of every agent: the starting state, positions and the velocity between them. No
+# term scores it (a model infers no impulse before frame 1, and frame 1's reads the velocity only
+# as the one it changes), so a move that changed it would buy motion for free: a runner "started"
+# at 25 length units per second and coasted down to the model's speed at no cost. The initial
+# trajectories set it (from a simulated flock, placed on the constraints at frame 0), and every
+# move and refine keep it.
+START_FRAMES = 2
+
+
+def held_frames(problem: Problem) -> np.ndarray:
+    """(T, N) boolean: the agent-frames no move may change, ``pinned_frames`` and the starting
+    state (the first START_FRAMES frames of every agent)."""
+    held = pinned_frames(problem)
+    held[:START_FRAMES] = True
+    return held
+
+
 def unmet(problem: Problem, motion: Motion) -> list[tuple[int, float, float]]:
     """(index, residual, tolerance) of each constraint of `problem` that `motion` does not meet as
     a solution must: point constraints to 1e-9, COM constraints within 3 sigma_com, every
@@ -165,18 +192,41 @@ def residuals(problem: Problem, motion: Motion) -> tuple[float, ...]:
 
 
 class Scorer:
-    """Per-frame log g of motions for one problem, behavior and set of objective terms."""
+    """Per-frame log g of motions for one problem, behavior and set of objective terms.
+
+    With ``Problem.keyframed_weight`` other than 1 and a behavior declaring
+    ``Capabilities(residuals=True)``, each agent's share of the behavior's term, - |r|^2 / 2 of its
+    residuals, is weighed by ``Problem.agent_weights``; the per-frame constant the residuals are
+    subtracted from is read once, from the first motion scored whole."""
 
     def __init__(self, problem, behavior, objectives):
         self.problem, self.behavior, self.objectives = problem, behavior, objectives
-        self.reach = capabilities(behavior).plausibility_reach
+        declared = capabilities(behavior)
+        self.reach = declared.plausibility_reach
+        weights = problem.agent_weights()
+        self.weights = weights if declared.residuals and np.any(weights != 1.0) else None
+        self._constant = None
 
     def frames(self, motion: Motion, start: int = 0, stop: int | None = None) -> np.ndarray:
         stop = motion.n_frames if stop is None else stop
-        total = np.asarray(self.behavior.log_plausibility(motion, start, stop), dtype=np.float64).copy()
+        total = self._plausibility(motion, start, stop)
         for objective in self.objectives:
             total += objective.log_terms(motion, self.problem, start, stop)
         return total
+
+    def _plausibility(self, motion: Motion, start: int, stop: int) -> np.ndarray:
+        if self.weights is None:
+            return np.asarray(self.behavior.log_plausibility(motion, start, stop), dtype=np.float64).copy()
+        if self._constant is None:
+            whole = self._squares(motion, 0, motion.n_frames)
+            plain = np.asarray(self.behavior.log_plausibility(motion), dtype=np.float64)
+            self._constant = plain + 0.5 * whole.sum(axis=1)
+        return self._constant[start:stop] - 0.5 * (self._squares(motion, start, stop) @ self.weights)
+
+    def _squares(self, motion: Motion, start: int, stop: int) -> np.ndarray:
+        """(frames, N): each agent's summed squared residuals."""
+        residuals = np.asarray(self.behavior.plausibility_residuals(motion, start, stop), dtype=np.float64)
+        return np.einsum("tnk,tnk->tn", residuals, residuals)
 
     def affected(self, proposal: Proposal, n_frames: int) -> tuple[int, int]:
         """The frames whose score the proposal's changes can alter."""
@@ -215,7 +265,7 @@ def run_chain(
     weights = np.array([p for _, _, p in moves], dtype=float)
     weights = weights / weights.sum()
     shares = np.ones(len(moves))  # each move's share of its probability
-    spans, pinned = tuple(windows(problem)), pinned_frames(problem)
+    spans, pinned = tuple(windows(problem)), held_frames(problem)
     current, scores = initial, scorer.frames(initial)
     total = float(scores.sum())
     best, best_total = current, total  # the initial trajectories meet every constraint
@@ -229,6 +279,8 @@ def run_chain(
             scores=_readonly(scores), pinned=pinned, scale=float(scales[pick]),
         )  # fmt: skip
         proposal = moves[pick][1].propose(current, context, rng)
+        if proposal is not None and _moves_held(proposal, current, pinned):
+            proposal = None  # refused: a held agent-frame moved
         if proposal is not None:
             start, stop = scorer.affected(proposal, current.n_frames)
             fresh = scorer.frames(proposal.motion, start, stop)
@@ -518,6 +570,17 @@ def _acceptance(traces) -> dict:
             tried[name] += 1
             taken[name] += bool(accepted)
     return {name: taken[name] / tried[name] for name in tried}
+
+
+def _moves_held(proposal: Proposal, current: Motion, held: np.ndarray) -> bool:
+    """Whether the proposal changes an agent-frame of `held` (T, N): at the frames it reports, and
+    at the starting state whatever it reports."""
+    new, old = proposal.motion.positions, current.positions
+    if not np.array_equal(new[:START_FRAMES], old[:START_FRAMES]):
+        return True
+    start, stop = max(proposal.start, START_FRAMES), proposal.stop
+    rows = held[start:stop]
+    return bool(rows.any()) and not np.array_equal(new[start:stop][rows], old[start:stop][rows])
 
 
 def _readonly(array: np.ndarray) -> np.ndarray:

@@ -6,8 +6,12 @@
     agents = 20          # required; dims = 2, dt = 0.1, flocks = 1, sigma_com, shape_weight, flock_weight,
     duration = 8.0       # visibility, clearance and follow are optional (defaults as in Problem)
 
-    [solve]              # optional: behavior, behavior_params = {...}, iterations, refine, starts, chains, seed,
-                         # stable, proposals = {bump = 0.6, ...}, objectives = [...]
+    [behavior]           # optional: the behavior model's name (default "boids") and its parameters, which
+    name = "boids"       # also define what is plausible (paper 004, Figure 8); dt and obstacles come from
+    cohesion_weight = 6.0  # [problem] and [[obstacle]]
+
+    [solve]              # optional: iterations, refine, starts, chains, seed, stable,
+                         # proposals = {bump = 0.6, ...}, objectives = [...]
     iterations = 1000
 
     [[point]]            # agent, time, position, optional velocity
@@ -43,10 +47,11 @@ _PROBLEM_KEYS = {
     "visibility": "visibility",
     "clearance": "clearance",
     "follow": "follow",
+    "keyframed_weight": "keyframed_weight",
 }
+# [behavior]: its name, and everything else is a parameter of the model
+_BEHAVIOR_NAME = "name"
 _SOLVE_KEYS = {
-    "behavior",
-    "behavior_params",
     "iterations",
     "refine",
     "starts",
@@ -64,19 +69,23 @@ _CONSTRAINT_KEYS = {
 
 
 def load_scenario(path) -> tuple[Problem, dict]:
-    """(Problem, solve settings) from a scenario file; errors name the file and the entry."""
+    """(Problem, solve settings) from a scenario file; errors name the file and the entry. The
+    settings are ``flockkit.solve``'s keyword arguments: [solve]'s, and from a [behavior] table
+    ``behavior`` (its name) and ``behavior_params`` (the rest)."""
     path = Path(path)
     data = _tomlfile.read(path, "scenario")
-    unknown = set(data) - {"problem", "solve", "point", "com", "shape", "obstacle"}
+    unknown = set(data) - {"problem", "behavior", "solve", "point", "com", "shape", "obstacle"}
     if unknown:
         raise ValidationError(
-            f"{path}: unknown table {sorted(unknown)[0]!r}; expected problem, solve, point, com, shape, obstacle"
+            f"{path}: unknown table {sorted(unknown)[0]!r}; expected problem, behavior, solve, point, com, shape, "
+            "obstacle"
         )
     try:
         problem_table = _table(data, "problem", path)
         _only(problem_table, set(_PROBLEM_KEYS), f"{path}: [problem]")
         settings = _table(data, "solve", path, required=False)
         _only(settings, _SOLVE_KEYS, f"{path}: [solve]")
+        settings = dict(settings, **_behavior(_table(data, "behavior", path, required=False), path))
         if "seed" in settings:
             validate.seed(settings["seed"], f"{path}: [solve] seed")
         for key in ("iterations", "refine", "starts", "chains"):
@@ -103,6 +112,23 @@ def load_scenario(path) -> tuple[Problem, dict]:
     except TypeError as exc:
         raise ValidationError(f"{path}: {exc}") from None
     return problem, dict(settings)
+
+
+def _behavior(table: dict, path) -> dict:
+    """``behavior`` and ``behavior_params`` settings from a [behavior] table (none if it is empty);
+    the model checks its parameters when ``solve`` makes it."""
+    if not table:
+        return {}
+    name = table.get(_BEHAVIOR_NAME, "boids")
+    if not isinstance(name, str):
+        raise ValidationError(f"{path}: [behavior] name must be an installed behavior model's name; got {name!r}")
+    params = {k: v for k, v in table.items() if k != _BEHAVIOR_NAME}
+    clash = sorted({"dt", "obstacles"} & set(params))
+    if clash:
+        raise ValidationError(
+            f"{path}: [behavior] {clash[0]} comes from the scenario ([problem] dt, [[obstacle]]); leave it out"
+        )
+    return {"behavior": name, "behavior_params": params}
 
 
 def _named(where, build, *args):

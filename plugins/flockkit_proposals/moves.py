@@ -1,6 +1,7 @@
 """Proposal moves of paper 004, section 3.4.1. Each returns a flockkit.constrained.Proposal (the new
 motion and the frames and agents it changed) or None, never mutates the current motion, and never
-moves a point-constrained agent at a constrained frame."""
+moves an agent-frame the context pins: a point-constrained agent at a constrained frame, and (in
+``flockkit.solve``) the starting state, frames 0 and 1 of every agent, which no term scores."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ from scipy.interpolate import CubicSpline
 
 import flockkit
 from flockkit import validate
-from flockkit.constrained import Proposal, initial_trajectories, regenerate
+from flockkit.constrained import Proposal, regenerate
 
 
 def _segment(context, n_frames, rng, short_probability):
@@ -40,7 +41,8 @@ class Bump:
     """Add 1 to `max_bumps` bumps d = 16 s (x^2 - 2x^3 + x^4), s ~ N(0, size x context.scale), each to one free
     agent's trajectory in multi-resolution coordinates, so that the bump follows the trajectory
     and scales with its sample spacing. A bump reaching past the motion is applied to the
-    trajectory extended along its end velocities, and the part outside is dropped."""
+    trajectory extended along its end velocities, and the part outside is dropped; one reaching
+    before ``context.first_movable`` starts at the frame before it, so the held start stays."""
 
     size: float = validate.parameter("proposal", default=0.05, minimum=0, strict=True)
     max_bumps: int = validate.parameter("proposal", default=3, kind="integer", minimum=1)
@@ -52,8 +54,9 @@ class Bump:
         changed, low, high = set(), n_frames, -1
         for _ in range(int(rng.integers(1, self.max_bumps + 1))):
             first, last = _segment(context, n_frames, rng, self.short_probability)
+            first = max(first, context.first_movable - 1)  # its zero end on the last held frame at most
             # frames the bump moves: all but its own (zero) ends, within the motion
-            moved_first, moved_last = max(first + 1, 0), min(last - 1, n_frames - 1)
+            moved_first, moved_last = first + 1, min(last - 1, n_frames - 1)
             if moved_first > moved_last:
                 continue
             free = context.free_agents(moved_first, moved_last + 1)
@@ -75,8 +78,9 @@ class Bump:
 class Retime:
     """Re-time one free agent along its own path over a segment (chosen as for bumps, kept inside
     the motion): the arc length at each sample is offset by o = 16 s (u^2 - 2u^3 + u^4),
-    s ~ N(0, spread * r * context.scale), r the segment's path length. Same path, same total distance, ends fixed;
-    None when the offset would make the agent go backwards."""
+    s ~ N(0, spread * r * context.scale), r the segment's path length. Same path, same total distance, ends fixed
+    (the first at ``context.first_movable - 1`` at the earliest); None when the offset would make the agent go
+    backwards."""
 
     spread: float = validate.parameter("proposal", default=0.025, minimum=0, strict=True)
     short_probability: float = validate.parameter("proposal", default=0.8, minimum=0, maximum=1)
@@ -84,7 +88,7 @@ class Retime:
     def propose(self, current, context, rng):
         n_frames = current.n_frames
         first, last = _segment(context, n_frames, rng, self.short_probability)
-        first, last = max(first, 0), min(last, n_frames - 1)
+        first, last = max(first, context.first_movable - 1, 0), min(last, n_frames - 1)
         if last - first < 2:
             return None
         free = context.free_agents(first + 1, last)
@@ -120,16 +124,20 @@ def _along(path: np.ndarray, travelled: np.ndarray, target: np.ndarray) -> np.nd
 
 @attrs.frozen(kw_only=True)
 class Regenerate:
-    """With probability `everything`, new initial trajectories for the whole problem; otherwise 1
-    to 3 contiguous windows rebuilt, held to the current motion at their ends."""
+    """With probability `everything`, every window rebuilt as the initial trajectories build them,
+    from the current starting state (frames 0 and 1, which ``flockkit.solve`` holds); otherwise 1
+    to 3 contiguous windows rebuilt, held to the current motion at their ends (``regenerate``)."""
 
     everything: float = validate.parameter("proposal", default=0.5, minimum=0, maximum=1)
 
     def propose(self, current, context, rng):
         problem, behavior = context.problem, context.behavior
+        everyone = tuple(range(current.n_agents))
         if rng.random() < self.everything:
-            motion = initial_trajectories(problem, behavior, rng)
-            return Proposal(motion=motion, start=0, stop=current.n_frames, agents=tuple(range(current.n_agents)))
+            if current.n_frames < 3:
+                return None
+            motion = regenerate(problem, behavior, current, 0, current.n_frames - 1, rng)
+            return Proposal(motion=motion, start=2, stop=current.n_frames, agents=everyone)
         spans = context.windows
         count = min(int(rng.integers(1, 4)), len(spans))
         first = int(rng.integers(0, len(spans) - count + 1))
@@ -138,9 +146,7 @@ class Regenerate:
             return None
         motion = regenerate(problem, behavior, current, start, stop, rng)
         held = stop < current.n_frames - 1  # the last frame is free unless constrained
-        return Proposal(
-            motion=motion, start=start + 1, stop=stop if held else stop + 1, agents=tuple(range(current.n_agents))
-        )
+        return Proposal(motion=motion, start=start + 1, stop=stop if held else stop + 1, agents=everyone)
 
 
 # -- multi-resolution bumps ---------------------------------------------------------------------

@@ -1,4 +1,5 @@
 import importlib
+import math
 import warnings
 from pathlib import Path
 
@@ -542,3 +543,139 @@ def test_a_chain_keeps_the_best_of_its_starts():
         assert max(best.residuals) <= 1e-9
         kept.append(best.log_g[0] > one.log_g[0])
     assert any(kept)
+
+
+# -- the starting state, and the keyframed agents' weight ----------------------------------------
+
+
+def start_problem(**extra):
+    """Agent 0 keyframed from frame 0 on, eight free agents, a COM constraint on some of them."""
+    return Problem(
+        n_agents=9,
+        duration=3.0,
+        constraints=[
+            PointConstraint(agent=0, time=0.0, position=[0.0, 0.0], velocity=[1.0, 0.0]),
+            PointConstraint(agent=0, time=2.0, position=[2.3, 0.4]),
+            PointConstraint(agent=0, time=3.0, position=[3.4, 0.3]),
+            ComConstraint(agents=[1, 2, 3, 4], time=1.5, position=[1.0, -1.0], velocity=[1.0, 0.0]),
+        ],
+        **extra,
+    )
+
+
+@pytest.mark.parametrize("name", ["bump", "velocity", "regenerate"])
+def test_moves_never_change_the_starting_state_nor_a_point_constraint(name):
+    """The starting state (frames 0 and 1: positions and the velocity between them) is scored by
+    no term, so a move that changed it would buy motion for free; every built-in move leaves it,
+    and every held agent-frame, exactly as it was, and still changes the motion after it."""
+    from flockkit.constrained import ProposalContext, initial_trajectories, windows
+    from flockkit.constrained.sampler import held_frames
+
+    problem = start_problem()
+    behavior = flockkit.get("behavior", "boids")
+    held = held_frames(problem)
+    assert held[:2].all() and held[20, 0] and not held[20, 1:].any()
+    move, rng = flockkit.get("proposal", name), np.random.default_rng(4)
+    made = 0
+    for seed in range(3):
+        motion = initial_trajectories(problem, behavior, np.random.default_rng(seed))
+        # the frames nearest the start scored worst, so that moves aim there most
+        scores = np.linspace(-1e3, 0.0, motion.n_frames)
+        context = ProposalContext(problem=problem, behavior=behavior, windows=tuple(windows(problem)),
+                                  scores=scores, pinned=held)  # fmt: skip
+        assert context.first_movable == 2
+        for _ in range(40):
+            proposal = move.propose(motion, context, rng)
+            if proposal is None:
+                continue
+            new = proposal.motion.positions
+            np.testing.assert_array_equal(new[:2], motion.positions[:2])
+            np.testing.assert_array_equal(new[held], motion.positions[held])
+            made += not np.array_equal(new[2:], motion.positions[2:])
+    assert made >= 10
+
+
+class StartMover:
+    """A move that shifts frame 1 of a free agent (the starting velocity), reporting it honestly."""
+
+    def propose(self, current, context, rng):
+        positions = np.array(current.positions)
+        positions[1, 5] += [0.3, 0.0]
+        return flockkit.Proposal(
+            motion=flockkit.Motion(positions=positions, dt=current.dt, channels=dict(current.channels)),
+            start=1,
+            stop=2,
+            agents=(5,),
+        )
+
+
+def test_the_sampler_refuses_a_move_that_changes_the_starting_state():
+    problem = start_problem()
+    start = flockkit.solve(problem, iterations=0, refine=0, seed=2).motion
+    solution = flockkit.solve(problem, iterations=30, refine=0, seed=2, proposals=[(StartMover(), 1.0)])
+    assert not solution.trace[0].accepted.any()
+    np.testing.assert_array_equal(solution.motion.positions, start.positions)
+
+
+def test_refine_holds_the_starting_state_and_the_point_constraints():
+    from flockkit.constrained import initial_trajectories, refine
+    from flockkit.constrained.sampler import pinned_frames
+
+    problem = start_problem()
+    behavior = flockkit.get("behavior", "boids")
+    motion = initial_trajectories(problem, behavior, np.random.default_rng(1))
+    refined = refine(problem, behavior, motion, pinned_frames(problem), np.random.default_rng(1), iterations=5)
+    np.testing.assert_array_equal(refined.positions[:2], motion.positions[:2])
+    assert not np.array_equal(refined.positions[2:], motion.positions[2:])
+    assert max(flockkit.constrained.residuals(problem, refined)[:3]) <= 1e-9
+
+
+def independent_score(problem, motion, weight):
+    """log g with the keyframed agent's wander terms weighed by `weight`, from the impulses the
+    model infers (paper 004's Gaussian, written out here) and the objective terms."""
+    behavior = flockkit.get("behavior", "boids", dt=problem.dt)
+    sigma = behavior.wander_sigma
+    squares = np.sum(behavior.wander_impulses(motion) ** 2, axis=-1)  # (T, N)
+    interior = np.zeros(motion.n_frames, dtype=bool)
+    interior[1:-1] = True
+    log_norm = math.log(sigma * math.sqrt(2 * math.pi))
+    per_agent = np.where(interior[:, None], -squares / (2 * sigma**2) - log_norm, 0.0)
+    per_agent[:, 0] += np.where(interior, (weight - 1) * -squares[:, 0] / (2 * sigma**2), 0.0)
+    terms = [flockkit.get("objective", name) for name in ("com", "shape", "flocks")]
+    return per_agent.sum() + sum(t.log_terms(motion, problem).sum() for t in terms)
+
+
+@pytest.mark.parametrize("weight", [1.0, 0.25, 0.0])
+def test_the_keyframed_weight_weighs_the_point_constrained_agents_terms(weight):
+    """Problem.keyframed_weight scales the keyframed agent's -|impulse|^2 / 2 sigma^2 in log g,
+    and incremental scores after sampling still equal a full evaluation written from the paper."""
+    problem = start_problem(keyframed_weight=weight)
+    solution = flockkit.solve(problem, iterations=150, refine=0, seed=3)
+    assert np.count_nonzero(solution.trace[0].accepted) > 0
+    assert solution.log_g[0] == pytest.approx(independent_score(problem, solution.motion, weight), rel=1e-9)
+    if weight != 1.0:
+        plain = independent_score(problem, solution.motion, 1.0)
+        assert abs(solution.log_g[0] - plain) > 1e-3
+
+
+def test_the_keyframed_weight_is_a_number_at_least_zero():
+    with pytest.raises(ValidationError, match="Problem.keyframed_weight"):
+        start_problem(keyframed_weight=-0.5)
+    assert np.array_equal(start_problem(keyframed_weight=0.3).agent_weights(), [0.3] + [1.0] * 8)
+
+
+def test_a_scenario_sets_the_behavior_s_parameters(tmp_path):
+    from flockkit.constrained import load_scenario
+
+    text = "[problem]\nagents = 4\nduration = 1.0\nkeyframed_weight = 0.5\n\n[behavior]\ncohesion_weight = 6.0\n"
+    path = tmp_path / "insects.toml"
+    path.write_text(text + "[solve]\niterations = 3\n")
+    problem, settings = load_scenario(path)
+    assert settings == {"iterations": 3, "behavior": "boids", "behavior_params": {"cohesion_weight": 6.0}}
+    assert problem.keyframed_weight == 0.5
+    path.write_text(text.replace("cohesion_weight", "dt"))
+    with pytest.raises(ValidationError, match=r"\[behavior\] dt comes from the scenario"):
+        load_scenario(path)
+    path.write_text(text.replace("[behavior]", "[solve]"))
+    with pytest.raises(ValidationError, match="unknown key 'cohesion_weight'"):
+        load_scenario(path)
