@@ -4,7 +4,8 @@ Each check is ``check_<property>(name, move, *, behavior=None)`` and raises Asse
 what is wrong. They call the move many times on the initial trajectories of a problem with point,
 COM and shape constraints (in each dimension the move declares), made with the partner
 `behavior` (a model stepping dt = 0.1 s; default: the built-in ``boids``, where installed), and
-look at every proposal it makes.
+look at every proposal it makes. The context holds what ``solve`` holds: the point-constrained
+agent-frames and the starting state (frames 0 and 1 of every agent) as `pinned`.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import numpy as np
 
 from ..constrained import Proposal, ProposalContext, initial_trajectories, windows
 from ..constrained.problem import ComConstraint, PointConstraint, Problem, ShapeConstraint
-from ..constrained.sampler import pinned_frames
+from ..constrained.sampler import held_frames
 from ..regions import Ball, Polygon
 from ._expect import dims_of, needs, partner
 
@@ -60,7 +61,7 @@ def _cases(move, behavior):
             behavior=behavior,
             windows=tuple(windows(problem)),
             scores=scores,
-            pinned=pinned_frames(problem),
+            pinned=held_frames(problem),
         )
         found.append((problem, motion, context))
     return found
@@ -107,6 +108,20 @@ def check_keeps_point_constraints(name, move, *, behavior=None):
 
 
 @needs("behavior")
+def check_leaves_held_frames(name, move, *, behavior=None):
+    """Every agent-frame the context pins (``context.pinned``: point constraints and the starting
+    state, frames 0 and 1 of every agent, which no term scores) keeps its exact position."""
+    for problem, current, proposal in _proposals(move, behavior):
+        moved = np.any(proposal.motion.positions != current.positions, axis=2) & held_frames(problem)
+        if moved.any():
+            frame, agent = (int(v[0]) for v in np.nonzero(moved))
+            raise AssertionError(
+                f"{name} moved agent {agent} at frame {frame}, which the context pins"
+                + (" (the starting state: a move there buys motion no term scores)" if frame < 2 else "")
+            )
+
+
+@needs("behavior")
 def check_reports_changes(name, move, *, behavior=None):
     """Every changed value lies at frames start <= t < stop and at the reported agents."""
     for _, current, proposal in _proposals(move, behavior):
@@ -130,4 +145,10 @@ def check_input_unchanged(name, move, *, behavior=None):
         assert np.array_equal(positions, motion.positions), f"{name}.propose changed the current motion"
 
 
-CHECKS = (check_returns_proposals, check_keeps_point_constraints, check_reports_changes, check_input_unchanged)
+CHECKS = (
+    check_returns_proposals,
+    check_keeps_point_constraints,
+    check_leaves_held_frames,
+    check_reports_changes,
+    check_input_unchanged,
+)

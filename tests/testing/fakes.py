@@ -736,6 +736,17 @@ class MovesPinned(Retime):
         )
 
 
+class RestartsFree(Retime):
+    """Speeds up the free agents' start (frame 1), which no term scores, and says so."""
+
+    def propose(self, current, context, rng):
+        positions = current.positions.copy()
+        free = np.flatnonzero(~context.pinned[1]) if not context.pinned[1].all() else np.arange(current.n_agents)
+        positions[1, free] += 0.5
+        return flockkit.Proposal(motion=flockkit.Motion(positions=positions, dt=current.dt), start=1, stop=2,
+                                 agents=tuple(int(a) for a in free))  # fmt: skip
+
+
 class UnderReports(Retime):
     def propose(self, current, context, rng):
         proposal = super().propose(current, context, rng)
@@ -757,6 +768,7 @@ BROKEN_BY_KIND["proposal"] = {
     "check_interface": NoPropose,
     "check_returns_proposals": DropsFrames,
     "check_keeps_point_constraints": MovesPinned,
+    "check_leaves_held_frames": RestartsFree,
     "check_reports_changes": UnderReports,
     "check_input_unchanged": MutatesCurrent,
 }
