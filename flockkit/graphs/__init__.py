@@ -1,6 +1,7 @@
 """Data-driven groups (paper 000): motion graphs of recorded group motion, walks through them
 (one graph, or the graphs of an object's parts), and synthesis of new motion from walks."""
 
+from .bridges import BRIDGE_PLAUSIBILITY, bridge, bridge_plan
 from .graph import (
     Clip,
     MotionGraph,
@@ -34,4 +35,7 @@ __all__ = [
     "played_length",
     "played_frames",
     "blended_frames",
+    "bridge",
+    "bridge_plan",
+    "BRIDGE_PLAUSIBILITY",
 ]

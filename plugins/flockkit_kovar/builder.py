@@ -89,6 +89,13 @@ class Kovar:
         Seconds between the frames that offer turns.
     prune : bool
         Skip exact evaluations the metric's declared ``pairs_within`` (or ``lower_bound``) rules out.
+    bridges : bool
+        Add solver-made bridges (``flockkit.graphs.bridge`` along ``flockkit.graphs.bridge_plan``):
+        the recording's own change of formation every `bridge_seconds`, turned by +-`bridge_turn`
+        degrees (straight where a turn is refused), from the recording's end on; they join the
+        dead ends that trimming drops (with every transition found there) and give region walks
+        turns the recording lacks. Each is solved with `bridge_behavior` and refused below
+        `bridge_plausibility` (log plausibility per agent-step).
     n_jobs : int, optional
         joblib workers for the difference matrix (-1: all cores; None: what
         ``joblib.parallel_config`` says, else 1); any joblib backend runs them (``flockkit.parallel``).
@@ -104,6 +111,11 @@ class Kovar:
     turn_angle: float = validate.parameter("kovar", default=15.0, minimum=0, maximum=90)
     turn_interval: float = validate.parameter("kovar", default=2.0, minimum=0, strict=True)
     prune: bool = validate.parameter("kovar", default=True, kind="flag")
+    bridges: bool = validate.parameter("kovar", default=False, kind="flag")
+    bridge_seconds: float = validate.parameter("kovar", default=6.0, minimum=0, strict=True)
+    bridge_turn: float = validate.parameter("kovar", default=30.0, minimum=0, maximum=90)
+    bridge_plausibility: float = validate.parameter("kovar", default=flockkit.graphs.BRIDGE_PLAUSIBILITY)
+    bridge_behavior: object = attrs.field(default="boids")
     n_jobs: int | None = attrs.field(default=None)
 
     capabilities = flockkit.Capabilities(progress=True)
@@ -115,7 +127,8 @@ class Kovar:
     def build(
         self, motion: flockkit.Motion, metric, rng: np.random.Generator, *, progress=None
     ) -> flockkit.MotionGraph:
-        """The motion graph of `motion` under `metric` (deterministic; `rng` is not needed).
+        """The motion graph of `motion` under `metric` (deterministic for a seeded `rng`, which only
+        bridges use).
         `progress(done, total, stage)` is called as pairs are bounded and distances computed."""
         if not isinstance(motion, flockkit.Motion):
             raise ValidationError(f"kovar: motion must be a flockkit.Motion; got {type(motion).__name__}")
@@ -162,7 +175,19 @@ class Kovar:
             transitions += flockkit.graphs.turns(
                 motion, np.arange(nodes[0], nodes[-1] - blend + 1, every), angle=self.turn_angle, blend=blend
             )
-        return flockkit.MotionGraph.assemble(motion, transitions, params=params, provenance={"builder": "kovar"})
+        graph = flockkit.MotionGraph.assemble(motion, transitions, params=params, provenance={"builder": "kovar"})
+        if not self.bridges:
+            return graph
+        plan = flockkit.graphs.bridge_plan(graph, seconds=self.bridge_seconds, degrees=self.bridge_turn)
+        return flockkit.graphs.bridge(
+            graph,
+            plan,
+            behavior=self.bridge_behavior,
+            seconds=self.bridge_seconds,
+            min_plausibility=self.bridge_plausibility,
+            transitions=transitions,
+            seed=int(rng.integers(2**32)),
+        )
 
     def _choose(self, motion, frames, far, matrix, blend, spread, prune):
         """(threshold, chosen minima) by the rule the parameters ask for: the paper's `per_second`,

@@ -146,7 +146,7 @@ class RegionWalk:
         # Depth-first over decisions: each entry holds a state and the edges still to try there;
         # when none is left, step back and try the previous decision's next edge.
         stack = [(node, math.inf, rotation, translation, 0, steer.order(node, math.inf, rotation, translation, rng))]
-        edges, tries = [], 0
+        edges, tries, reached = [], 0, 0
         while stack[-1][4] < needed:
             node, since, rotation, translation, played, options = stack[-1]
             while options:
@@ -157,7 +157,8 @@ class RegionWalk:
             else:
                 stack.pop()
                 if not stack or tries > 20 * self.budget:
-                    raise ValidationError(_impossible(graph, self.region, com, duration, self.horizon, tries))
+                    seconds = reached * graph.motion.dt
+                    raise ValidationError(_impossible(graph, self.region, com, duration, self.horizon, tries, seconds))
                 edges.pop()
                 continue
             edges.append(edge)
@@ -167,6 +168,7 @@ class RegionWalk:
             target = graph.edge_target(edge)
             order = steer.order(target, since, rotation, translation, rng)
             stack.append((target, since, rotation, translation, played + frames, order))
+            reached = max(reached, played + frames)
         return flockkit.Walk(start=stack[0][0], edges=edges, rotation=stack[0][2], translation=stack[0][3])
 
 
@@ -215,8 +217,11 @@ def _turn_degrees(rotation) -> float:
     return float(np.degrees(np.arccos(np.clip(cosine, -1, 1))))
 
 
-def _impossible(graph, region, com, duration, horizon, tries) -> str:
-    """Why a region walk failed, in numbers, and what to change."""
+def _impossible(graph, region, com, duration, horizon, tries, reached) -> str:
+    """Why a region walk failed, in numbers, and what to change: a region narrower than the
+    group's tightest circle cannot hold it; in a wider one the search ran out (its look-ahead
+    finds no way to turn in time on this graph), which the graph's edges or a longer look-ahead
+    can change, not a wider region."""
     blend = max(int(graph.tables.transition_blend.max()), 1)
     dt = graph.motion.dt
     travel = float(np.linalg.norm(com[blend:] - com[:-blend], axis=1).min()) if len(com) > blend else 0.0
@@ -235,10 +240,21 @@ def _impossible(graph, region, com, duration, horizon, tries) -> str:
         turning = f"the graph has no turns and its recording turns at most {degrees:.3g} degrees per blend"
         circle = travel * 360 / degrees / np.pi
         change = "a graph with turns (kovar turn_angle > 0, its default)"
+    numbers = (
+        f"after each transition the group travels at least {travel:.3g} units before it may take another "
+        f"({blend * dt:g} s blend); {turning}, so its tightest circle is about {circle:.3g} units across"
+    )
+    if circle < width:
+        return (
+            f"cannot keep the group inside the region for {duration:g} s: the search gave up after {tries} edges, "
+            f"{reached:g} s in at best. The region, {width:.3g} units across at its narrowest, is wide enough for "
+            f"the group's turns ({numbers}), but looking {horizon:g} s ahead the walk finds no way through this "
+            f"graph's {len(graph.nodes)} nodes and {len(graph.transitions)} transitions that turns in time. Use a "
+            f"longer horizon or a larger budget, or a graph with more ways to turn: solver-made bridges "
+            f"(flockkit.graphs.bridge, kovar bridges=True), a longer recording, or {change}"
+        )
     return (
-        f"cannot keep the group inside the region for {duration:g} s (searched {tries} edges): after each "
-        f"transition the group travels at least {travel:.3g} units before it may take another "
-        f"({blend * dt:g} s blend); {turning}, so its tightest circle is about {circle:.3g} units across, "
+        f"cannot keep the group inside the region for {duration:g} s (searched {tries} edges): {numbers}, "
         f"against a region {width:.3g} units across at its narrowest. Use a region wider than that circle, a "
         f"horizon longer than {horizon:g} s, or {change}"
     )

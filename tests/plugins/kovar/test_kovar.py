@@ -319,3 +319,19 @@ def test_a_turn_steers_the_synthesized_group_by_its_angle(graph):
     assert np.isclose(abs(angle), 15.0)
     steps = np.linalg.norm(np.diff(com, axis=0), axis=1)
     assert steps.max() <= 1.5 * np.linalg.norm(np.diff(source, axis=0), axis=1).max()  # no jump
+
+
+def test_bridges_join_the_dead_ends_and_add_turned_stretches():
+    """bridges=True: the graph keeps frames that trimming dropped, holds solver-made stretches
+    (reported in params), and stays the same graph for the same seed."""
+    recording = flockkit.simulate(n_agents=6, steps=300, seed=3)
+    options = {"blend_time": 1.0, "min_transitions": 10, "bridge_seconds": 3.0, "bridge_turn": 20.0}
+    plain = flockkit.build_graph(recording, seed=3, **options)
+    bridged = flockkit.build_graph(recording, seed=3, bridges=True, **options)
+    first = bridged.params["bridge_frames"]
+    assert first == recording.n_frames and bridged.motion.n_frames > first
+    assert any(s["made"] for s in bridged.params["bridges"]["stretches"])
+    kept = bridged.nodes[bridged.nodes < first]
+    assert kept.min() <= plain.nodes.min() and kept.max() >= plain.nodes.max()
+    assert bridged.kept_frames() > plain.kept_frames()
+    assert flockkit.build_graph(recording, seed=3, bridges=True, **options) == bridged
