@@ -81,14 +81,17 @@ def write_usd(motion: Motion, path, *, fps: float | None = USD_FPS, meters_per_u
 def write_meshes(path, objects, *, dt: float, n_frames: int, fps: float | None = USD_FPS,
                  meters_per_unit: float = 1.0, metadata: dict | None = None) -> None:  # fmt: skip
     """A USD stage of objects under /Scene, each (name, positions (T, N, D), faces (F, K) or None,
-    custom data {key: value}): an animated UsdGeom.Mesh where it has faces, else UsdGeom.Points,
-    its points time-sampled at each of the `n_frames` frames `dt` apart (a 2D object lies in
-    z = 0). The stage as :func:`write_usd` makes it, `metadata` (JSON-like) in its root layer's
+    custom data {key: value}[, transform]): an animated UsdGeom.Mesh where it has faces, else
+    UsdGeom.Points, its points time-sampled at each of the `n_frames` frames `dt` apart (a 2D
+    object lies in z = 0). An object with a `transform`, (translations (T, 3), turns (T,) radians
+    about +z, unwrapped), holds its points in its own frame and is placed by time-sampled
+    translate and rotateZ ops (degrees; unwrapped, so that readers interpolate the short way).
+    The stage as :func:`write_usd` makes it, `metadata` (JSON-like) in its root layer's
     ``customLayerData["flockkit"]``."""
     _, Usd, UsdGeom, Vt = _modules()
     with _stage(path, "/Scene", dt=dt, n_frames=n_frames, fps=fps, meters_per_unit=meters_per_unit,
                 metadata=metadata) as (stage, times):  # fmt: skip
-        for name, motion_positions, faces, custom in objects:
+        for name, motion_positions, faces, custom, *transform in objects:
             prim = UsdGeom.Mesh.Define(stage, name) if faces is not None else UsdGeom.Points.Define(stage, name)
             if faces is not None:
                 faces = np.asarray(faces)
@@ -103,6 +106,12 @@ def write_meshes(path, objects, *, dt: float, n_frames: int, fps: float | None =
                 points.Set(Vt.Vec3fArray.FromNumpy(positions[frame]), Usd.TimeCode(float(when)))
             for key, value in custom.items():
                 prim.GetPrim().SetCustomDataByKey(key, value)
+            if transform:
+                translations, turns = (np.asarray(a, dtype=float) for a in transform[0])
+                translate, rotate = prim.AddTranslateOp(), prim.AddRotateZOp()
+                for frame, when in enumerate(times):
+                    translate.Set(tuple(float(x) for x in translations[frame]), Usd.TimeCode(float(when)))
+                    rotate.Set(float(np.degrees(turns[frame])), Usd.TimeCode(float(when)))
 
 
 def write_crowd(path, *, names, joints, rest, bind, scales, fps: float, n_frames: int, rotations, translations,

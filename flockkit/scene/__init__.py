@@ -8,14 +8,16 @@ templates placed in a region and animated after constraints drawn as arrows.
 object's position with the inverse-distance weights of section 5.2) and ``SelfMovement`` (an arrow
 that rides on one object and sets its speed and heading) both give, per object and output frame, a
 target feature arrow (``flockkit.Features``' form: length in [0, 1], direction). ``Scene`` places
-the duplicates and walks each after its targets; ``SceneAnimation`` is the result.
+the duplicates and walks each after its targets; objects whose arrows are self-movement
+(``Features.speed``) move and turn after them (``Paths``); ``SceneAnimation`` is the result.
 """
 
 from .animation import SceneAnimation
-from .features import Features, arrow_keyframes, interpolate_arrows
+from .features import Features, arrow_keyframes, ground_speed, interpolate_arrows
 from .file import read_scene
 from .flow import Arrow, FlowField, SelfMovement
 from .layers import GraphLayers, LayeredWalk, crack_width, seam_stretch, synthesize_layers, walk_layers
+from .movement import Paths
 from .placement import Placement
 from .scene import Scene
 from .segmentation import Segmentation, canonical_labels, merge_rigid_parts, same_partition
@@ -34,6 +36,8 @@ __all__ = [
     "Features",
     "arrow_keyframes",
     "interpolate_arrows",
+    "ground_speed",
+    "Paths",
     "Arrow",
     "FlowField",
     "SelfMovement",

@@ -15,6 +15,7 @@ from ..regions import Polygon
 from .desync import NEAREST, NEIGHBOUR_DIAGONALS, largest_in_step, stacked
 from .flow import FlowField, SelfMovement, flow_constraints
 from .layers import GraphLayers
+from .movement import Paths, source_frames_at, world_positions
 from .placement import Placement, heading_turn, turned_half
 from .templates import footprint, template_view
 
@@ -48,7 +49,9 @@ class SceneAnimation:
     and after de-synchronisation the largest share of frames two neighbours play in step
     (``in_step_before``, ``in_step_after``: source frames at most ``in_step_frames`` apart in some
     part) and the share of neighbour pairs in step on more than 5% of frames
-    (``pairs_in_step_before``, ``pairs_in_step_after``); see :meth:`neighbours`."""
+    (``pairs_in_step_before``, ``pairs_in_step_after``); see :meth:`neighbours`. `paths`, where
+    some objects move (``flockkit.scene.movement``), holds where each object is, its heading and
+    the source time it plays at each frame; None: every object stands where it is placed."""
 
     templates: tuple = attrs.field(converter=tuple)
     placement: Placement
@@ -58,6 +61,7 @@ class SceneAnimation:
     constraints: tuple = attrs.field(default=(), converter=flow_constraints)
     region: Polygon | None = attrs.field(default=None)
     report: dict = attrs.field(factory=dict)
+    paths: Paths | None = attrs.field(default=None)
     _footprints: list = attrs.field(init=False, repr=False, eq=False)  # (center, half extents) per template
 
     def __attrs_post_init__(self):
@@ -73,6 +77,11 @@ class SceneAnimation:
         heading about +z and moved to its position."""
         played = template_view(self.templates[self.placement.templates[i]]).synthesize(self.walks[i])
         center, _ = self._footprints[self.placement.templates[i]]
+        if self.paths is not None and self.paths.moving[i]:
+            paths = self.paths
+            positions = world_positions(played.positions, center, self.placement.scales[i], paths.clocks[i],
+                                        paths.headings[i], paths.positions[i])  # fmt: skip
+            return Motion._adopt(positions, self.dt)
         dims = played.dims
         scale, turn = self.placement.scales[i], heading_turn(self.placement.headings[i], dims)
         where = np.zeros(dims)
@@ -80,21 +89,50 @@ class SceneAnimation:
         positions = (played.positions[: self.n_frames] - center) @ (scale * turn).T + where
         return Motion._adopt(positions, self.dt)
 
+    def local_motion(self, i: int) -> Motion:
+        """Object i's points in its own frame at each output frame: its walk played at its clock,
+        about the template's center, scaled; `transforms` places them (a moving object's export)."""
+        played = template_view(self.templates[self.placement.templates[i]]).synthesize(self.walks[i])
+        center, _ = self._footprints[self.placement.templates[i]]
+        clock = self.paths.clocks[i] if self.paths is not None else np.arange(self.n_frames, dtype=float)
+        still = np.zeros(self.n_frames)
+        positions = world_positions(played.positions, center, self.placement.scales[i], clock, still,
+                                    np.zeros((self.n_frames, 2)))  # fmt: skip
+        return Motion._adopt(positions, self.dt)
+
+    def transforms(self) -> tuple[np.ndarray, np.ndarray]:
+        """(positions (objects, frames, 2) on the ground, headings (objects, frames) radians about
+        +z): where each object's center is and how it is turned at each output frame."""
+        if self.paths is not None:
+            return np.asarray(self.paths.positions), np.asarray(self.paths.headings)
+        n = self.n_frames
+        return np.repeat(self.placement.positions[:, None], n, axis=1), np.repeat(self.placement.headings[:, None], n,
+                                                                                  axis=1)  # fmt: skip
+
     @staticmethod
-    def _frames_of(template, walk, n_frames: int) -> np.ndarray:
+    def _frames_of(template, walk, n_frames: int, clock=None) -> np.ndarray:
+        """(parts, n_frames): the source frame each part of `walk` plays at each output frame (at
+        `clock`, a moving object's source time per output frame, if given)."""
         view = template_view(template)
-        return np.stack([played_frames(g, w)[0][:n_frames] for g, w in zip(view.graphs, view.part_walks(walk))])
+        played = [played_frames(g, w)[0] for g, w in zip(view.graphs, view.part_walks(walk))]
+        if clock is None:
+            return np.stack([f[:n_frames] for f in played])
+        return source_frames_at(np.stack([f[: min(map(len, played))] for f in played]), clock)
 
     def source_frames(self) -> np.ndarray:
         """(objects, parts, frames): the source frame each object's part plays at each output
         frame (-1 for parts an object's template does not have)."""
         return stacked(
             [
-                self._frames_of(self.templates[kind], walk, self.n_frames)
-                for kind, walk in zip(self.placement.templates, self.walks)
+                self._frames_of(self.templates[kind], walk, self.n_frames, self._clock(i))
+                for i, (kind, walk) in enumerate(zip(self.placement.templates, self.walks))
             ],
             self.n_frames,
         )
+
+    def _clock(self, i: int):
+        """Object i's clock where it moves, else None (it plays output frame t at t)."""
+        return self.paths.clocks[i] if self.paths is not None and self.paths.moving[i] else None
 
     def bounding_boxes(self) -> np.ndarray:
         """(objects, 2, 2): the (low, high) corners in x, y of each object's placed footprint."""
@@ -146,12 +184,14 @@ class SceneAnimation:
         writes motions. Needs usd-core.
 
         Objects are written where the scene placed them, in flockkit's axes: z up, standing on
-        z = 0, turned about +z. Templates built from a mesh read in another convention (a glTF
-        file is y up) stand upright only if the mesh was converted before it was analysed
-        (``AnimatedMesh.to_flockkit_axes``). The stage's ``customLayerData["flockkit"]``
-        records the axes and each template's height and size in metres; a FlockkitWarning with
-        a hint (``flockkit.mesh.unit_hint``) comes where a template is a size no object
-        plausibly has (a mesh modelled in centimetres and never said to be)."""
+        z = 0, turned about +z. An object that moves (``paths``) holds its points in its own
+        frame and is placed by time-sampled translate and rotateZ ops: its transform over time.
+        Templates built from a mesh read in another convention (a glTF file is y up) stand upright
+        only if the mesh was converted before it was analysed (``AnimatedMesh.to_flockkit_axes``).
+        The stage's ``customLayerData["flockkit"]`` records the axes and each template's height
+        and size in metres; a FlockkitWarning with a hint (``flockkit.mesh.unit_hint``) comes
+        where a template is a size no object plausibly has (a mesh modelled in centimetres and
+        never said to be)."""
         from pathlib import Path
 
         if Path(path).suffix.lower() not in (".usda", ".usdc", ".usd"):
@@ -162,7 +202,7 @@ class SceneAnimation:
         if not isinstance(other, SceneAnimation):
             return NotImplemented
         return (self.templates == other.templates and self.placement == other.placement and self.walks == other.walks
-                and self.dt == other.dt and self.n_frames == other.n_frames)  # fmt: skip
+                and self.dt == other.dt and self.n_frames == other.n_frames and self.paths == other.paths)  # fmt: skip
 
     __hash__ = None
 
@@ -205,6 +245,9 @@ def _save(animation: SceneAnimation, path) -> None:
     edges = [e for w in walks for e in w.edges]
     arrays["edge_transition"] = np.array([kind == "transition" for kind, _ in edges], dtype=bool)
     arrays["edge_index"] = np.array([index for _, index in edges], dtype=np.int64)
+    if animation.paths is not None:
+        for name in ("positions", "headings", "clocks", "moving"):
+            arrays[f"paths.{name}"] = getattr(animation.paths, name)
     kinds, headers = [], []
     for k, template in enumerate(animation.templates):
         own, header = template._payload()
@@ -250,7 +293,10 @@ def _load(path) -> SceneAnimation:
             at += parts
         if at != len(flat):
             raise ValidationError(f"{len(flat)} walks for {at} object parts")
-        return SceneAnimation(templates=templates, placement=placement, walks=walks, dt=header["dt"],
+        paths = None
+        if "paths.positions" in arrays:
+            paths = Paths(**{name: arrays[f"paths.{name}"] for name in ("positions", "headings", "clocks", "moving")})
+        return SceneAnimation(templates=templates, placement=placement, walks=walks, dt=header["dt"], paths=paths,
                               n_frames=header["n_frames"], report=header.get("report", {}),
                               region=None if header.get("region") is None else Polygon(vertices=header["region"]),
                               constraints=[_constraint_from_json(c) for c in header["constraints"]])  # fmt: skip
@@ -280,10 +326,15 @@ def _export_usd(animation: SceneAnimation, path, *, fps, meters_per_unit) -> Non
                 "template_heights_m": heights, "template_sizes_m": sizes}  # fmt: skip
     width = len(str(animation.placement.n_objects))
     objects = []
-    for i, motion in enumerate(animation.motions):
+    places, turns = animation.transforms()
+    for i in range(animation.placement.n_objects):
         template = animation.templates[animation.placement.templates[i]]
         faces = template_view(template).faces
-        objects.append((f"/Scene/Object{i:0{width}d}", motion.positions, faces,
-                        {"flockkit:template": int(animation.placement.templates[i])}))  # fmt: skip
+        name, custom = f"/Scene/Object{i:0{width}d}", {"flockkit:template": int(animation.placement.templates[i])}
+        if animation.paths is not None and animation.paths.moving[i]:  # its own frame, placed by its transform
+            ground = np.column_stack([places[i], np.zeros(animation.n_frames)])
+            objects.append((name, animation.local_motion(i).positions, faces, custom, (ground, turns[i])))
+        else:
+            objects.append((name, animation.motion(i).positions, faces, custom))
     write_meshes(path, objects, dt=animation.dt, n_frames=animation.n_frames, fps=fps,
                  meters_per_unit=meters_per_unit, metadata=metadata)  # fmt: skip

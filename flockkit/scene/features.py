@@ -6,6 +6,11 @@ Stored as Cartesian vectors (T, D) of length at most 1; ``Features.spherical()``
 c = (tau, phi, theta): length, azimuth in the x-y plane from +x, and polar angle from the up axis
 (+z; in 2D, pi / 2). Keyframed arrows are interpolated with :func:`interpolate_arrows`: their
 direction along the great circle between keyframes, their length linearly.
+
+An object that walks (an animal, a character) carries self-movement arrows: ``Features.speed``
+says how fast an arrow of length 1 carries it, so each frame's arrow is its travel in its own
+coordinates. :func:`ground_speed` measures that travel for a clip played in place, from the
+points that carry it (its feet).
 """
 
 from __future__ import annotations
@@ -18,7 +23,12 @@ from ..errors import ValidationError
 from ..motion import Motion
 from ..validate import number
 
-__all__ = ["Features", "interpolate_arrows", "arrow_keyframes"]
+__all__ = ["Features", "interpolate_arrows", "arrow_keyframes", "ground_speed"]
+
+# Points within this share of an in-place clip's height of its lowest point in a frame carry it
+# (they touch the ground): ground_speed measures how fast they move back (our choice; the Fox's
+# paws and a generated walker's feet, tests/core/test_moving_scene.py).
+CONTACT = 0.03
 
 
 def _vectors(value) -> np.ndarray:
@@ -111,13 +121,29 @@ def interpolate_arrows(times: np.ndarray, vectors: np.ndarray, at) -> np.ndarray
     return length * _slerp(directions[k], directions[k + 1], u)
 
 
+def _speed(value):
+    return None if value is None else number(value, "Features.speed", minimum=0, strict=True)
+
+
 @attrs.frozen(kw_only=True, eq=False)
 class Features:
     """Feature arrows of a source motion, one per frame: `vectors` (T, D), length in [0, 1]; `dt`
-    seconds between frames."""
+    seconds between frames.
+
+    `speed` None: the arrows are forces the object is under (wind on a flag); an object placed in
+    a scene stays where it stands. A number: the arrows are self-movement (section 4.2's "moving
+    speed and facing direction"): played in place, frame t carries the object along its arrow at
+    length x `speed` units per second (its clip's ground speed), so a scene moves and turns it
+    after its targets (``flockkit.scene.movement``)."""
 
     vectors: np.ndarray = attrs.field(converter=_vectors)
     dt: float = attrs.field(converter=lambda v: number(v, "Features.dt", minimum=0, strict=True))
+    speed: float | None = attrs.field(default=None, converter=_speed)
+
+    @property
+    def moves(self) -> bool:
+        """Whether these are self-movement arrows (`speed` is set)."""
+        return self.speed is not None
 
     @property
     def n_frames(self) -> int:
@@ -140,18 +166,37 @@ class Features:
     def __eq__(self, other):
         if not isinstance(other, Features):
             return NotImplemented
-        return self.dt == other.dt and np.array_equal(self.vectors, other.vectors)
+        return self.dt == other.dt and self.speed == other.speed and np.array_equal(self.vectors, other.vectors)
 
     __hash__ = None
 
     @classmethod
-    def from_keyframes(cls, keyframes, *, n_frames: int, dt: float) -> Features:
+    def from_keyframes(cls, keyframes, *, n_frames: int, dt: float, speed: float | None = None) -> Features:
         """Features of `n_frames` frames from a few keyframed arrows, ``[(time, vector), ...]``
         (times in seconds, increasing, within the motion; vectors of length at most 1):
-        direction along the great circle, length linearly, held outside the keyframes."""
+        direction along the great circle, length linearly, held outside the keyframes. `speed`
+        as for Features (None: forces)."""
         dt = number(dt, "Features.from_keyframes: dt", minimum=0, strict=True)
         times, vectors = arrow_keyframes(keyframes, "Features.from_keyframes: keyframes", duration=(n_frames - 1) * dt)
-        return cls(vectors=interpolate_arrows(times, vectors, np.arange(n_frames) * dt), dt=dt)
+        return cls(vectors=interpolate_arrows(times, vectors, np.arange(n_frames) * dt), dt=dt, speed=speed)
+
+    @classmethod
+    def from_stride(cls, motion: Motion, *, forward, contact: float = CONTACT) -> Features:
+        """Self-movement arrows of a clip played in place (a walk, a run) facing `forward` (a
+        vector in its ground plane, x and y): every arrow `forward` at length 1, and `speed` the
+        clip's :func:`ground_speed` along it, so that a scene moves the object as fast as its feet
+        push back and they do not slide."""
+        if not isinstance(motion, Motion) or motion.dims != 3:
+            raise ValidationError("Features.from_stride needs a 3D flockkit.Motion (z up), such as a mesh's")
+        direction = _ground_direction(forward, "Features.from_stride: forward")
+        speed = ground_speed(motion, forward=direction, contact=contact)
+        if speed <= 0:
+            raise ValidationError(
+                f"Features.from_stride: the points that carry the clip do not move back along forward "
+                f"{direction[:2].tolist()} (their median speed along it is {-speed:.3g} units/s forwards): it does "
+                f"not walk that way in place; give the direction it faces"
+            )
+        return cls(vectors=np.tile(direction, (motion.n_frames, 1)), dt=motion.dt, speed=speed)
 
     @classmethod
     def from_motion(cls, motion: Motion, *, top_speed: float | None = None) -> Features:
@@ -170,3 +215,35 @@ class Features:
         lengths = np.linalg.norm(vectors, axis=1, keepdims=True)
         vectors = np.where(lengths > 1, vectors / np.maximum(lengths, 1e-300), vectors)  # faster than top_speed: 1
         return cls(vectors=vectors, dt=motion.dt)
+
+
+def _ground_direction(forward, field: str) -> np.ndarray:
+    """`forward` (2 or 3 coordinates) as a unit vector in the ground plane (3,)."""
+    vector = np.zeros(3)
+    given = np.asarray(forward, dtype=float).ravel()
+    if given.shape not in ((2,), (3,)) or not np.all(np.isfinite(given)):
+        raise ValidationError(f"{field} must be a finite vector of 2 or 3 coordinates; got {forward!r}")
+    vector[:2] = given[:2]
+    length = np.linalg.norm(vector)
+    if length < 1e-12:
+        raise ValidationError(f"{field} must have a direction in the ground plane (x, y); got {forward!r}")
+    return vector / length
+
+
+def ground_speed(motion: Motion, *, forward, contact: float = CONTACT) -> float:
+    """How fast a clip played in place pushes the ground back along `forward` (units per second):
+    in each frame, the points within `contact` times the clip's height of that frame's lowest
+    point (what touches the ground), their velocity along `forward` (central differences); the
+    median over those points and frames, negated. An object moved forwards at that speed keeps
+    those points still on the ground. z is up (a mesh in flockkit's axes)."""
+    if not isinstance(motion, Motion) or motion.dims != 3 or motion.n_frames < 3:
+        raise ValidationError("ground_speed needs a 3D flockkit.Motion (z up) of at least 3 frames")
+    contact = number(contact, "ground_speed: contact", minimum=0, strict=True)
+    direction = _ground_direction(forward, "ground_speed: forward")
+    heights = motion.positions[..., 2]
+    band = contact * float(np.ptp(heights))
+    low = heights <= heights.min(axis=1, keepdims=True) + band
+    along = np.gradient(motion.positions @ direction, motion.dt, axis=0)
+    inner = np.zeros_like(low)
+    inner[1:-1] = low[1:-1]  # one-sided differences at the ends are not a foot's speed
+    return float(-np.median(along[inner]))

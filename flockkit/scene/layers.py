@@ -164,6 +164,8 @@ class GraphLayers:
             "params": [_thaw(g.params) for g in self.graphs],
             "provenance": [_thaw(g.provenance) for g in self.graphs],
         }
+        if self.features is not None and self.features.speed is not None:
+            metadata["feature_speed"] = self.features.speed
         return arrays, metadata
 
     @classmethod
@@ -177,7 +179,9 @@ class GraphLayers:
                 own = {name.split(".", 1)[1]: a for name, a in arrays.items() if name.startswith(f"part{k}.")}
                 graphs.append(MotionGraph._from_arrays(own, part_motion(motion, points), header["params"][k],
                                                        header["provenance"][k], source))  # fmt: skip
-            features = Features(vectors=arrays["features"], dt=motion.dt) if "features" in arrays else None
+            features = None
+            if "features" in arrays:
+                features = Features(vectors=arrays["features"], dt=motion.dt, speed=header.get("feature_speed"))
             return cls(source=motion, segmentation=segmentation, graphs=graphs, faces=arrays.get("faces"),
                        features=features, welds=arrays.get("welds"))  # fmt: skip
         except (KeyError, IndexError, TypeError, ValidationError) as exc:

@@ -14,7 +14,9 @@ phases to give them).
 Objects stand on the ground plane: a template's center (its mean center of mass) is placed at
 the object's position, turned by its heading about the up axis (+z) and scaled; a 2D template
 lies in the plane. Arrows and targets are in the world's coordinates; each object follows its
-target turned into its own (the template's) coordinates.
+target turned into its own (the template's) coordinates. Objects whose templates' arrows are
+self-movement (``Features.speed``: an animal's walk) move and turn after their targets
+(``flockkit.scene.movement``); ``SceneAnimation.paths`` holds where each is at each frame.
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ from .animation import SceneAnimation
 from .desync import IN_STEP_FRAMES, MAX_IN_STEP, in_step, largest_in_step, pairs_in_step, part_in_step, stacked
 from .features import Features
 from .flow import Arrow, FlowField, SelfMovement, flow_constraints
+from .movement import MAX_TURN, Course, Gaits, Paths, avoid_in_source_time, plan, settle
 from .placement import PLACEMENT_TRIES, Placement, heading_turn, turned_half
 from .templates import footprint, template_view
 
@@ -85,7 +88,11 @@ class Scene:
     first target, in its own coordinates, points like an arrow its source holds, of about the
     same length (chosen at random among them): for templates whose arrows point only a few ways
     (a flag recorded in wind from one side), which a random heading would ask to lean where
-    their source never does."""
+    their source never does.
+
+    Objects whose template's arrows are self-movement (``Features.speed`` set) move: their heading
+    follows their target, turning at most `max_turn` radians a second, and they travel as their
+    clips carry them (``flockkit.scene.movement``)."""
 
     templates: tuple = attrs.field(converter=tuple)
     region: Polygon = attrs.field()
@@ -99,6 +106,8 @@ class Scene:
     walk_params: dict = attrs.field(factory=dict, converter=dict)
     n_jobs: int | None = attrs.field(default=None)
     headings: str = attrs.field(default="random")
+    max_turn: float = attrs.field(default=MAX_TURN, converter=lambda v: number(v, "Scene.max_turn", minimum=0,
+                                                                              strict=True))  # fmt: skip
 
     def __attrs_post_init__(self):
         if self.headings not in ("random", "aligned"):
@@ -256,7 +265,7 @@ class Scene:
         from .._progress import progress_bar
 
         placement = self.place()
-        targets = self.targets(placement)
+        targets, rates = self._courses(placement)
         seeds = np.random.SeedSequence(self.seed).spawn(2)[1].spawn(placement.n_objects)
         with progress_bar(progress, unit="object") as report:
             items = [(i, targets[i], int(seeds[i].generate_state(1)[0]), None) for i in range(placement.n_objects)]
@@ -272,7 +281,53 @@ class Scene:
         report = {"in_step_before": before, "in_step_after": largest_in_step(frames, neighbours),
                   "pairs_in_step_before": pairs_before, "pairs_in_step_after": pairs_in_step(frames, neighbours),
                   "in_step_frames": IN_STEP_FRAMES}  # fmt: skip
-        return attrs.evolve(animation, walks=walks, report=report)
+        return attrs.evolve(animation, walks=walks, report=report, paths=self._paths(placement, walks, rates))
+
+    def _gaits(self, placement: Placement) -> list:
+        """Each object's Gaits (None for an object whose template does not move)."""
+        own = [Gaits.of(template_view(t).features(k, needed=False)) for k, t in enumerate(self.templates)]
+        return [own[kind] for kind in placement.templates]
+
+    def _arrows_at(self, movers):
+        """arrows_at(positions, t) for `movers`: their target arrows standing at positions at frame t."""
+        return lambda positions, t: self._world(positions, [t * self.frame_time], movers)[:, 0]
+
+    def _courses(self, placement: Placement) -> tuple[list, np.ndarray | None]:
+        """Each object's target: its world arrows per frame (F, 3), or for a moving object its
+        Course (movement.plan); and the moving objects' rates (movers, F), None without any."""
+        targets = list(self.targets(placement))
+        gaits = self._gaits(placement)
+        movers = [i for i, g in enumerate(gaits) if g is not None]
+        if not movers:
+            return targets, None
+        dims = [template_view(self.templates[placement.templates[i]]).source.dims for i in movers]
+        courses, rates = plan([gaits[i] for i in movers], placement.positions[movers], placement.headings[movers],
+                              n_frames=self.n_frames, dt=self.frame_time, max_turn=self.max_turn,
+                              arrows_at=self._arrows_at(movers), dims=dims)  # fmt: skip
+        for i, course in zip(movers, courses):
+            targets[i] = course
+        return targets, rates
+
+    def _paths(self, placement: Placement, walks, rates) -> Paths | None:
+        """Where each object is at each frame (movement.settle for the moving ones), None when
+        none moves."""
+        if rates is None:
+            return None
+        gaits = self._gaits(placement)
+        movers = [i for i, g in enumerate(gaits) if g is not None]
+        played = [template_view(self.templates[placement.templates[i]]).played_arrows(walks[i]) for i in movers]
+        moved, turned = settle([gaits[i] for i in movers], played, rates, placement.positions[movers],
+                               placement.headings[movers], dt=self.frame_time, max_turn=self.max_turn,
+                               arrows_at=self._arrows_at(movers))  # fmt: skip
+        n = placement.n_objects
+        positions = np.repeat(placement.positions[:, None], self.n_frames, axis=1)
+        headings = np.repeat(placement.headings[:, None], self.n_frames, axis=1)
+        clocks = np.tile(np.arange(self.n_frames, dtype=float), (n, 1))
+        positions[movers], headings[movers] = moved, turned
+        clocks[movers] = np.concatenate([np.zeros((len(movers), 1)), np.cumsum(rates[:, :-1], axis=1)], axis=1)
+        moving = np.zeros(n, dtype=bool)
+        moving[movers] = True
+        return Paths(positions=positions, headings=headings, clocks=clocks, moving=moving)
 
     def _walk_many(self, placement, items, report, stage: str) -> tuple[list, list]:
         """The walks of `items` ((object, target, seed, avoid) each) and the source frames they
@@ -380,20 +435,27 @@ def _walk_batch(scene: Scene, placement: Placement, items) -> list:
     for i, target, seed, avoid in items:
         walk = _walk_object(scene, i, placement, target, seed, avoid)
         template = scene.templates[placement.templates[i]]
-        results.append((walk, SceneAnimation._frames_of(template, walk, scene.n_frames)))
+        clock = target.clock if isinstance(target, Course) else None
+        results.append((walk, SceneAnimation._frames_of(template, walk, scene.n_frames, clock)))
     return results
 
 
-def _walk_object(scene: Scene, i: int, placement: Placement, target: np.ndarray, seed: int, avoid):
+def _walk_object(scene: Scene, i: int, placement: Placement, target, seed: int, avoid):
     """Object i's walk (a Walk, or a LayeredWalk of one walk per part), each part with its own
-    random stream from `seed`; `avoid` (neighbours, parts, frames) of source frames to fall out
-    of step with."""
+    random stream from `seed`, after `target` (its world arrows per frame, or a moving object's
+    Course, walked in its source time); `avoid` (neighbours, parts, frames) of source frames to
+    fall out of step with."""
     kind = int(placement.templates[i])
     view = template_view(scene.templates[kind])
-    local = target @ heading_turn(placement.headings[i], 3)  # the world's arrows in the template's coordinates (R^T w)
+    duration = scene.duration
+    if isinstance(target, Course):
+        local, duration = target.track, target.n_source * scene.frame_time
+        avoid = avoid_in_source_time(avoid, target.clock, target.n_source)
+    else:  # the world's arrows in the template's coordinates (R^T w)
+        local = target @ heading_turn(placement.headings[i], 3)
     track = Features(vectors=local[:, : view.source.dims], dt=scene.frame_time)
     part_params = None if avoid is None else [{"avoid": avoid[:, k]} for k in range(len(view.graphs))]
     params = {**scene.walk_params, "target": track, "features": view.features(kind, needed=False)}
-    walks = walk_parts(view.graphs, strategy=scene.walk, duration=scene.duration, seed=seed, part_params=part_params,
+    walks = walk_parts(view.graphs, strategy=scene.walk, duration=duration, seed=seed, part_params=part_params,
                        **params)  # fmt: skip
     return view.walk_of(walks)

@@ -51,6 +51,16 @@ class TemplateView:
     def part_walks(self, walk) -> tuple:
         return walk.walks if self.layered else (walk,)
 
+    def played_arrows(self, walk) -> np.ndarray:
+        """(S, D): the feature arrow `walk` plays at each of its frames, the mean over its parts'
+        (each part plays its own source frame), over the frames every part plays."""
+        from ..graphs import played_frames
+
+        frames = [played_frames(g, w)[0] for g, w in zip(self.graphs, self.part_walks(walk))]
+        n = min(len(f) for f in frames)
+        vectors = np.asarray(self.features(0, needed=False).vectors)
+        return np.mean([vectors[f[:n]] for f in frames], axis=0)
+
     def synthesize(self, walk) -> Motion:
         return synthesize_layers(self.template, walk) if self.layered else synthesize_graph(self.template, walk)
 
