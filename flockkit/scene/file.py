@@ -7,6 +7,7 @@
     region = [[0, 0], [40, 0], [40, 30], [0, 30]]   # a simple polygon on the ground
     scale = [0.8, 1.2]       # optional: uniform scales
     headings = "aligned"     # optional: "random" (default) or "aligned"
+    max_turn = 90            # optional: degrees a second a moving object turns at most (default 90)
 
     [[templates]]            # one per template: layers or graph, a flockkit file, relative to this one
     layers = "plants.npz"
@@ -14,6 +15,9 @@
     features = [[0, [0.8, 0]], [2.5, [0.3, 0.1]]]   # optional, for layers that carry no feature
                              # arrows (build --layers makes none): keyframed [time, vector], time in
                              # seconds of the template's source, vectors in its coordinates
+    speed = "stride"         # optional: the arrows are self-movement (a walk played in place): the
+                             # object moves and turns after its targets; units a second an arrow of
+                             # length 1 carries it, or "stride": measured from its feet
 
     [[arrows]]               # a flow field: physical-force arrows, keyframed [time, vector]
     position = [20, 15]
@@ -29,22 +33,38 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import attrs
+import numpy as np
 
 from .. import _files, _tomlfile
 from ..errors import FlockkitError, ValidationError
 from ..graphs import MotionGraph
 from ..regions import Polygon
-from .features import Features
+from ..validate import number
+from .features import Features, ground_speed
 from .flow import Arrow, FlowField, SelfMovement
 from .layers import GraphLayers
+from .movement import MAX_TURN
 from .scene import Scene
 
 __all__ = ["read_scene", "FEATURE_SOURCES"]
 
-_KEYS = {"duration", "seed", "region", "scale", "headings", "templates", "arrows", "self_movement", "walk", "n_jobs"}
+_KEYS = {
+    "duration",
+    "seed",
+    "region",
+    "scale",
+    "headings",
+    "templates",
+    "arrows",
+    "self_movement",
+    "walk",
+    "n_jobs",
+    "max_turn",
+}
 
 # Where the feature arrows of layers that carry none come from (read_scene's `features`): the
 # paper's two kinds of annotation (section 4.2), keyframed by hand, or an object's own movement.
@@ -80,12 +100,16 @@ def read_scene(path, *, features: str | None = None, n_jobs: int | None = None, 
         templates, counts = [], []
         for k, entry in enumerate(data["templates"]):
             kinds = [key for key in ("layers", "graph") if key in entry]
-            if len(kinds) != 1 or "count" not in entry or set(entry) - {"layers", "graph", "count", "features"}:
-                raise ValidationError(f"[[templates]] {k} needs one of layers or graph, and count (features optional)")
+            allowed = {"layers", "graph", "count", "features", "speed"}
+            if len(kinds) != 1 or "count" not in entry or set(entry) - allowed:
+                raise ValidationError(
+                    f"[[templates]] {k} needs one of layers or graph, and count (features and speed optional)"
+                )
             file = _files.confined(path.parent, entry[kinds[0]], source=path, where=f"templates[{k}].{kinds[0]}",
                                    allow_outside=allow_outside, uri=False)  # fmt: skip
             template = (GraphLayers if kinds[0] == "layers" else MotionGraph).load(file)
-            templates.append(_with_features(template, entry.get("features"), features, k, entry[kinds[0]]))
+            template = _with_features(template, entry.get("features"), features, k, entry[kinds[0]])
+            templates.append(_with_speed(template, entry.get("speed"), k, entry[kinds[0]]))
             counts.append(entry["count"])
         for table, keys in (("arrows", {"position", "keyframes"}), ("self_movement", {"object", "keyframes"})):
             for k, entry in enumerate(data.get(table, [])):
@@ -107,6 +131,9 @@ def read_scene(path, *, features: str | None = None, n_jobs: int | None = None, 
             seed=data.get("seed", 0),
             scale=data.get("scale", (1.0, 1.0)),
             headings=data.get("headings", "random"),
+            max_turn=math.radians(
+                number(data.get("max_turn", math.degrees(MAX_TURN)), "max_turn", minimum=0, strict=True)
+            ),  # fmt: skip
             walk_params=data.get("walk", {}),
             n_jobs=n_jobs,
         )
@@ -149,3 +176,29 @@ def _with_features(template, keyframes, source: str | None, k: int, name: str):
             f"from its own motion with features='motion' (flockkit scene --features motion)"
         )
     return attrs.evolve(template, features=arrows)
+
+
+def _with_speed(template, speed, k: int, name: str):
+    """`template` whose arrows are self-movement at `speed` (units a second of an arrow of length
+    1; "stride": the source's ground_speed along its mean arrow over that arrow's length), or
+    unchanged where `speed` is None."""
+    if speed is None:
+        return template
+    where = f"[[templates]] {k} ({name}) speed"
+    if not isinstance(template, GraphLayers):
+        raise ValidationError(f"{where}: only layers walk in place; a graph's motion travels by itself")
+    arrows = template.features.vectors
+    mean = arrows.mean(axis=0)
+    if speed == "stride":
+        length = float(np.linalg.norm(mean))
+        if length < 1e-9 or template.source.dims != 3:
+            raise ValidationError(f"{where}: 'stride' needs 3D layers whose arrows point somewhere (their mean is 0)")
+        speed = ground_speed(template.source, forward=mean) / length
+        if speed <= 0:
+            raise ValidationError(
+                f"{where}: the source's feet do not push back along its arrows {np.round(mean, 3).tolist()} (ground "
+                f"speed {speed * length:.3g}): its features must point the way it faces"
+            )
+    elif isinstance(speed, str):
+        raise ValidationError(f"{where}: a number (units a second of an arrow of length 1) or 'stride'; got {speed!r}")
+    return attrs.evolve(template, features=attrs.evolve(template.features, speed=speed))
