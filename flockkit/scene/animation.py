@@ -49,7 +49,10 @@ class SceneAnimation:
     and after de-synchronisation the largest share of frames two neighbours play in step
     (``in_step_before``, ``in_step_after``: source frames at most ``in_step_frames`` apart in some
     part) and the share of neighbour pairs in step on more than 5% of frames
-    (``pairs_in_step_before``, ``pairs_in_step_after``); see :meth:`neighbours`. `paths`, where
+    (``pairs_in_step_before``, ``pairs_in_step_after``); see :meth:`neighbours`; and over the
+    true nearest neighbours, the share of pairs in step within ``in_step_tolerance_frames``
+    frames (``nearest_pairs_in_step``) and, for looping parts, within ``in_step_tolerance_phase``
+    of their cycle (``nearest_pairs_in_phase``; ``flockkit.scene.desync.nearest_in_step``). `paths`, where
     some objects move (``flockkit.scene.movement``), holds where each object is, its heading and
     the source time it plays at each frame; None: every object stands where it is placed."""
 

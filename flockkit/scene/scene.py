@@ -33,7 +33,16 @@ from ..regions import Polygon
 from ..registry import require
 from ..validate import integer, number
 from .animation import SceneAnimation
-from .desync import IN_STEP_FRAMES, MAX_IN_STEP, in_step, largest_in_step, pairs_in_step, part_in_step, stacked
+from .desync import (
+    IN_STEP_FRAMES,
+    MAX_IN_STEP,
+    in_step,
+    largest_in_step,
+    nearest_in_step,
+    pairs_in_step,
+    part_in_step,
+    stacked,
+)
 from .features import Features
 from .flow import Arrow, FlowField, SelfMovement, flow_constraints
 from .movement import MAX_TURN, Course, Gaits, Paths, avoid_in_source_time, plan, settle
@@ -281,7 +290,9 @@ class Scene:
         report = {"in_step_before": before, "in_step_after": largest_in_step(frames, neighbours),
                   "pairs_in_step_before": pairs_before, "pairs_in_step_after": pairs_in_step(frames, neighbours),
                   "in_step_frames": IN_STEP_FRAMES}  # fmt: skip
-        return attrs.evolve(animation, walks=walks, report=report, paths=self._paths(placement, walks, rates))
+        animation = attrs.evolve(animation, walks=walks, report=report, paths=self._paths(placement, walks, rates))
+        report.update(nearest_in_step(animation))
+        return animation
 
     def _gaits(self, placement: Placement) -> list:
         """Each object's Gaits (None for an object whose template does not move)."""
