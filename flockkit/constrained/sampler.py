@@ -312,10 +312,14 @@ def run_chain(
     return best, best_total, Trace(log_g=log_g, proposals=tuple(tried), accepted=accepted)
 
 
+# the behavior model solve uses when none is named (a convenience default: any installed model works)
+DEFAULT_BEHAVIOR = "boids"
+
+
 def solve(
     problem: Problem,
     *,
-    behavior="boids",
+    behavior=DEFAULT_BEHAVIOR,
     behavior_params: dict | None = None,
     iterations=1000,
     refine=40,

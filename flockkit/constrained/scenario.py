@@ -34,6 +34,7 @@ from .. import _tomlfile, validate
 from ..errors import FlockkitError, ValidationError
 from ..regions import Ball, Box, Polygon
 from .problem import ComConstraint, PointConstraint, Problem, ShapeConstraint
+from .sampler import DEFAULT_BEHAVIOR
 
 _PROBLEM_KEYS = {
     "agents": "n_agents",
@@ -119,7 +120,7 @@ def _behavior(table: dict, path) -> dict:
     the model checks its parameters when ``solve`` makes it."""
     if not table:
         return {}
-    name = table.get(_BEHAVIOR_NAME, "boids")
+    name = table.get(_BEHAVIOR_NAME, DEFAULT_BEHAVIOR)
     if not isinstance(name, str):
         raise ValidationError(f"{path}: [behavior] name must be an installed behavior model's name; got {name!r}")
     params = {k: v for k, v in table.items() if k != _BEHAVIOR_NAME}
