@@ -109,6 +109,7 @@ class _Tour:
 
 def run_demo(out, *, data=None, progress=False, report=print) -> dict:
     """Run the demo into folder `out` (created if needed); return the summary it writes."""
+    begin = time.perf_counter()
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tour = _Tour(out, progress)
@@ -126,7 +127,7 @@ def run_demo(out, *, data=None, progress=False, report=print) -> dict:
     else:
         summary["sticklebacks"] = _sticklebacks(tour, folder)
         summary["foxes"] = _foxes(tour, folder)
-    summary["seconds"] = tour.timings
+    summary["seconds"] = {**tour.timings, "the whole demo": round(time.perf_counter() - begin, 2)}
     tour.path("summary.json").write_text(json.dumps(summary, indent=2, default=float))
     for path in tour.written:
         report(f"wrote {path}")
@@ -143,21 +144,26 @@ def _data_driven(tour: _Tour) -> tuple[dict, object]:
         recording = simulate(n_agents=20, steps=600, seed=1, obstacles=fence)
     with tour.step("build the motion graph"):
         graph = build_graph(recording, seed=1, n_jobs=-1, progress=tour.progress)
-    viz.plot_motion(recording, tour.path("recording.png"), obstacles=fence, title="the recording: 20 boids, 60 s")
-    values, stride = difference_matrix(recording, interval=0.5)
-    marked = [(t.start // stride, t.end // stride) for t in graph.transitions if not t.is_turn]
-    viz.plot_difference_matrix(
-        values, tour.path("difference-matrix.png"), marked=marked, title="E, frames 0.5 s apart (circles: transitions)"
-    )
-    viz.plot_graph(graph, tour.path("graph.png"))
+    with tour.step("draw the recording, its differences and its graph"):
+        viz.plot_motion(recording, tour.path("recording.png"), obstacles=fence, title="the recording: 20 boids, 60 s")
+        values, stride = difference_matrix(recording, interval=0.5)
+        marked = [(t.start // stride, t.end // stride) for t in graph.transitions if not t.is_turn]
+        viz.plot_difference_matrix(
+            values,
+            tour.path("difference-matrix.png"),
+            marked=marked,
+            title="E, frames 0.5 s apart (circles: transitions)",
+        )
+        viz.plot_graph(graph, tour.path("graph.png"))
 
     box = Box(lower=[-10.0, -10.0], upper=[10.0, 10.0])  # the arena is 30 units across
     with tour.step("synthesize 2 min in a box"):
         synthesized = synthesize(graph, walk(graph, strategy="region", region=box, duration=120, seed=2))
     title = "2 minutes synthesized, its center of mass kept in the box"
     shown = {"region for the center of mass": box}
-    viz.plot_motion(synthesized, tour.path("synthesized.png"), regions=shown, title=title)
-    viz.animate(synthesized, tour.path("synthesized.gif"), regions=shown, progress=tour.progress)
+    with tour.step("draw the synthesized flock (png, gif)"):
+        viz.plot_motion(synthesized, tour.path("synthesized.png"), regions=shown, title=title)
+        viz.animate(synthesized, tour.path("synthesized.gif"), regions=shown, progress=tour.progress)
     com = synthesized.center_of_mass()
     inside = bool(box.contains(com).all())
     crossed = (com.max(axis=0) - com.min(axis=0)) / (box.upper - box.lower)
@@ -186,8 +192,9 @@ def _scene(tour: _Tour, graph) -> dict:
         scene = Scene(templates=[graph], region=square, counts=[12], duration=40.0, constraints=[wind], seed=2,
                       walk_params={"alpha": 30.0})  # fmt: skip
         animation = scene.synthesize(progress=tour.progress)
-    viz.plot_scene(animation, tour.path("scene.png"))
-    viz.animate_scene(animation, tour.path("scene.gif"), progress=tour.progress)
+    with tour.step("draw the scene (png, gif)"):
+        viz.plot_scene(animation, tour.path("scene.png"))
+        viz.animate_scene(animation, tour.path("scene.gif"), progress=tour.progress)
     targets = scene.targets(animation.placement)
     within = []
     for motion, target in zip(animation.motions, targets):
@@ -237,10 +244,11 @@ def _crowd(tour: _Tour) -> dict:
 
     with tour.step("a crowd of 48 for 5 s"):
         recording = record(crowd, 5.0, agents=range(48), on_frame=script)
-        viz.animate_recording(recording, tour.path("crowd.gif"), layout="grid", axes="yz", progress=tour.progress)
     offsets = np.array(offsets)
-    viz.plot_offsets((30 + np.arange(len(offsets))) / 30.0, offsets, tour.path("crowd-offsets.png"),
-                     title="offsets of the cheering half after the cheer stream starts")  # fmt: skip
+    with tour.step("draw the crowd (gif) and its offsets"):
+        viz.animate_recording(recording, tour.path("crowd.gif"), layout="grid", axes="yz", progress=tour.progress)
+        viz.plot_offsets((30 + np.arange(len(offsets))) / 30.0, offsets, tour.path("crowd-offsets.png"),
+                         title="offsets of the cheering half after the cheer stream starts")  # fmt: skip
     return {
         "agents": crowd.n_agents,
         "streams": len(streams),
@@ -310,7 +318,8 @@ def _foxes(tour: _Tour, folder: Path) -> dict:
         usd = "foxes.usdc"
     except MissingDependencyError:
         tour.written.pop()
-    viz.animate_recording(shown, tour.path("foxes.gif"), progress=tour.progress)
+    with tour.step("draw 64 of the Foxes (gif)"):
+        viz.animate_recording(shown, tour.path("foxes.gif"), progress=tour.progress)
     root = driver.roots[:, :2, 3]
     return {
         "agents": n,
@@ -333,9 +342,10 @@ def _constrained(tour: _Tour) -> dict:
     with tour.step("solve come-from-behind"):
         solution = solve(problem, iterations=1000, seed=2, progress=tour.progress)
     title = "come from behind to win (paper 004, Fig. 5)"
-    viz.plot_motion(solution.motion, tour.path("come-from-behind.png"), problem=problem, title=title)
-    viz.animate(solution.motion, tour.path("come-from-behind.gif"), problem=problem, progress=tour.progress)
-    viz.plot_trace(solution, tour.path("trace.png"))
+    with tour.step("draw come-from-behind and its trace"):
+        viz.plot_motion(solution.motion, tour.path("come-from-behind.png"), problem=problem, title=title)
+        viz.animate(solution.motion, tour.path("come-from-behind.gif"), problem=problem, progress=tour.progress)
+        viz.plot_trace(solution, tour.path("trace.png"))
     return {"log g": solution.log_g[0], "residuals": list(solution.residuals), "acceptance": solution.acceptance}
 
 
@@ -355,8 +365,9 @@ def _sticklebacks(tour: _Tour, folder: Path) -> dict:
         fish_walk = synthesize(fish_graph, walk(fish_graph, strategy="region", region=inner, duration=60, seed=3))
     title = "60 s synthesized from 20 s of five sticklebacks, kept in the video frame"
     shown = {"video frame (1280 x 720 px)": frame, "where the school's center is kept": inner}
-    viz.plot_motion(fish_walk, tour.path("sticklebacks.png"), regions=shown, title=title)
-    viz.animate(fish_walk, tour.path("sticklebacks.gif"), regions=shown, progress=tour.progress)
+    with tour.step("draw the sticklebacks (png, gif)"):
+        viz.plot_motion(fish_walk, tour.path("sticklebacks.png"), regions=shown, title=title)
+        viz.animate(fish_walk, tour.path("sticklebacks.gif"), regions=shown, progress=tour.progress)
     return {
         **fish_graph.stats(),
         "center kept in the video frame": bool(inner.contains(fish_walk.center_of_mass()).all()),

@@ -317,6 +317,9 @@ def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data
     assert just_after == 1.0 and later < 0.05  # the cue's dilation spreads the runners within its 2 s
     assert max(summary["come-from-behind"]["residuals"]) <= 0.3 and summary["sticklebacks"]["transitions"] >= 3
     assert str((tmp_path / "demo").resolve()) in out
+    steps = summary["seconds"]  # every step is timed, drawing included, and the whole
+    assert {"draw the scene (png, gif)", "draw 64 of the Foxes (gif)", "the whole demo"} <= set(steps)
+    assert sum(v for k, v in steps.items() if k != "the whole demo") <= steps["the whole demo"]
 
 
 def test_the_issue_region_walk_on_a_default_flock_from_the_command_line(capsys, tmp_path):
