@@ -59,7 +59,7 @@ def plot_scene(animation, path=None, *, times=None, size=None):
     if animation.region is not None:
         draw_region(ax, animation.region, fill=False, edgecolor="tab:green", lw=1.2, label="region")
         low, high = np.minimum(low, animation.region.bounds()[0]), np.maximum(high, animation.region.bounds()[1])
-    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.06), ncol=3, fontsize=8, frameon=False)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.1), ncol=3, fontsize=8, frameon=False)
     ax.set_title(f"scene: {animation.placement.n_objects} objects, {duration:g} s")
     fit_view(ax, low, high)
     if path is not None:
