@@ -373,12 +373,4 @@ class FLOCKKIT_OT_crowd(_Worker, bpy.types.Operator):
 CLASSES = (FLOCKKIT_OT_behavior, FLOCKKIT_OT_simulate, FLOCKKIT_OT_add, FLOCKKIT_OT_hints, FLOCKKIT_OT_solve,
            FLOCKKIT_OT_analyse, FLOCKKIT_OT_scatter, FLOCKKIT_OT_crowd)  # fmt: skip
 
-
-def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)

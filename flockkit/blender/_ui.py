@@ -110,12 +110,4 @@ class FLOCKKIT_PT_object(_Panel, bpy.types.Panel):
 
 CLASSES = (FLOCKKIT_PT_flock, FLOCKKIT_PT_constraints, FLOCKKIT_PT_scene, FLOCKKIT_PT_crowd, FLOCKKIT_PT_object)
 
-
-def register():
-    for cls in CLASSES:
-        bpy.utils.register_class(cls)
-
-
-def unregister():
-    for cls in reversed(CLASSES):
-        bpy.utils.unregister_class(cls)
+register, unregister = bpy.utils.register_classes_factory(CLASSES)
