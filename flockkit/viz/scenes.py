@@ -19,18 +19,19 @@ from ._figures import (
 
 
 def plot_scene(animation, path=None, *, times=None, size=None):
-    """Top view of a SceneAnimation: the region's objects as their footprint boxes (one colour per
-    template) and the flow arrows at a few `times` (default: start, middle and end), darker as
-    time goes on; self-moving objects' arrows are drawn on them. Returns the Figure; writes it to
-    `path` if given."""
+    """Top view of a SceneAnimation: the region's objects as their footprint boxes where they are at
+    t = 0 (one colour per template; see :func:`starting_boxes`) and the flow arrows at a few
+    `times` (default: start, middle and end), darker as time goes on; self-moving objects' arrows
+    are drawn where those objects are then. Returns the Figure; writes it to `path` if given."""
     import matplotlib.patches as patches
 
     plt = pyplot()
     path = None if path is None else picture_path(path)
     from ..scene import FlowField, SelfMovement
 
-    boxes = animation.bounding_boxes()
+    boxes = starting_boxes(animation)
     low, high = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
+    places = animation.transforms()[0]  # (objects, frames, 2)
     flows = [c for c in animation.constraints if isinstance(c, FlowField)]
     for flow in flows:
         points = np.stack([a.position[:2] for a in flow.arrows])
@@ -52,10 +53,10 @@ def plot_scene(animation, path=None, *, times=None, size=None):
                       label=label)  # fmt: skip
             label = None
         for mover in (c for c in animation.constraints if isinstance(c, SelfMovement)):
-            where = animation.placement.positions[mover.object]
+            where = places[mover.object, min(max(round(when / animation.dt), 0), animation.n_frames - 1)]
             arrow = mover.targets([when])[0][:2] * reach
             ax.quiver(*where, *arrow, color=shade, angles="xy", scale_units="xy", scale=1, width=0.004)
-    ax.plot([], [], color=colours(0), lw=1, label=f"{animation.placement.n_objects} objects (footprints)")
+    ax.plot([], [], color=colours(0), lw=1, label=f"{animation.placement.n_objects} objects (footprints at t = 0)")
     if animation.region is not None:
         draw_region(ax, animation.region, fill=False, edgecolor="tab:green", lw=1.2, label="region")
         low, high = np.minimum(low, animation.region.bounds()[0]), np.maximum(high, animation.region.bounds()[1])
@@ -65,6 +66,16 @@ def plot_scene(animation, path=None, *, times=None, size=None):
     if path is not None:
         save(figure, path)
     return figure
+
+
+def starting_boxes(animation) -> np.ndarray:
+    """(objects, 2, 2): the (low, high) corners in x, y of each object's footprint box where it is
+    at t = 0: about its points' mean at its first frame. A footprint is the box around a template's
+    shape about its own center of mass, and a walk starts wherever in its recording it starts (a
+    flock's recording travels), so the placed position alone can sit far from the object."""
+    boxes = animation.bounding_boxes()
+    starts = np.stack([motion.positions[0, :, :2].mean(axis=0) for motion in animation.motions])
+    return boxes - boxes.mean(axis=1, keepdims=True) + starts[:, None]
 
 
 # Points drawn per object in a scene animation at most (evenly chosen): a field of meshes of

@@ -258,3 +258,26 @@ def test_every_world_axis_says_its_unit(solved):
     ax = figure.axes[0]
     assert (ax.get_xlabel(), ax.get_ylabel()) == ("x (m)", "y (m)")
     assert [unit_name(f) for f in (1.0, 0.01, 0.0254, None, 0.3)] == ["m", "cm", "in", "units", "× 0.3 m"]
+
+
+def test_scene_footprints_are_drawn_where_the_objects_start():
+    """A flock's recording travels, so a walk starts away from the recording's mean center: the
+    still draws each footprint about where its object is at t = 0, not where it was placed."""
+    import matplotlib.patches as patches
+
+    from flockkit.scene import Arrow, FlowField, Scene
+
+    graph = flockkit.build_graph(flockkit.simulate(n_agents=6, steps=200, seed=2))
+    wind = FlowField(arrows=[Arrow(position=[0.0, 0.0], keyframes=[(0.0, [0.7, 0.0])])])
+    square = flockkit.Polygon(vertices=[[-60.0, -60.0], [60.0, -60.0], [60.0, 60.0], [-60.0, 60.0]])
+    animation = Scene(templates=[graph], region=square, counts=[4], duration=2.0, constraints=[wind],
+                      seed=2).synthesize()  # fmt: skip
+    figure = viz.plot_scene(animation)
+    boxes = [p for p in figure.axes[0].patches if isinstance(p, patches.Rectangle)]
+    drawn = np.array([[b.get_x() + b.get_width() / 2, b.get_y() + b.get_height() / 2] for b in boxes])
+    starts = np.array([m.positions[0, :, :2].mean(axis=0) for m in animation.motions])
+    assert drawn.shape == starts.shape and np.abs(drawn - starts).max() < 1e-9
+    assert np.linalg.norm(animation.placement.positions - starts, axis=1).max() > 1.0  # the case that was wrong
+    sizes = np.array([[b.get_width(), b.get_height()] for b in boxes])
+    placed = animation.bounding_boxes()
+    assert np.allclose(sizes, placed[:, 1] - placed[:, 0])  # the same footprints, moved
