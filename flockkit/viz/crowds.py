@@ -19,10 +19,12 @@ from ._figures import (
 )
 
 
-def animate_recording(recording, path, *, layout="world", axes=None, fps=None, size=None, progress=False):
+def animate_recording(recording, path, *, layout="world", axes=None, fps=None, size=None, progress=False, pool=None):
     """A recorded crowd (``flockkit.crowd.record``) as stick figures, joints joined to their
     parents, coloured by the stream each agent's part reads (while blending, by the stream it
-    blends to, drawn thicker), seen along `axes` (horizontal, vertical). `layout` "world": where
+    blends to, drawn thicker), seen along `axes` (horizontal, vertical). A legend below the
+    figures names each stream's colour: by its ``Stream.name`` in `pool` (the StreamPool the crowd
+    read) where it has one, else by its index; unique slots are one entry. `layout` "world": where
     they are (`axes` default "xy", from above); "grid": each agent in a cell of a grid, in place
     (`axes` default "xz", from the front), to see the poses of many. Returns the path."""
     path = movie_path(path)
@@ -32,7 +34,7 @@ def animate_recording(recording, path, *, layout="world", axes=None, fps=None, s
     joints = recording.world()[..., :3, 3][..., _crowd_axes(axes)]
     if layout == "world":
         return _animate_skeletons(recording, joints, path, fps=fps, size=size, progress=progress, ticks=True,
-                                  names=tuple(axes))  # fmt: skip
+                                  names=tuple(axes), pool=pool)  # fmt: skip
     agents = joints.shape[1]  # (frames, agents, J, 2)
     extent = np.ptp(joints.reshape(-1, 2), axis=0).max() if joints.size else 1.0
     spacing = 0.8 * max(float(np.ptp(joints[..., 0], axis=-1).max()), 1e-9) + 0.4 * extent / max(agents, 1) ** 0.5
@@ -41,7 +43,7 @@ def animate_recording(recording, path, *, layout="world", axes=None, fps=None, s
     grid = np.stack([np.arange(agents) % columns, -(np.arange(agents) // columns)], axis=1)
     centers = joints.mean(axis=(0, 2))  # each agent's mean joint position: figures stay in their cells
     placed = joints - centers[None, :, None] + (grid * [spacing, height])[None, :, None]
-    return _animate_skeletons(recording, placed, path, fps=fps, size=size, progress=progress, ticks=False)
+    return _animate_skeletons(recording, placed, path, fps=fps, size=size, progress=progress, ticks=False, pool=pool)
 
 
 def _crowd_axes(axes) -> list[int]:
@@ -50,16 +52,36 @@ def _crowd_axes(axes) -> list[int]:
     return ["xyz".index(a) for a in axes]
 
 
-def _animate_skeletons(recording, placed, path, *, fps, size, progress, ticks: bool, names=("x", "y")):
+# A recording's stream value for a unique slot is UNIQUE + slot; all unique slots share one colour.
+UNIQUE = 1000
+UNIQUE_COLOUR = "black"
+
+
+def _stream_key(streams, pool) -> list[tuple[int, str]]:
+    """(stream value, label) for each colour among `streams`: streams by name (from `pool`) or
+    index, in index order, then every unique slot as one entry."""
+    found = np.unique(streams)
+    known = [getattr(s, "name", "") for s in getattr(pool, "streams", ())] if pool is not None else []
+    if pool is not None and len(found) and found[found < UNIQUE].max(initial=-1) >= len(known):
+        raise ValidationError(f"animate_recording: pool has {len(known)} streams; the recording reads stream "
+                              f"{int(found[found < UNIQUE].max())}")  # fmt: skip
+    key = [(int(s), (known[s] if s < len(known) and known[s] else f"stream {s}")) for s in found if s < UNIQUE]
+    if (found >= UNIQUE).any():
+        key.append((UNIQUE, "unique slots"))
+    return key
+
+
+def _animate_skeletons(recording, placed, path, *, fps, size, progress, ticks: bool, names=("x", "y"), pool=None):
     """Draw `placed` (frames, agents, J, 2) joint positions of `recording` as stick figures, on
-    axes named `names` (in metres) where `ticks`."""
+    axes named `names` (in metres) where `ticks`, with a legend of the streams' colours below."""
     parents = recording.skeleton.parents
     frames, rate = timeline(1.0 / recording.fps, recording.n_frames, fps, None, "animate_recording")
     plt = pyplot()
     from matplotlib.collections import LineCollection
+    from matplotlib.lines import Line2D
 
     low, high = placed.reshape(-1, 2).min(axis=0), placed.reshape(-1, 2).max(axis=0)
-    figure, ax = scene_figure(plt, low, high, size, keyed=False, longer=640)
+    figure, ax = scene_figure(plt, low, high, size, keyed=True, longer=640)
     # a driven crowd's roots place it in metres; otherwise joints are in the skeleton's own unit
     length = "m" if recording.axes else unit_name(recording.skeleton.meters_per_unit)
     fit_view(ax, low, high, names=names, unit=length if ticks else None)
@@ -68,6 +90,15 @@ def _animate_skeletons(recording, placed, path, *, fps, size, progress, ticks: b
         ax.set_yticks([])
     bones = np.flatnonzero(parents >= 0)
     palette = plt.get_cmap("tab10")
+
+    def colour(stream):
+        return UNIQUE_COLOUR if stream >= UNIQUE else palette(int(stream) % 10)
+
+    key = _stream_key(recording.streams[frames], pool)
+    handles = [Line2D([], [], color=colour(s), lw=2) for s, _ in key]
+    # in the band scene_figure keeps below the axes, under the tick labels: it covers no figure
+    figure.legend(handles, [label for _, label in key], loc="lower center", bbox_to_anchor=(0.5, 0.0),
+                  ncol=min(len(key), 4), fontsize=8, frameon=False)  # fmt: skip
     lines = LineCollection([], zorder=3)
     ax.add_collection(lines)
     label = ax.set_title("")
@@ -76,7 +107,7 @@ def _animate_skeletons(recording, placed, path, *, fps, size, progress, ticks: b
         frame = frames[index]
         segments = np.stack([placed[frame][:, bones], placed[frame][:, parents[bones]]], axis=2).reshape(-1, 2, 2)
         lines.set_segments(segments)
-        lines.set_color([palette(int(s) % 10) for s in recording.streams[frame] for _ in bones])
+        lines.set_color([colour(s) for s in recording.streams[frame] for _ in bones])
         lines.set_linewidth([2.2 if b else 1.0 for b in recording.blending[frame] for _ in bones])
         label.set_text(f"{recording.n_agents} agents coloured by stream, t = {(frame + 1) / recording.fps:.1f} s")
         return [lines, label]

@@ -1,3 +1,4 @@
+import attrs
 import numpy as np
 import pytest
 
@@ -175,7 +176,7 @@ def test_the_graph_picture_keys_its_colours_and_turns():
     assert any(ax.get_ylabel() == "transition cost E" for ax in figure.axes)  # the colour bar
 
 
-def test_a_crowd_gif_colours_parts_by_stream_and_the_offsets_plot_shows_dilation(tmp_path):
+def test_a_crowd_gif_colours_parts_by_stream_and_the_offsets_plot_shows_dilation(tmp_path, monkeypatch):
     from PIL import Image
 
     from flockkit.crowd import Crowd, Stream, StreamPool, record
@@ -184,8 +185,9 @@ def test_a_crowd_gif_colours_parts_by_stream_and_the_offsets_plot_shows_dilation
     walker = inputs.walker()
     play = lambda **k: flockkit.get("controller", "clip", clip=walker, **k)  # noqa: E731
     pool = StreamPool(
-        [Stream(controller=play(), history=30), Stream(controller=play(rate=1.7), history=30, default="Stopped")]
-    )
+        [Stream(controller=play(), history=30, name="walk"), Stream(controller=play(rate=1.7), history=30,
+                                                                 default="Stopped")]
+    )  # fmt: skip
     crowd = Crowd(pool, n_agents=6, clusters={"body": 0}, seed=0)
 
     def cheer(crowd, frame):
@@ -193,11 +195,28 @@ def test_a_crowd_gif_colours_parts_by_stream_and_the_offsets_plot_shows_dilation
             crowd.transition_to_streamed([0, 1, 2], "body", 1, blend_time=0.2, time_to_dilate=2.0)
 
     recording = record(crowd, 1.0, on_frame=cheer)
-    viz.animate_recording(recording, tmp_path / "crowd.gif", layout="grid", axes="yz", size=(320, 240))
+    from flockkit.viz import crowds
+
+    keys, saved = [], crowds.save_animation
+
+    def keep_key(figure, *args):  # the legend's labels, and whether it stays off the axes
+        figure.canvas.draw()
+        (legend,) = figure.legends
+        ax = figure.axes[0].get_tightbbox(figure.canvas.get_renderer())
+        keys.append(([t.get_text() for t in legend.get_texts()], legend.get_window_extent().y1 <= ax.y0))
+        return saved(figure, *args)
+
+    monkeypatch.setattr(crowds, "save_animation", keep_key)
+    viz.animate_recording(recording, tmp_path / "crowd.gif", layout="grid", axes="yz", size=(320, 240), pool=pool)
+    viz.animate_recording(recording, tmp_path / "world.gif", size=(320, 240))
+    unique = attrs.evolve(recording, streams=np.where(np.arange(6) < 2, 1000 + np.arange(6), recording.streams))
+    viz.animate_recording(unique, tmp_path / "unique.gif", layout="grid")
+    assert keys == [(["walk", "stream 1"], True), (["stream 0", "stream 1"], True),
+                    (["stream 0", "stream 1", "unique slots"], True)]  # fmt: skip
     with Image.open(tmp_path / "crowd.gif") as image:
         assert image.size == (320, 240) and image.n_frames == 15  # 1 s at 30 fps, drawn at 15
         image.seek(image.n_frames - 1)
-        pixels = np.asarray(image.convert("RGB")).astype(int)
+        pixels = np.asarray(image.convert("RGB")).astype(int)[: 240 - 75]  # above the legend's band
     blue = (pixels[..., 2] > pixels[..., 0] + 40) & (pixels[..., 2] > 150)  # stream 0: tab10 blue
     orange = (pixels[..., 0] > pixels[..., 2] + 80) & (pixels[..., 1] > 80)  # stream 1: tab10 orange
     assert blue.sum() > 50 and orange.sum() > 50
