@@ -13,7 +13,7 @@ the duplicates and walks each after its targets; objects whose arrows are self-m
 """
 
 from .animation import SceneAnimation
-from .features import Features, arrow_keyframes, ground_speed, interpolate_arrows
+from .features import Features, arrow_keyframes, interpolate_arrows, stride_speed
 from .file import read_scene
 from .flow import Arrow, FlowField, SelfMovement
 from .layers import GraphLayers, LayeredWalk, crack_width, seam_stretch, synthesize_layers, walk_layers
@@ -36,7 +36,7 @@ __all__ = [
     "Features",
     "arrow_keyframes",
     "interpolate_arrows",
-    "ground_speed",
+    "stride_speed",
     "Paths",
     "Arrow",
     "FlowField",

@@ -9,7 +9,7 @@ direction along the great circle between keyframes, their length linearly.
 
 An object that walks (an animal, a character) carries self-movement arrows: ``Features.speed``
 says how fast an arrow of length 1 carries it, so each frame's arrow is its travel in its own
-coordinates. :func:`ground_speed` measures that travel for a clip played in place, from the
+coordinates. :func:`stride_speed` measures that travel for a clip played in place, from the
 points that carry it (its feet).
 """
 
@@ -23,10 +23,10 @@ from ..errors import ValidationError
 from ..motion import Motion
 from ..validate import number
 
-__all__ = ["Features", "interpolate_arrows", "arrow_keyframes", "ground_speed"]
+__all__ = ["Features", "interpolate_arrows", "arrow_keyframes", "stride_speed"]
 
 # Points within this share of an in-place clip's height of its lowest point in a frame carry it
-# (they touch the ground): ground_speed measures how fast they move back (our choice; the Fox's
+# (they touch the ground): stride_speed measures how fast they move back (our choice; the Fox's
 # paws and a generated walker's feet, tests/core/test_moving_scene.py).
 CONTACT = 0.03
 
@@ -184,12 +184,12 @@ class Features:
     def from_stride(cls, motion: Motion, *, forward, contact: float = CONTACT) -> Features:
         """Self-movement arrows of a clip played in place (a walk, a run) facing `forward` (a
         vector in its ground plane, x and y): every arrow `forward` at length 1, and `speed` the
-        clip's :func:`ground_speed` along it, so that a scene moves the object as fast as its feet
+        clip's :func:`stride_speed` along it, so that a scene moves the object as fast as its feet
         push back and they do not slide."""
         if not isinstance(motion, Motion) or motion.dims != 3:
             raise ValidationError("Features.from_stride needs a 3D flockkit.Motion (z up), such as a mesh's")
         direction = _ground_direction(forward, "Features.from_stride: forward")
-        speed = ground_speed(motion, forward=direction, contact=contact)
+        speed = stride_speed(motion, forward=direction, contact=contact)
         if speed <= 0:
             raise ValidationError(
                 f"Features.from_stride: the points that carry the clip do not move back along forward "
@@ -230,16 +230,16 @@ def _ground_direction(forward, field: str) -> np.ndarray:
     return vector / length
 
 
-def ground_speed(motion: Motion, *, forward, contact: float = CONTACT) -> float:
+def stride_speed(motion: Motion, *, forward, contact: float = CONTACT) -> float:
     """How fast a clip played in place pushes the ground back along `forward` (units per second):
     in each frame, the points within `contact` times the clip's height of that frame's lowest
     point (what touches the ground), their velocity along `forward` (central differences); the
     median over those points and frames, negated. An object moved forwards at that speed keeps
     those points still on the ground. z is up (a mesh in flockkit's axes)."""
     if not isinstance(motion, Motion) or motion.dims != 3 or motion.n_frames < 3:
-        raise ValidationError("ground_speed needs a 3D flockkit.Motion (z up) of at least 3 frames")
-    contact = number(contact, "ground_speed: contact", minimum=0, strict=True)
-    direction = _ground_direction(forward, "ground_speed: forward")
+        raise ValidationError("stride_speed needs a 3D flockkit.Motion (z up) of at least 3 frames")
+    contact = number(contact, "stride_speed: contact", minimum=0, strict=True)
+    direction = _ground_direction(forward, "stride_speed: forward")
     heights = motion.positions[..., 2]
     band = contact * float(np.ptp(heights))
     low = heights <= heights.min(axis=1, keepdims=True) + band

@@ -44,7 +44,7 @@ from ..errors import FlockkitError, ValidationError
 from ..graphs import MotionGraph
 from ..regions import Polygon
 from ..validate import number
-from .features import Features, ground_speed
+from .features import Features, stride_speed
 from .flow import Arrow, FlowField, SelfMovement
 from .layers import GraphLayers
 from .movement import MAX_TURN
@@ -180,7 +180,7 @@ def _with_features(template, keyframes, source: str | None, k: int, name: str):
 
 def _with_speed(template, speed, k: int, name: str):
     """`template` whose arrows are self-movement at `speed` (units a second of an arrow of length
-    1; "stride": the source's ground_speed along its mean arrow over that arrow's length), or
+    1; "stride": the source's stride_speed along its mean arrow over that arrow's length), or
     unchanged where `speed` is None."""
     if speed is None:
         return template
@@ -193,7 +193,7 @@ def _with_speed(template, speed, k: int, name: str):
         length = float(np.linalg.norm(mean))
         if length < 1e-9 or template.source.dims != 3:
             raise ValidationError(f"{where}: 'stride' needs 3D layers whose arrows point somewhere (their mean is 0)")
-        speed = ground_speed(template.source, forward=mean) / length
+        speed = stride_speed(template.source, forward=mean) / length
         if speed <= 0:
             raise ValidationError(
                 f"{where}: the source's feet do not push back along its arrows {np.round(mean, 3).tolist()} (ground "

@@ -13,7 +13,7 @@ import pytest
 
 import flockkit
 from flockkit.errors import ValidationError
-from flockkit.scene import Arrow, Features, FlowField, SelfMovement, ground_speed
+from flockkit.scene import Arrow, Features, FlowField, SelfMovement, stride_speed
 from flockkit.scene.movement import RATES, Gaits
 
 PERIOD, DT, STRIDE = 30, 1 / 30, 0.25
@@ -67,8 +67,8 @@ def planted_slide(positions: np.ndarray) -> np.ndarray:
 
 def test_ground_speed_is_how_fast_the_feet_push_back():
     motion = walker_mesh()
-    assert ground_speed(motion, forward=[1, 0]) == pytest.approx(SPEED, rel=1e-9)
-    assert ground_speed(motion, forward=[-1, 0]) == pytest.approx(-SPEED, rel=1e-9)
+    assert stride_speed(motion, forward=[1, 0]) == pytest.approx(SPEED, rel=1e-9)
+    assert stride_speed(motion, forward=[-1, 0]) == pytest.approx(-SPEED, rel=1e-9)
     features = Features.from_stride(motion, forward=[2, 0])
     assert features.moves and features.speed == pytest.approx(SPEED) and np.allclose(features.vectors, [1, 0, 0])
     with pytest.raises(ValidationError, match="do not move back"):
