@@ -41,6 +41,8 @@ __all__ = [
     "Pairwise",
     "Skinned",
     "RootMotionSource",
+    "BatchedController",
+    "LiveController",
 ]
 
 
@@ -141,6 +143,15 @@ class Capabilities:
         Controller: it offers ``root_motion(times)``, where the stream's root has gone on the
         ground at each time (``RootMotionSource``): what a crowd's agents advance by when their
         motion comes from their clips (``Crowd(root_motion=...)``, ``Driver(root_motion="clip")``).
+    batch : bool
+        Controller: it offers ``batch(controllers)`` (``BatchedController``), one evaluator for
+        many controllers of its class and joint count at once: a ``StreamPool`` advances all such
+        streams in one call a frame, writing their poses in place into its store, instead of
+        calling each stream's ``pose``.
+    live : bool
+        Controller: its pose depends on inputs fed each frame (``LiveController``: ``inputs``
+        and ``feed``), not on time alone: a pool evaluates it every frame at that frame's time,
+        never ahead, so that what is fed before an ``update`` shows in that update's poses.
     skin : bool
         Segmenter: it needs the skin of what it segments: ``segment`` takes ``skin``, a
         ``flockkit.mesh.MeshSkin`` with one row per point of the motion (joints, hierarchy and
@@ -162,6 +173,8 @@ class Capabilities:
     targets: bool = attrs.field(default=False, validator=_flag("targets"))
     clip_player: bool = attrs.field(default=False, validator=_flag("clip_player"))
     root_motion: bool = attrs.field(default=False, validator=_flag("root_motion"))
+    batch: bool = attrs.field(default=False, validator=_flag("batch"))
+    live: bool = attrs.field(default=False, validator=_flag("live"))
     skin: bool = attrs.field(default=False, validator=_flag("skin"))
 
     def __attrs_post_init__(self):
@@ -379,6 +392,44 @@ class RootMotionSource(Protocol):
     """
 
     def root_motion(self, times): ...
+
+
+class BatchedController(Protocol):
+    """The operation a controller declaring ``Capabilities(batch=True)`` offers.
+
+    ``batch(controllers)``
+        An evaluator of `controllers` (a sequence of instances of the controller's class, this
+        one among them, all of one joint count) with one method, ``write(index, times, out,
+        rows, stride)``: for each i, the pose of ``controllers[index[i]]`` at ``times[i]``
+        (seconds on its stream's clock) written into the flat float32 array `out`, joint j's
+        rotation (x, y, z, w) at ``out[rows[i] + stride * j : ... + 4]`` and its translation at
+        the three floats after, nothing else touched. Equal to ``pose`` at those times, rounded
+        to float32; one call for every i, so no Python runs per controller. Its ``nbytes``
+        attribute, if it has one, is the bytes it holds beyond the controllers (what
+        ``StreamPool.memory`` counts).
+    """
+
+    def batch(self, controllers): ...
+
+
+class LiveController(Protocol):
+    """The operations a controller declaring ``Capabilities(live=True)`` offers: a state machine
+    fed each frame (a locomotion controller fed speed and turn rate by a driver).
+
+    ``inputs``
+        An attribute: a mapping of each input's name to its (low, high) range.
+    ``feed(**values)``
+        Sets inputs (names from ``inputs``, numbers in range; others raise ValidationError). The
+        next ``pose`` call shows them.
+    ``pose(times)``
+        As ``Controller.pose``, asked one time a frame by a pool, times never decreasing: the
+        controller advances its state from the time it was last asked to, with the inputs fed
+        since. The same inputs fed at the same times give the same poses.
+    """
+
+    inputs: dict
+
+    def feed(self, **values): ...
 
 
 class Skinned(Protocol):

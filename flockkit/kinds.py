@@ -157,8 +157,12 @@ KINDS: Mapping[str, Kind] = _frozen(
             hook="flockkit_register_controllers",
             protocol=interfaces.Controller,
             attributes=("skeleton",),
-            fields={"clip_player", "root_motion"},
-            optional={"root_motion": interfaces.RootMotionSource},
+            fields={"clip_player", "root_motion", "batch", "live"},
+            optional={
+                "root_motion": interfaces.RootMotionSource,
+                "batch": interfaces.BatchedController,
+                "live": interfaces.LiveController,
+            },  # fmt: skip
             factory_parameters={"clip_player": ("clip", "rate")},
             kit="flockkit.testing.controller",
             receives=("flockkit.skeleton.SkeletalClip", "flockkit.skeleton.Channel"),

@@ -18,8 +18,17 @@ A stream whose controller offers root motion (``Capabilities.root_motion``) keep
 pose, where its root had gone by then (a ground transform, float64: it accumulates over hours):
 what the agents of a crowd that takes its motion from its clips advance by.
 
-Streams evaluate their controllers PREFETCH_FRAMES frames ahead (a controller's pose is a function
-of time alone), a few streams each frame, so that a frame does not call a thousand controllers.
+How a stream's poses are made depends on what its controller declares (``Capabilities``):
+
+- ``batch``: every Running stream of one controller class and joint count is advanced by one
+  call a frame (``BatchedController``), which writes the poses in place into the store: no
+  Python runs per stream, nothing is evaluated ahead, and the frame's work is the store's writes.
+- ``live`` (a state machine fed each frame): evaluated every frame at that frame's time, never
+  ahead, so what is fed before an ``update`` shows in that update.
+- otherwise (a function of time alone): evaluated PREFETCH_FRAMES frames ahead, a few streams
+  each frame, so that a frame does not call a thousand controllers.
+
+Events and root motion of time-only streams are read ahead in the same blocks.
 """
 
 from __future__ import annotations
@@ -33,11 +42,15 @@ from ..interfaces import capabilities
 from ..registry import resolve
 from ..skeleton import Pose, Skeleton
 
-__all__ = ["Stream", "StreamPool", "UniquePool", "ENTRY_FLOATS", "PREFETCH_FRAMES", "equation_5", "equation_4"]
+__all__ = ["Stream", "StreamPool", "UniquePool", "ENTRY_FLOATS", "PREFETCH_FRAMES", "READ_AHEAD_FRAMES", "equation_5",
+           "equation_4"]  # fmt: skip
 
 ENTRY_FLOATS = 12  # per joint: rotation 4, translation 3, scale 3, reserved 2: 48 bytes
 # Frames a stream's controller is evaluated ahead; refills are staggered over this many frames.
 PREFETCH_FRAMES = 32
+# Frames a batched stream's events and root motion are read ahead (its poses are not): longer
+# blocks, since these are small (4 floats a frame) and each block is one Python call per stream.
+READ_AHEAD_FRAMES = 128
 STATES = ("Running", "Stopped")
 # The fastest animation system a pool runs (frames a second): above any display's refresh rate.
 # A pool runs at least one frame a second.
@@ -185,15 +198,39 @@ class StreamPool:
         block_start = np.cumsum(sizes.sum(axis=0)) - sizes.sum(axis=0)
         self.lookup = np.where(held, block_start + np.cumsum(sizes, axis=0) - sizes, -1)
         self.xp = np if xp is None else xp
-        self.store = self.xp.zeros(int(sizes.sum()), dtype=self.xp.float32)
+        declared = [capabilities(st.controller) for st in self.streams]
+        self.live = np.array([c.live for c in declared])
+        self.batched = np.array([c.batch and not c.live for c in declared])
+        # every slot holds its stream's scales from the start: a batched write touches only the
+        # rotations and translations
+        store = np.zeros(int(sizes.sum()), dtype=np.float32)
+        for k, st in enumerate(self.streams):
+            slots = self.lookup[k, : self.history[k]]
+            scales = np.broadcast_to(st.skeleton.scales.astype(np.float32), (len(slots), self.bones[k], 3))
+            self._blocks(store, int(self.bones[k]), writeable=True)[slots, :, 7:10] = scales
+        self.store = store if self.xp is np else self.xp.asarray(store)
         self.head = np.zeros(s, dtype=np.int64)  # the slot written last
         self.filled = np.zeros(s, dtype=np.int64)  # frames written since the stream (re)started
         self.clock = np.zeros(s, dtype=np.int64)  # frames evaluated since the stream (re)started
         self.running = np.array([st.default == "Running" for st in self.streams])
         self.users = np.zeros(s, dtype=np.int64)  # agent parts reading the stream
-        # prefetched poses: per skeleton size, (streams of that size, PREFETCH_FRAMES, J, 12); a
-        # stream's block starts at frame _first and holds _count frames (0: refill at once)
-        self._group = {int(b): np.flatnonzero(self.bones == b) for b in np.unique(self.bones)}
+        # batched streams: per (controller class, joint count), the streams and one evaluator
+        self._batches = []
+        for key in dict.fromkeys((type(st.controller), int(self.bones[k])) for k, st in enumerate(self.streams)
+                                 if self.batched[k]):  # fmt: skip
+            members = np.array([k for k, st in enumerate(self.streams) if self.batched[k] and
+                                (type(st.controller), int(self.bones[k])) == key])  # fmt: skip
+            controllers = [self.streams[k].controller for k in members]
+            self._batches.append((members, controllers[0].batch(controllers)))
+        self._batch_of = np.full(s, -1, dtype=np.int64)  # each batched stream's index in its evaluator
+        for members, _ in self._batches:
+            self._batch_of[members] = np.arange(len(members))
+        # prefetched poses, for streams neither batched nor live: per skeleton size, (streams of
+        # that size, PREFETCH_FRAMES, J, 12); a stream's block starts at frame _first and holds
+        # _count frames (0: refill at once); batched and live streams read ahead only events
+        # and root motion (live ones not at all)
+        ahead = ~self.batched & ~self.live
+        self._group = {int(b): np.flatnonzero((self.bones == b) & ahead) for b in np.unique(self.bones[ahead])}
         self._place = np.zeros(s, dtype=np.int64)
         for members in self._group.values():
             self._place[members] = np.arange(len(members))
@@ -208,7 +245,8 @@ class StreamPool:
         # root motion: which streams have it, their roots per ring slot and prefetched ahead
         self.rooted = np.array([capabilities(st.controller).root_motion for st in self.streams])
         self.roots = np.zeros((s, longest if self.rooted.any() else 0, 4))
-        self._ahead_roots = np.zeros((s, PREFETCH_FRAMES if self.rooted.any() else 0, 4))
+        self._block = np.where(self.batched, READ_AHEAD_FRAMES, PREFETCH_FRAMES)
+        self._ahead_roots = np.zeros((s, int(self._block[self.rooted].max()) if self.rooted.any() else 0, 4))
         self._restart(np.flatnonzero(self.running))
 
     # -- lookups --------------------------------------------------------------------------------
@@ -262,19 +300,25 @@ class StreamPool:
 
     def memory(self) -> int:
         """Bytes of every array the pool holds: the store (Equation 5 with U = 0), the prefetched
-        poses (48 * PREFETCH_FRAMES * sum_A Bones_A: 45% more than the store at paper 003's
-        scale) and the bookkeeping (lookup table, heads, clocks, ref counts)."""
+        poses (48 * PREFETCH_FRAMES * Bones_A for each stream neither batched nor live), the
+        batch evaluators' tables and the bookkeeping (lookup table, heads, clocks, ref counts)."""
         return sum(self.memory_parts().values())
 
     def memory_parts(self) -> dict:
         """`memory` by part, in bytes: ``store`` (the ring buffers, what Equation 5 counts),
-        ``prefetch`` (PREFETCH_FRAMES poses ahead per stream) and ``bookkeeping``."""
+        ``prefetch`` (PREFETCH_FRAMES poses ahead per stream that is neither batched nor live),
+        ``batch`` (what the evaluators of batched streams hold: their ``nbytes``) and
+        ``bookkeeping``."""
         ahead = sum(int(a.nbytes) for a in self._ahead.values())
+        batch = sum(int(getattr(evaluator, "nbytes", 0)) for _, evaluator in self._batches)
         tables = [self.lookup, self.history, self.bones, self.head, self.filled, self.clock, self.running,
                   self.users, self._place, self._first, self._count, self._stops, *self._group.values(),
-                  *self._scales, self.rooted, self.roots, self._ahead_roots]  # fmt: skip
+                  *self._scales, self.rooted, self.roots, self._ahead_roots, self.live, self.batched,
+                  self._batch_of, self._block]  # fmt: skip
         store = int(self.store.size) * 4  # float32, in whatever namespace holds it
-        return {"store": store, "prefetch": ahead, "bookkeeping": sum(int(a.nbytes) for a in tables)}
+        tables += [members for members, _ in self._batches]
+        return {"store": store, "prefetch": ahead, "batch": batch,
+                "bookkeeping": sum(int(a.nbytes) for a in tables)}  # fmt: skip
 
     def gather(self, streams: np.ndarray, offsets: np.ndarray, bones: int):
         """Entries (n, bones, 12) of `streams` (all of `bones` joints) `offsets` frames behind their
@@ -284,6 +328,13 @@ class StreamPool:
             return self.windows(bones)[rows].reshape(-1, bones, ENTRY_FLOATS)
         index = (rows[:, None] + np.arange(bones * ENTRY_FLOATS)).reshape(-1)
         return self.xp.reshape(self.xp.take(self.store, self.xp.asarray(index)), (-1, bones, ENTRY_FLOATS))
+
+    @staticmethod
+    def _blocks(store: np.ndarray, bones: int, *, writeable: bool = False) -> np.ndarray:
+        """`store` seen as overlapping pose blocks (count, bones, 12), one starting at every float."""
+        count = max(len(store) - bones * ENTRY_FLOATS + 1, 0)
+        return np.lib.stride_tricks.as_strided(store, shape=(count, bones, ENTRY_FLOATS), strides=(4, 48, 4),
+                                               writeable=writeable)  # fmt: skip
 
     def windows(self, bones: int, *, writeable: bool = False) -> np.ndarray:
         """The store seen as overlapping rows of `bones` entries, one starting at every float:
@@ -330,13 +381,33 @@ class StreamPool:
     def _write(self, live: np.ndarray) -> list:
         if not len(live):
             return []
-        for k in live[self.clock[live] - self._first[live] >= self._count[live]]:
+        fed = self.live[live]
+        for k in live[~fed & (self.clock[live] - self._first[live] >= self._count[live])]:
             self._refill(int(k))
         self.head[live] = (self.head[live] + 1) % self.history[live]
         rows = self.lookup[live, self.head[live]]
         events = []
         for k in self._events.keys() & set(live.tolist()):
             events.extend((k, e) for e in self._events[k].pop(int(self.clock[k]), ()))
+        for k, row in zip(live[fed].tolist(), rows[fed].tolist()):
+            events.extend((k, e) for e in self._evaluate_live(k, row))
+        for members, evaluator in self._batches:
+            mine = self._batch_of[live] >= 0
+            mine[mine] = np.isin(live[mine], members)
+            if not mine.any():
+                continue
+            streams = live[mine]
+            times = self.clock[streams] / self.fps
+            if self.xp is np:
+                evaluator.write(self._batch_of[streams], times, self.store, rows[mine], ENTRY_FLOATS)
+            else:  # written on the host, copied over once
+                width = int(self.bones[streams[0]]) * ENTRY_FLOATS
+                host = np.zeros(len(streams) * width, dtype=np.float32)
+                evaluator.write(self._batch_of[streams], times, host, np.arange(len(streams)) * width, ENTRY_FLOATS)
+                host = host.reshape(len(streams), -1, ENTRY_FLOATS)
+                host[..., 7:10] = np.stack([self._scales[k] for k in streams.tolist()])
+                for row, entry in zip(rows[mine].tolist(), host):
+                    self.store[row : row + entry.size] = self.xp.asarray(entry.ravel())
         for bones, members in self._group.items():
             mine = np.isin(live, members)
             streams = live[mine]
@@ -348,33 +419,53 @@ class StreamPool:
             else:
                 for row, entry in zip(rows[mine].tolist(), entries):
                     self.store[row : row + entry.size] = self.xp.asarray(entry.ravel())
-        rooted = live[self.rooted[live]]
+        rooted = live[self.rooted[live] & ~fed]
         if len(rooted):
             self.roots[rooted, self.head[rooted]] = self._ahead_roots[rooted, self.clock[rooted] - self._first[rooted]]
         self.filled[live] = np.minimum(self.filled[live] + 1, self.history[live])
         self.clock[live] += 1
         return events
 
-    def _refill(self, k: int) -> None:
-        """Evaluate stream k's controller for its next block of frames, and note its events there.
-        A stream's first block is shorter by its index modulo PREFETCH_FRAMES, so that refills of
-        streams started together fall on different frames."""
-        frame = int(self.clock[k])
-        count = PREFETCH_FRAMES - (k % PREFETCH_FRAMES if frame == 0 else 0)
-        controller = self.streams[k].controller
-        pose = controller.pose((frame + np.arange(count)) / self.fps)
-        if pose.n_joints != self.bones[k] or pose.shape != (count,):
+    def _checked(self, k: int, pose, count: int):
+        if not isinstance(pose, Pose) or pose.n_joints != self.bones[k] or pose.shape != (count,):
             raise ValidationError(
-                f"stream {k}'s controller gave poses of shape {pose.shape} x {pose.n_joints} joints for "
-                f"{count} times and a skeleton of {self.bones[k]}"
+                f"stream {k}'s controller gave poses of shape {getattr(pose, 'shape', None)} x "
+                f"{getattr(pose, 'n_joints', None)} joints for {count} times and a skeleton of {self.bones[k]}"
             )
-        self._ahead[int(self.bones[k])][self._place[k], :count] = _entries(pose, self._scales[k])
+        return pose
+
+    def _evaluate_live(self, k: int, row: int) -> list:
+        """Stream k's live controller at this frame's time, written at store offset `row`; its
+        root motion and the events it reports within the frame."""
+        frame = int(self.clock[k])
+        controller, now = self.streams[k].controller, np.array([frame / self.fps])
+        entry = _entries(self._checked(k, controller.pose(now), 1), self._scales[k])[0]
+        self.store[row : row + entry.size] = entry.ravel() if self.xp is np else self.xp.asarray(entry.ravel())
         if self.rooted[k]:
-            roots = np.asarray(controller.root_motion((frame + np.arange(count)) / self.fps), dtype=np.float64)
-            if roots.shape != (count, 4) or not np.all(np.isfinite(roots)):
-                raise ValidationError(f"stream {k}'s controller gave root motion of shape {roots.shape} for {count} "
-                                      "times (finite, 4 per time: a ground translation and a heading)")  # fmt: skip
-            self._ahead_roots[k, :count] = roots
+            self.roots[k, self.head[k]] = self._roots_of(k, controller, now)[0]
+        return controller.events(frame / self.fps, (frame + 1) / self.fps)
+
+    def _roots_of(self, k: int, controller, times) -> np.ndarray:
+        roots = np.asarray(controller.root_motion(times), dtype=np.float64)
+        if roots.shape != (len(times), 4) or not np.all(np.isfinite(roots)):
+            raise ValidationError(f"stream {k}'s controller gave root motion of shape {roots.shape} for {len(times)} "
+                                  "times (finite, 4 per time: a ground translation and a heading)")  # fmt: skip
+        return roots
+
+    def _refill(self, k: int) -> None:
+        """Evaluate stream k's controller for its next block of frames (a batched stream: only its
+        root motion, READ_AHEAD_FRAMES of it), and note its events there. A stream's first block
+        is shorter by its index modulo the block's length, so that refills of streams started
+        together fall on different frames."""
+        frame = int(self.clock[k])
+        block = int(self._block[k])
+        count = block - (k % block if frame == 0 else 0)
+        controller = self.streams[k].controller
+        if not self.batched[k]:
+            pose = self._checked(k, controller.pose((frame + np.arange(count)) / self.fps), count)
+            self._ahead[int(self.bones[k])][self._place[k], :count] = _entries(pose, self._scales[k])
+        if self.rooted[k]:
+            self._ahead_roots[k, :count] = self._roots_of(k, controller, (frame + np.arange(count)) / self.fps)
         self._first[k], self._count[k] = frame, count
         found = {}
         for e in controller.events(frame / self.fps, (frame + count) / self.fps):

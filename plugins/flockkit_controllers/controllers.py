@@ -8,11 +8,14 @@ import math
 
 import attrs
 import numpy as np
+from numba.typed import List
 
 import flockkit
 from flockkit import validate
 from flockkit.crowd import Event, Pose, SkeletalClip, stream_times
 from flockkit.errors import ValidationError
+
+from ._kernels import write_frames
 
 # Skeletal poses are 3D.
 SKELETAL = flockkit.Capabilities(dims=(3,))
@@ -48,8 +51,8 @@ class ClipPlayer:
     holding its last pose. Its root motion is the clip's ``root_motion`` played alike (each loop
     adds the clip's), none for a clip without one."""
 
-    # takes clip and rate; offers root_motion(times)
-    capabilities = flockkit.Capabilities(dims=(3,), clip_player=True, root_motion=True)
+    # takes clip and rate; offers root_motion(times) and batch(controllers)
+    capabilities = flockkit.Capabilities(dims=(3,), clip_player=True, root_motion=True, batch=True)
 
     clip: SkeletalClip = attrs.field(converter=_clip)
     loop: bool = validate.parameter("clip", default=True, kind="flag")
@@ -67,6 +70,10 @@ class ClipPlayer:
         u = self._unwrapped(stream_times(times, owner="clip"))
         period = self.clip.duration
         return self.clip.sample(np.mod(u, period) if self.loop and period > 0 else u)
+
+    def batch(self, controllers) -> ClipBatch:
+        """One evaluator of many clip players (``Capabilities.batch``)."""
+        return ClipBatch(controllers)
 
     def root_motion(self, times) -> np.ndarray:
         t = stream_times(times, owner="clip")
@@ -91,6 +98,84 @@ class ClipPlayer:
             inside = (low <= at) & (at < high)
             found = list(zip(at[inside].tolist(), names[inside].tolist()))
         return [Event(time=(at - self.start) / self.rate, name=name) for at, name in sorted(found)]
+
+
+class ClipBatch:
+    """Clip players evaluated together by a compiled loop that writes each pose straight into the
+    caller's array: the clips' keys read where the clips hold them, and each interval's slerp
+    angle and its sine (signed by the side the next key is turned to) worked out once, as the
+    clip's own keys do (16 bytes a joint and frame). Players of clips of channels are evaluated
+    one by one through ``pose``."""
+
+    def __init__(self, players):
+        self.players = tuple(players)
+        joints = {p.skeleton.n_joints for p in self.players}
+        if not self.players or len(joints) != 1 or not all(isinstance(p, ClipPlayer) for p in self.players):
+            raise ValidationError("clip: batch needs clip players of one joint count")
+        clips, angles, sines, first, index = [], [], [], [], {}
+        for p in self.players:
+            clip = p.clip
+            if clip.channels or id(clip) in index:
+                continue
+            index[id(clip)] = len(clips)
+            clips.append(clip)
+            first.append(sum(len(a) for a in angles))
+            q = clip.rotations
+            dot = np.sum(q[:-1] * q[1:], axis=-1, keepdims=True)  # as flockkit.skeleton's LINEAR keys
+            angle = np.maximum(np.arccos(np.minimum(np.abs(dot), 1.0)), 1e-12)[..., 0]
+            sine = np.where(dot[..., 0] < 0, -1.0, 1.0) * np.sin(angle)
+            held = np.full((1, q.shape[1]), 1e-12)  # after the last key (and a clip of one frame)
+            angles.append(np.concatenate([angle, held]))
+            sines.append(np.concatenate([sine, np.sin(held)]))
+        self._clips = List([c.rotations for c in clips]) if clips else None
+        self._translations = List([c.translations for c in clips]) if clips else None
+        self._angles = np.concatenate(angles) if clips else None
+        self._sines = np.concatenate(sines) if clips else None
+        self._framed = np.array([id(p.clip) in index for p in self.players])
+        self._clip = np.array([index.get(id(p.clip), 0) for p in self.players], dtype=np.int64)
+        self._first = np.array([first[k] if first else 0 for k in self._clip], dtype=np.int64)
+        self._frames = np.array([p.clip.n_frames if f else 1 for p, f in zip(self.players, self._framed)])
+        self._fps = np.array([p.clip.fps or 1.0 for p in self.players], dtype=np.float64)
+        self._start = np.array([p.start for p in self.players], dtype=np.float64)
+        self._rate = np.array([p.rate for p in self.players], dtype=np.float64)
+        self._period = np.array([p.clip.duration if p.loop else 0.0 for p in self.players], dtype=np.float64)
+        self._end = (self._frames - 1) / self._fps  # the last key's time, as the clip computes it
+        held = (self._angles, self._sines, self._framed, self._clip, self._first, self._frames, self._fps,
+                self._start, self._rate, self._period, self._end)  # fmt: skip
+        self.nbytes = sum(a.nbytes for a in held if a is not None)
+
+    def write(self, index, times, out, rows, stride) -> None:
+        """``BatchedController``: the pose of player index[i] at times[i] into `out` at rows[i]."""
+        index, t = np.asarray(index, dtype=np.int64), np.asarray(times, dtype=np.float64)
+        rows = np.asarray(rows, dtype=np.int64)
+        framed = self._framed[index]
+        if not framed.all():
+            for i in np.flatnonzero(~framed).tolist():
+                pose = self.players[index[i]].pose(t[i : i + 1])
+                j = pose.n_joints
+                block = out[rows[i] : rows[i] + stride * j].reshape(j, stride)
+                block[:, 0:4], block[:, 4:7] = pose.rotations[0], pose.translations[0]
+            index, t, rows = index[framed], t[framed], rows[framed]
+        if not len(index):
+            return
+        # as ClipPlayer.pose: the time on the clip, wrapped round a loop
+        u = self._start[index] + self._rate[index] * t
+        period = self._period[index]
+        looped = period > 0
+        u = np.where(looped, np.mod(u, np.where(looped, period, 1.0)), u)
+        # as the clip's keys: the last key at or before it (searchsorted's), the last interval at
+        # the very end; key k is at k / fps
+        frames, fps = self._frames[index], self._fps[index]
+        at = np.minimum(np.maximum(u, 0.0), self._end[index])
+        k = np.clip(np.floor(at * fps).astype(np.int64), 0, frames - 1)
+        k = np.where((k + 1 < frames) & ((k + 1) / fps <= at), k + 1, k)
+        k = np.where(k / fps > at, k - 1, k)
+        single = frames < 2
+        k = np.where(single, 0, np.minimum(k, frames - 2))
+        span = (k + 1) / fps - k / fps
+        share = np.where(single, 0.0, (at - k / fps) / np.where(single, 1.0, span))
+        write_frames(rows, self._clip[index], k, self._first[index] + k, share, self._clips, self._translations,
+                     self._angles, self._sines, out, stride)  # fmt: skip
 
 
 def _weight(value):

@@ -274,8 +274,9 @@ def test_memory_counts_every_array_and_its_store_is_equation_5(seed):
             tracemalloc.stop()
     parts = pool.memory_parts()
     assert parts["store"] == equation_5(bones, histories) == 48 * int(np.sum(bones * histories))
-    assert parts["prefetch"] == 48 * PREFETCH_FRAMES * int(np.sum(bones))
-    assert pool.memory() == sum(parts.values()) == held_bytes(pool)
+    assert parts["prefetch"] == 48 * PREFETCH_FRAMES * int(np.sum(bones[~pool.batched & ~pool.live]))
+    assert parts["batch"] == sum(evaluator.nbytes for _, evaluator in pool._batches)
+    assert pool.memory() == sum(parts.values()) == held_bytes(pool) + parts["batch"]
     # the rest of what building left behind is Python objects (dicts, array headers, events)
     assert pool.memory() <= traced <= pool.memory() + 64 * 1024
     extra = parts["prefetch"] / parts["store"]
