@@ -43,10 +43,16 @@ from flockkit import validate
 from flockkit.errors import ValidationError
 from flockkit.scene import Features, interpolate_arrows
 
+from . import _kernels
+
 # Look-ahead costs this close (as a mean arrow error) count as a tie in the initial pass, broken
 # at random (our choice, measured on bench/scene.py: neighbours in step on 27% of frames before
 # section 6.2 instead of 99%, frames within 0.2 of the target 98.6% instead of 99.3%).
 TIE = 0.02
+
+# Whether walks on graphs that do not turn run their first pass and replacement searches as the
+# compiled loops of _kernels (the same walks, edge for edge); False runs the Python reference.
+_COMPILED = True
 
 
 def _target(value):
@@ -303,6 +309,23 @@ class _Shared:
         # per node: which of its edges are phase shifts (what _monotony weighs)
         self.shifts_here = [np.array([kind == "transition" and bool(self.shift[i]) for kind, i in edges], dtype=bool)
                             for edges, _, _ in self.choices]  # fmt: skip
+        # the same, laid out for the compiled loops (_kernels): padded per node, kind 0 clip, 1 transition
+        width = max(len(edges) for edges, _, _ in self.choices) if self.choices else 0
+        self.edge_kind = np.full((len(self.nodes), width), -1, dtype=np.int64)
+        self.edge_index = np.zeros((len(self.nodes), width), dtype=np.int64)
+        self.edge_ahead = np.zeros((len(self.nodes), width), dtype=np.int64)
+        self.edge_fixed = np.zeros((len(self.nodes), width))
+        self.n_edges = np.array([len(edges) for edges, _, _ in self.choices], dtype=np.int64)
+        for node, (edges, targets, fixed) in enumerate(self.choices):
+            count = len(edges)
+            self.edge_kind[node, :count] = [kind == "transition" for kind, _ in edges]
+            self.edge_index[node, :count] = [index for _, index in edges]
+            self.edge_ahead[node, :count], self.edge_fixed[node, :count] = targets, fixed
+        self.out_table = np.zeros((len(self.nodes), max(map(len, self.out), default=0)), dtype=np.int64)
+        self.out_count = np.array([len(out) for out in self.out], dtype=np.int64)
+        for node, out in enumerate(self.out):
+            self.out_table[node, : len(out)] = out
+        self.shift_steps = np.asarray(self.shift, dtype=np.int64)
         self._memos = {}
         self._arrows = None  # the graph's distinct source arrows (see _Problem._tables)
 
@@ -409,8 +432,8 @@ class _Problem:
 
     def _tables(self) -> None:
         """Where the graph does not turn, the played arrow of a source frame is its own arrow, so
-        frame_error is a table over (source frame, output frame), made once per walk: the error
-        of each distinct source arrow against each distinct target arrow, gathered, and where in
+        frame_error is a lookup made once per walk: the error of each distinct source arrow
+        against each run of one target arrow (error_table[arrow_of[frame], run[t]]), and where in
         step with an avoided walk (within one frame, around the loop). Each entry is the value
         frame_error computes (the same norm of the same difference), so walks are the same."""
         self.error_table = self.step_table = None
@@ -421,8 +444,8 @@ class _Problem:
             self.shared._arrows = (self.features, arrows, arrow_of.ravel())
         _, arrows, self.arrow_of = self.shared._arrows
         targets = self.track[np.flatnonzero(np.append(True, np.diff(self.run)))]  # one per run of one arrow
-        distinct = np.linalg.norm(arrows[:, None, :] - targets[None, :, :], axis=2)
-        self.error_table = np.take(distinct, self.run, axis=1)  # (distinct arrows, output frames)
+        # (distinct arrows, runs of one target arrow): output frame t's column is run[t]
+        self.error_table = np.ascontiguousarray(np.linalg.norm(arrows[:, None, :] - targets[None, :, :], axis=2))
         if self.avoid is None:
             return
         frames = len(self.features)
@@ -443,7 +466,7 @@ class _Problem:
     def _table_error(self, frames, t) -> np.ndarray:
         """frame_error of `frames` (..., m) played from output frame t, from the tables."""
         columns = t + np.arange(frames.shape[-1])
-        error = self.error_table[self.arrow_of[frames], columns]
+        error = self.error_table[self.arrow_of[frames], self.run[columns]]
         if self.avoid is not None:
             error += self.in_step * self._in_step_table(frames, columns)
         return error
@@ -516,7 +539,7 @@ class _Problem:
         frames = self.straight[targets][:, : len(track)]
         if self.error_table is not None and rotations is None:
             columns = t + np.arange(frames.shape[1])
-            error = self.error_table[self.arrow_of[frames], columns]
+            error = self.error_table[self.arrow_of[frames], self.run[columns]]
             if self.avoid is not None:
                 react = frames.shape[1] if self.react is None else self.react
                 error[:, :react] += self.in_step * self._in_step_table(frames[:, :react], columns[:react])
@@ -537,6 +560,8 @@ class _Problem:
             node = self.start
         else:
             node = self._start(rng)
+        if self._compiled():
+            return self.path(node, self._initial_compiled(rng, node))
         start, edges, shifted, drifted = node, [], set(), 0
         state = (node, 0, math.inf, np.eye(self.dims))
         while state[1] < self.needed:
@@ -576,6 +601,51 @@ class _Problem:
             edges.append(edge)
             state = self.step(state, edge)
         return self.path(start, edges)
+
+    def _compiled(self) -> bool:
+        """Whether the compiled loops (_kernels) walk this problem: with the tables (a graph that
+        does not turn), in-step tables included where walks are avoided."""
+        return _COMPILED and self.error_table is not None and (self.avoid is None or self.step_table is not None)
+
+    def _kernel_tables(self) -> tuple:
+        step = self.step_table if self.step_table is not None else np.zeros((0, 0), dtype=bool)
+        return self.error_table, self.arrow_of, self.run, step
+
+    def _initial_compiled(self, rng, node) -> list:
+        """The edges of initial's loop from `node`, by _kernels.initial: the same choices from
+        the same random numbers (drawn here ahead, then the stream set to where initial leaves it)."""
+        shared = self.shared
+        state = np.array([node, 0, _kernels.NEVER, 0, 0, 0], dtype=np.int64)
+        shifted = np.zeros(len(self.shift), dtype=bool)
+        ints = np.array([self.needed, self.longest, self.n_clips, self.drift, self.ahead,
+                         -1 if self.react is None else self.react, self.avoid is not None], dtype=np.int64)  # fmt: skip
+        floats = np.array([self.alpha, self.dt, self.noise, self.vary, self.in_step], dtype=np.float64)
+        saved = rng.bit_generator.state
+        uniforms = rng.random(max(64, self.needed))
+        kind = np.zeros(max(16, self.needed // 4), dtype=np.int64)
+        index = np.zeros_like(kind)
+        try:
+            while True:
+                status = _kernels.initial(state, shifted, uniforms, kind, index, shared.edge_kind, shared.edge_index,
+                                          shared.edge_ahead, shared.edge_fixed, shared.n_edges, self.clip_frames,
+                                          self.clip_target, self.trans_target, shared.shift_steps, self.straight,
+                                          *self._kernel_tables(), ints, floats)  # fmt: skip
+                if status == 0:
+                    break
+                if status == 2:
+                    since = math.inf if state[2] >= _kernels.NEVER else int(state[2])
+                    raise ValidationError(
+                        f"annotated walk: node {int(state[0])} has no edge to take {since} frames after a transition"
+                    )
+                if state[4] + shared.edge_kind.shape[1] > len(uniforms):
+                    uniforms = np.concatenate([uniforms, rng.random(len(uniforms))])
+                if state[5] >= len(kind):
+                    kind, index = np.concatenate([kind, kind]), np.concatenate([index, index])
+        finally:  # the stream as initial leaves it: as many numbers drawn as it used
+            rng.bit_generator.state = saved
+            rng.random(int(state[4]))
+        names = ("clip", "transition")
+        return [(names[k], i) for k, i in zip(kind[: state[5]].tolist(), index[: state[5]].tolist())]
 
     def _start(self, rng) -> int:
         """A random node among those whose next two seconds stay within 0.1 (mean arrow error) of
@@ -646,6 +716,27 @@ class _Problem:
         )
         old_cost = self.alpha * self.dt * path.error[t0:].sum() + path.running_cost[j] - path.running_cost[i]
         old_edges = path.edges[i:j]
+        if self._compiled():
+            since = path.since[i]
+            ints = np.array([path.node[i], _kernels.NEVER if math.isinf(since) else int(since), t0, old_frames, tail,
+                             -1 if tail else goal, slack, -1 if lead is None else lead, self.needed, self.longest,
+                             self.MAX_TRANSITIONS, self.SEARCH_NODES, self.n_clips, self.period or 0,
+                             self.avoid is not None], dtype=np.int64)  # fmt: skip
+            floats = np.array([old_cost - 1e-9, self.alpha, self.dt, self.beta, self.in_step], dtype=np.float64)
+            kinds = np.array([kind == "transition" for kind, _ in old_edges], dtype=np.int64)
+            indices = np.array([index for _, index in old_edges], dtype=np.int64)
+            suffix = np.ascontiguousarray(path.frames[path.at[j] :] if not tail else path.frames[:0], dtype=np.int64)
+            size = self.SEARCH_NODES + 1  # each node expanded adds one edge at most
+            best_kind, best_index = np.zeros(size, dtype=np.int64), np.zeros(size, dtype=np.int64)
+            count = _kernels.replace(kinds, indices, suffix, self.shared.out_table, self.shared.out_count,
+                                     self.trans_target, self.trans_cost, self.shared.shift_steps, self.clip_frames,
+                                     self.clip_target, self.nodes, *self._kernel_tables(), ints, floats, best_kind,
+                                     best_index)  # fmt: skip
+            if count < 0:
+                return None
+            names = ("clip", "transition")
+            best = [(names[k], i) for k, i in zip(best_kind[:count].tolist(), best_index[:count].tolist())]
+            return self.path(path.start, [*path.edges[:i], *best, *path.edges[j:]])
         suffix = (path.played[path.at[j] :], path.frames[path.at[j] :]) if not tail else None
         best, best_cost = None, old_cost - 1e-9
         expanded = 0
