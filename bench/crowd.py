@@ -30,6 +30,7 @@ shared data's clips (the 2 752-frame BVH should take well under a second).
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from pathlib import Path
 
@@ -44,7 +45,7 @@ from flockkit.testing import inputs
 SKELETONS = {"body": 82, "flag": 25, "scarf": 24, "hat": 24}
 
 
-def build(n_agents: int, n_streams: int, seed: int = 0, clips: str = "stream"):
+def build(n_agents: int, n_streams: int, seed: int = 0, clips: str = "stream", running: str = "half"):
     """The crowd's pool and clusters. `clips`: "stream", every stream its own clip (the paper's
     evaluation has about 1 024 animations), or "skeleton", one clip per skeleton size that every
     stream of that size plays at its own rate (0.8 to 1.2)."""
@@ -55,6 +56,8 @@ def build(n_agents: int, n_streams: int, seed: int = 0, clips: str = "stream"):
     )
     histories = rng.integers(20, 121, size=n_streams)
     stopped = rng.random(n_streams) < 0.5
+    if running == "all":  # the acceptance case: every stream Running from the start
+        stopped[:] = False
 
     def clip_of(k: int, joints: int):
         if clips == "skeleton":
@@ -76,6 +79,8 @@ def build(n_agents: int, n_streams: int, seed: int = 0, clips: str = "stream"):
     shares = {"body": 1.0, "flag": 0.3, "scarf": 0.5, "hat": 0.4}
     for name, joints in SKELETONS.items():
         candidates = np.flatnonzero((bones == joints) & ~stopped)
+        if running == "all":  # the celebration streams (the first 16 of 82 joints) start unused
+            candidates = candidates[16:] if joints == 82 else candidates
         chosen = rng.choice(candidates, size=n_agents)
         clusters[name] = np.where(rng.random(n_agents) < shares[name], chosen, -1)
     return pool, clusters, bones, histories, stopped
@@ -286,6 +291,21 @@ def ms(function, repeat=5) -> float:
     return timed(function, repeat=repeat)[1] * 1000
 
 
+def load() -> str:
+    """The machine's load averages (1, 5, 15 minutes): other work sharing the cores."""
+    return ", ".join(f"{x:.2f}" for x in os.getloadavg())
+
+
+def bandwidth(crowd: Crowd, parts: np.ndarray) -> tuple[float, int]:
+    """The memory-bandwidth limit of blending `parts`' body poses: ms for a plain numpy copy
+    that moves the bytes the blend must move (two store entries read per part and one written:
+    a copy of 1.5 entries a part reads and writes as much), best of 5; and those bytes."""
+    entries = crowd.entries(parts, "body")
+    source = np.concatenate([entries, entries[: len(entries) // 2]])
+    out = np.empty_like(source)
+    return ms(lambda: np.copyto(out, source)), 2 * source.nbytes
+
+
 def gpu(args, movers, celebrations):
     """The same crowd with its store in CuPy, sampled and blended there through the same code
     (the array API), where CuPy and a GPU are present."""
@@ -295,7 +315,7 @@ def gpu(args, movers, celebrations):
         print("GPU: CuPy is not installed; the sampling and blending ran on the CPU only")
         return
     try:
-        pool, clusters, *_ = build(args.agents, args.streams, clips=args.clips)
+        pool, clusters, *_ = build(args.agents, args.streams, clips=args.clips, running=args.running)
         pool = StreamPool(pool.streams, fps=pool.fps, xp=cupy)
         crowd = Crowd(pool, n_agents=args.agents, clusters=clusters, seed=1)
         for k, group in enumerate(np.array_split(movers, 16)):
@@ -321,6 +341,8 @@ def main():
     parser.add_argument("--transitions", type=int, default=4096)
     parser.add_argument("--samples", type=int, default=8, help="frames on which every part's pose is timed both ways")
     parser.add_argument("--quick", action="store_true", help="8 000 agents, 128 streams, 30 frames, 512 transitions")
+    parser.add_argument("--running", choices=("all", "half"), default="all",
+                        help="all streams Running (the acceptance case) or half Stopped by default")  # fmt: skip
     parser.add_argument("--clips", choices=("stream", "skeleton"), default="stream",
                         help="a clip per stream, or one per skeleton size at each stream's rate")  # fmt: skip
     parser.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
@@ -335,7 +357,8 @@ def main():
             frames = sum(c.n_frames for c in clips.values())
             print(f"read_clips({name}): {len(clips)} clips, {frames} frames in {time.perf_counter() - begin:.3f} s")
     start = time.perf_counter()
-    pool, clusters, bones, histories, stopped = build(args.agents, args.streams, clips=args.clips)
+    pool, clusters, bones, histories, stopped = build(args.agents, args.streams, clips=args.clips,
+                                                      running=args.running)  # fmt: skip
     crowd = Crowd(pool, n_agents=args.agents, clusters=clusters, seed=1)
     setup = time.perf_counter() - start
     members = {name: np.flatnonzero(streams >= 0) for name, streams in clusters.items()}
@@ -348,7 +371,7 @@ def main():
         crowd.update()
     rng = np.random.default_rng(2)
     movers = rng.choice(args.agents, size=args.transitions, replace=False)
-    celebrations = np.flatnonzero((bones == 82) & stopped)
+    celebrations = np.flatnonzero((bones == 82) & stopped) if args.running == "half" else np.flatnonzero(bones == 82)
     begin = time.perf_counter()
     for k, group in enumerate(np.array_split(movers, 16)):  # 16 celebration streams start at once
         crowd.transition_to_streamed(group, "body", int(celebrations[k]), blend_time=0.5, time_to_dilate=2.0)
@@ -357,12 +380,26 @@ def main():
     compare_poses(crowd, direct, members, SKELETONS, Gaps())  # warm-up, not counted: the allocator's first blocks
     sampled = set(np.linspace(1, args.frames - 1, min(args.samples, args.frames)).astype(int).tolist())
     updates, ours, theirs, rows, gaps = [], [], [], [], Gaps()
+    advances, buffers = [], []
+    advance = pool.advance
+
+    def timed_advance():  # the pool's share of each update
+        begin = time.perf_counter()
+        found = advance()
+        advances.append((time.perf_counter() - begin) * 1000)
+        return found
+
+    pool.advance = timed_advance
     for frame in range(args.frames):
         begin = time.perf_counter()
         crowd.update()
         updates.append((time.perf_counter() - begin) * 1000)
+        begin = time.perf_counter()
+        crowd.instance_buffer()
+        buffers.append((time.perf_counter() - begin) * 1000)
         if frame == 4:  # mid-blend: sample the transitioning parts
             blended = ms(lambda: crowd.poses(movers, "body"))
+            limit, moved_bytes = bandwidth(crowd, movers)
             blended_world = ms(lambda: crowd.poses(movers, "body", space="world"), repeat=3)
             assert np.all(crowd.alphas("body")[movers] > 0)
         if frame in sampled:
@@ -385,11 +422,24 @@ def main():
           f"{crowd.instance_buffer().nbytes / 2**20:.1f} MB)")  # fmt: skip
     print(f"blended poses of {args.transitions} parts: local {blended:.2f} ms (target <= 3 ms), "
           f"world (forward kinematics) {blended_world:.2f} ms")  # fmt: skip
+    advances, buffers = np.array(advances), np.array(buffers)
+    frame = np.median(updates) + np.median(buffers)
+    print(f"budget per frame (median of {args.frames} frames; {'all' if args.running == 'all' else 'half the'} "
+          f"streams Running, {args.transitions} transitions started at frame 0; load {load()}):")  # fmt: skip
+    print(f"  pool.advance (every Running stream's head)   {np.median(advances):7.2f} ms")
+    print(f"  the rest of update (dilation, blends, roots) {np.median(updates) - np.median(advances):7.2f} ms")
+    print(f"  instance_buffer                              {np.median(buffers):7.3f} ms")
+    print(f"  update + instance_buffer                     {frame:7.2f} ms (target <= 5 ms: "
+          f"{'met' if frame <= 5 else 'NOT met'})")  # fmt: skip
+    print(f"  blended local poses of {args.transitions} parts       {blended:7.2f} ms; memory-bandwidth limit "
+          f"(numpy copy of the {moved_bytes / 2**20:.1f} MiB they read and write) {limit:.2f} ms: "
+          f"{blended / limit:.1f}x the limit (target <= 2x)")  # fmt: skip
     memory = pool.memory_parts()
     total_new = equation_5(bones, histories)
     total_prev = equation_4(bones, histories, transitions=args.transitions)
     print(f"memory: pool {pool.memory() / 2**20:.1f} MiB = store {memory['store'] / 2**20:.1f} + prefetch "
-          f"{memory['prefetch'] / 2**20:.1f} (+{memory['prefetch'] / memory['store']:.0%}) + bookkeeping "
+          f"{memory['prefetch'] / 2**20:.1f} (+{memory['prefetch'] / memory['store']:.0%}) + batch tables "
+          f"{memory['batch'] / 2**20:.1f} + bookkeeping "
           f"{memory['bookkeeping'] / 2**20:.1f}; Equation 5 {total_new / 2**20:.1f} MiB "
           f"({'equal to the store' if memory['store'] == total_new else 'NOT the store'}); Equation 4 (every stream "
           f"padded to 82 joints and 120 frames, {args.transitions} transition slots) {total_prev / 2**20:.1f} MiB; "

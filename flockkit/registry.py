@@ -99,7 +99,14 @@ def _parameter_problems(expected: inspect.Signature, actual: inspect.Signature) 
     params = list(actual.parameters.values())
     kinds = {p.kind for p in params}
     positional = [p for p in params if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)]
-    wanted_positional = [p for p in expected.parameters.values() if p.kind != p.KEYWORD_ONLY]
+    wanted_positional = [
+        p for p in expected.parameters.values() if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)
+    ]
+    if (
+        any(p.kind == p.VAR_KEYWORD for p in expected.parameters.values())
+        and inspect.Parameter.VAR_KEYWORD not in kinds
+    ):
+        return [f"takes no **{next(p.name for p in expected.parameters.values() if p.kind == p.VAR_KEYWORD)}"]
     problems = []
     for index, wanted in enumerate(wanted_positional):
         if index >= len(positional):

@@ -25,6 +25,19 @@ PARAMS = {
         "masks": [~LEFT_LEG, LEFT_LEG],
     },
     ("controller", "graph-walk"): {"clip": WALKER},
+    ("controller", "locomotion"): {
+        "clips": [
+            flockkit.SkeletalClip(
+                skeleton=WALKER.skeleton,
+                fps=WALKER.fps,
+                rotations=WALKER.rotations[:1],
+                translations=WALKER.translations[:1],
+                name="idle",
+            ),
+            WALKER,
+        ],  # fmt: skip
+        "speeds": [0.0, 1.4],
+    },
 }
 COMPONENTS = [
     (kind, flockkit.get(kind, name, **PARAMS.get((kind, name), {})))

@@ -45,6 +45,17 @@ def applies_when(field: str):
     return mark
 
 
+def applies_unless(field: str):
+    """Mark a check as not applying to components whose Capabilities declare `field` (a live
+    controller's pose is not a function of time alone)."""
+
+    def mark(check):
+        check.excluded_by = field
+        return check
+
+    return mark
+
+
 def needs(*partners: str):
     """Mark a check as taking these partner components as keyword arguments."""
 
@@ -106,6 +117,9 @@ def _raised_at(exc: BaseException) -> str:
 def skip_reason(check, declared) -> str | None:
     """Why `check` does not apply to a component declaring `declared`, or None if it does. A
     declared value of 0 (a plausibility reach of zero frames) is a declaration, checked as such."""
+    excluded = getattr(check, "excluded_by", None)
+    if excluded is not None and getattr(declared, excluded):
+        return f"the component declares Capabilities.{excluded} (this check is of components without it)"
     field = getattr(check, "requires", None)
     value = None if field is None else getattr(declared, field)
     if field is None or (value is not None and value is not False):

@@ -7,10 +7,13 @@ several seconds (through a clip's loops and a graph walk's transitions).
 
 from __future__ import annotations
 
+import copy
+import math
+
 import numpy as np
 
 from ..skeleton import Event, Pose, Skeleton
-from ._expect import applies_when, expect_validation_error
+from ._expect import applies_unless, applies_when, expect_validation_error
 
 TIMES = np.linspace(0.0, 7.3, 74)  # seconds on the stream's clock: past several loops of a short clip
 TIMES.setflags(write=False)  # each check hands a component a copy: one that sorts in place harms no other check
@@ -34,6 +37,7 @@ def check_poses_fit_the_skeleton(name, controller):
     assert np.all(np.isfinite(pose.translations)), f"{name}.pose gave translations that are not finite"
 
 
+@applies_unless("live")
 def check_pose_is_a_function_of_time(name, controller):
     """The pose at a time is the same asked in one batch, one at a time, or in reverse order."""
     batch = controller.pose(TIMES.copy())
@@ -93,6 +97,7 @@ def check_root_motion_on_the_ground(name, controller):
 
 
 @applies_when("root_motion")
+@applies_unless("live")
 def check_root_motion_is_a_function_of_time(name, controller):
     """root_motion at a time is the same asked in one batch, alone, or in reverse order."""
     batch = np.asarray(controller.root_motion(TIMES.copy()))
@@ -125,6 +130,95 @@ def check_root_motion_is_continuous(name, controller):
         )
 
 
+FRAME = 1 / 30  # seconds between a live controller's frames in the checks
+
+
+@applies_when("batch")
+def check_batch_equals_pose(name, controller):
+    """batch([controller, a copy]).write(...) writes each controller's pose at each time (asked in
+    any order, the same controller twice in one call) as pose gives it, to float32, and touches
+    nothing else in the array."""
+    j = controller.skeleton.n_joints
+    other = copy.deepcopy(controller)
+    evaluator = controller.batch([controller, other])
+    index = np.array([0, 1, 0, 1, 0, 1])
+    times = np.array([0.0, 0.5, 3.1, 7.3, 1.7, 0.0])
+    stride = 13  # not the store's 12: a batch must write at the stride it is given
+    out = np.full(len(index) * j * stride + 5, -7.0, dtype=np.float32)
+    rows = (np.arange(len(index))[::-1] * j * stride + 5).astype(np.int64)
+    evaluator.write(index, times, out, rows, stride)
+    assert np.all(out[:5] == -7.0), f"{name}.batch wrote outside the rows it was given"
+    for i, (k, t) in enumerate(zip(index, times)):
+        block = out[rows[i] : rows[i] + j * stride].reshape(j, stride)
+        expected = (controller, other)[k].pose(np.array([t]))
+        assert np.allclose(block[:, 0:4], expected.rotations[0], atol=1e-6) and np.allclose(
+            block[:, 4:7], expected.translations[0], atol=1e-5
+        ), f"{name}.batch wrote a pose at t = {t} s that differs from {name}.pose at that time"
+        assert np.all(block[:, 7:] == -7.0), f"{name}.batch wrote past a joint's rotation and translation"
+
+
+def _probe_values(controller) -> dict:
+    """Two values of each input of a live controller, apart: its range's ends, or 1 from a finite end."""
+    found = {}
+    for field, (low, high) in dict(controller.inputs).items():
+        a = low if math.isfinite(low) else (min(high, 0.0) - 1.0 if math.isfinite(high) else -1.0)
+        b = high if math.isfinite(high) else a + 1.0
+        found[field] = (float(a), float(b))
+    return found
+
+
+def _run(controller, frames: int, feeds: dict | None = None) -> Pose:
+    """Ask `controller` for frames 0 .. frames - 1 one a frame; `feeds` (frame -> inputs) fed
+    before that frame's pose. Returns the last frame's pose."""
+    pose = None
+    for frame in range(frames):
+        if feeds and frame in feeds:
+            controller.feed(**feeds[frame])
+        pose = controller.pose(np.array([frame * FRAME]))
+    return pose
+
+
+@applies_when("live")
+def check_live_input_shows_in_the_next_pose(name, controller):
+    """Inputs fed before a frame change that frame's pose: two copies run alike for 6 frames, then
+    fed an input's two ends, differ at the 7th (for at least one input)."""
+    assert dict(getattr(controller, "inputs", {})), f"{name}.inputs names no input"
+    changed = []
+    for field, (low, high) in _probe_values(controller).items():
+        a, b = copy.deepcopy(controller), copy.deepcopy(controller)
+        first = _run(a, 7, {6: {field: low}})
+        second = _run(b, 7, {6: {field: high}})
+        changed.append(not (np.allclose(first.rotations, second.rotations, atol=1e-9)
+                            and np.allclose(first.translations, second.translations, atol=1e-9)))  # fmt: skip
+    assert any(changed), f"{name}: no input fed before a frame changed that frame's pose"
+
+
+@applies_when("live")
+def check_live_same_inputs_same_poses(name, controller):
+    """Two copies fed the same inputs at the same frames give the same poses."""
+    feeds = {frame: {field: values[frame % 2] for field, values in _probe_values(controller).items()}
+             for frame in (0, 3, 5, 8)}  # fmt: skip
+    a, b = copy.deepcopy(controller), copy.deepcopy(controller)
+    for frames in (4, 9):
+        first, second = _run(a, frames, feeds), _run(b, frames, feeds)
+        assert np.array_equal(first.rotations, second.rotations) and np.array_equal(
+            first.translations, second.translations
+        ), f"{name} gave different poses for the same inputs at the same times"
+
+
+@applies_when("live")
+def check_live_rejects_bad_inputs(name, controller):
+    """feed with an unknown input name, or a value that is not a finite number in range, raises
+    flockkit.errors.ValidationError."""
+    fed = copy.deepcopy(controller)
+    expect_validation_error(lambda: fed.feed(no_such_input=1.0), f"{name}.feed(an unknown input)")
+    field = next(iter(dict(controller.inputs)))
+    expect_validation_error(lambda: fed.feed(**{field: float("nan")}), f"{name}.feed({field}=NaN)")
+    low, _ = dict(controller.inputs)[field]
+    if math.isfinite(low):
+        expect_validation_error(lambda: fed.feed(**{field: low - 1.0}), f"{name}.feed({field} below its range)")
+
+
 CHECKS = (
     check_poses_fit_the_skeleton,
     check_pose_is_a_function_of_time,
@@ -134,4 +228,8 @@ CHECKS = (
     check_root_motion_on_the_ground,
     check_root_motion_is_a_function_of_time,
     check_root_motion_is_continuous,
+    check_batch_equals_pose,
+    check_live_input_shows_in_the_next_pose,
+    check_live_same_inputs_same_poses,
+    check_live_rejects_bad_inputs,
 )

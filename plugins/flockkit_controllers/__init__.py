@@ -1,10 +1,11 @@
-"""The built-in controllers ``clip``, ``blend``, ``mask`` and ``graph-walk`` (paper 003, section 3.4)."""
+"""The built-in controllers ``clip``, ``blend``, ``mask``, ``graph-walk`` and ``locomotion`` (paper 003,
+section 3.4)."""
 
 import flockkit
 
-from .controllers import Blend, ClipPlayer, GraphWalk, Mask
+from .controllers import Blend, ClipPlayer, GraphWalk, Locomotion, Mask
 
-__all__ = ["ClipPlayer", "Blend", "Mask", "GraphWalk"]
+__all__ = ["ClipPlayer", "Blend", "Mask", "GraphWalk", "Locomotion"]
 
 
 @flockkit.hookimpl
@@ -16,4 +17,9 @@ def flockkit_register_controllers(registry):
         "graph-walk",
         GraphWalk,
         description="an endless, non-repeating stream: a random walk through a motion graph of a clip",
+    )
+    registry.add(
+        "locomotion",
+        Locomotion,
+        description="a live state machine fed speed and turn rate each frame: clips blended by speed, in step",
     )

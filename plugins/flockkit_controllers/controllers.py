@@ -358,3 +358,98 @@ class GraphWalk:
                 if into[i] <= e.time * fps < into[i] + 1 and start <= at < stop:
                     found.append(Event(time=at, name=e.name))
         return found
+
+
+def _clips(value) -> tuple:
+    clips = tuple(value)
+    if not clips or not all(isinstance(c, SkeletalClip) for c in clips):
+        raise ValidationError("locomotion parameter clips must be one or more flockkit.SkeletalClip")
+    _same_skeleton([ClipPlayer(clip=c) for c in clips], "locomotion")
+    return clips
+
+
+def _speeds(value) -> np.ndarray:
+    speeds = np.asarray(value, dtype=np.float64)
+    if speeds.ndim != 1 or not np.all(np.isfinite(speeds)) or np.any(speeds < 0) or np.any(np.diff(speeds) <= 0):
+        raise ValidationError(f"locomotion parameter speeds must be increasing ground speeds >= 0; got {value!r}")
+    speeds.setflags(write=False)
+    return speeds
+
+
+@attrs.define(kw_only=True, eq=False)
+class Locomotion:
+    """A state machine fed each frame (``Capabilities.live``): `clips` of one skeleton (idle,
+    walk, run, ...) each moving at its ground speed in `speeds` (units a second, increasing),
+    blended by the fed ``speed`` (the two clips either side, linearly in speed; held beyond the
+    ends), all played at one phase that advances at the blended clips' cycle rate, so that feet
+    stay in step through the blend; the fed ``turn`` (radians a second about the skeleton's up
+    axis) turns the root joints `lean` seconds' worth into the turn (at most `max_turn`
+    radians). Inputs start at 0 (the first clip, not turning). Its state advances from the
+    time it was last asked to the time asked; an earlier time holds it. No events."""
+
+    capabilities = flockkit.Capabilities(dims=(3,), live=True)
+    inputs = {"speed": (0.0, math.inf), "turn": (-math.inf, math.inf)}  # noqa: RUF012 - the protocol's mapping
+
+    clips: tuple = attrs.field(converter=_clips)
+    speeds: np.ndarray = attrs.field(converter=_speeds, eq=False)
+    lean: float = validate.parameter("locomotion", default=0.2, minimum=0)
+    max_turn: float = validate.parameter("locomotion", default=0.5, minimum=0, maximum=math.pi)
+    _state: dict = attrs.field(init=False, factory=dict, repr=False)
+
+    def __attrs_post_init__(self):
+        if len(self.speeds) != len(self.clips):
+            raise ValidationError(f"locomotion: {len(self.clips)} clips need {len(self.clips)} speeds; got "
+                                  f"{len(self.speeds)}")  # fmt: skip
+        self._state.update(speed=0.0, turn=0.0, phase=0.0, time=0.0)
+
+    @property
+    def skeleton(self) -> flockkit.Skeleton:
+        return self.clips[0].skeleton
+
+    def feed(self, **values) -> None:
+        """Set inputs (``speed``, ``turn``); the next ``pose`` shows them."""
+        for name, value in values.items():
+            if name not in self.inputs:
+                raise ValidationError(f"locomotion: unknown input {name!r}; its inputs are speed and turn")
+            low, high = self.inputs[name]
+            value = validate.number(value, f"locomotion input {name}", minimum=low)
+            if not math.isfinite(value) or value > high:
+                raise ValidationError(f"locomotion input {name} must be finite and at most {high}; got {value!r}")
+            self._state[name] = value
+
+    def _mix(self) -> tuple[int, int, float]:
+        """The two clips either side of the fed speed and the weight of the second."""
+        speed, speeds = self._state["speed"], self.speeds
+        b = int(np.clip(np.searchsorted(speeds, speed, side="right"), 1, max(len(speeds) - 1, 1)))
+        a = b - 1 if len(speeds) > 1 else 0
+        b = min(b, len(speeds) - 1)
+        weight = 0.0 if a == b else float(np.clip((speed - speeds[a]) / (speeds[b] - speeds[a]), 0, 1))
+        return a, b, weight
+
+    def pose(self, times) -> Pose:
+        t = stream_times(times, owner="locomotion")
+        state = self._state
+        a, b, weight = self._mix()
+        durations = [max(self.clips[k].duration, 1e-9) for k in (a, b)]
+        rate = (1 - weight) / durations[0] + weight / durations[1]  # cycles a second
+        phase = state["phase"] + np.maximum(t - state["time"], 0.0) * rate
+        if len(t):
+            latest = int(np.argmax(t))
+            if t[latest] > state["time"]:
+                state["phase"], state["time"] = float(phase[latest] % 1.0), float(t[latest])
+        cycle = np.mod(phase, 1.0)
+        pose = Pose.blend(self.clips[a].sample(cycle * durations[0]), self.clips[b].sample(cycle * durations[1]),
+                          np.full(len(t), weight))  # fmt: skip
+        angle = float(np.clip(self.lean * state["turn"], -self.max_turn, self.max_turn))
+        if angle == 0.0:
+            return pose
+        up = np.zeros(3)
+        up["xyz".index(self.skeleton.up_axis)] = 1.0
+        turn = np.append(math.sin(angle / 2) * up, math.cos(angle / 2))
+        roots = np.flatnonzero(self.skeleton.parents < 0)
+        rotations = pose.rotations.copy()
+        rotations[:, roots] = flockkit.rigid.quaternion_product(turn, rotations[:, roots])
+        return Pose._adopt(rotations, pose.translations)
+
+    def events(self, start: float, stop: float) -> list[Event]:
+        return []

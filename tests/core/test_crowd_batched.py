@@ -3,9 +3,11 @@ same poses as their controllers' own ``pose``, rounded to float32; live controll
 (``Capabilities.live``) show what is fed in the very next update."""
 
 import numpy as np
+import pytest
 
 import flockkit
-from flockkit.crowd import Stream, StreamPool
+from flockkit.crowd import Crowd, Stream, StreamPool, UniquePool
+from flockkit.errors import ValidationError
 from flockkit.testing import inputs
 
 
@@ -93,3 +95,52 @@ def test_stopped_batched_streams_restart_from_zero():
     pool.acquire(np.array([1]))
     np.testing.assert_array_equal(pool.read(1, 0).rotations, controllers[1].pose([0.0]).rotations[0].astype(np.float32))
     assert not pool.is_running(0)
+
+
+def locomotion():
+    walker = inputs.walker()
+    idle = flockkit.SkeletalClip(skeleton=walker.skeleton, fps=walker.fps, rotations=walker.rotations[:1],
+                                 translations=walker.translations[:1], name="idle")  # fmt: skip
+    return flockkit.get("controller", "locomotion", clips=(idle, walker), speeds=(0.0, 1.4))
+
+
+@pytest.mark.parametrize("where", ["stream", "unique"])
+def test_live_input_changes_the_pose_in_the_very_next_update(where):
+    """Two crowds alike; one is fed a new speed (then a turn) before an update: its pose differs
+    from the other's in that update, and not before."""
+    crowds = []
+    for _ in range(2):
+        controller = locomotion()
+        if where == "stream":
+            pool = StreamPool([Stream(controller=controller, history=1)])
+            crowd = Crowd(pool, n_agents=3, clusters={"body": 0}, seed=1)
+        else:
+            pool = StreamPool([Stream(controller=locomotion(), history=1)])
+            unique = UniquePool(1, max_bones=controller.skeleton.n_joints)
+            unique.set(0, controller)
+            crowd = Crowd(pool, n_agents=3, clusters={"body": 0}, unique=unique, seed=1)
+            crowd.transition_to_unique([0, 1, 2], "body", 0, blend_time=1e-6)
+        crowds.append((crowd, controller))
+    assert pool.live.all()
+    for crowd, _ in crowds:
+        for _ in range(4):
+            crowd.update()
+    same = [crowd.entries(None, "body") for crowd, _ in crowds]
+    np.testing.assert_array_equal(same[0], same[1])
+    for inputs_fed in ({"speed": 1.4}, {"turn": 1.0}):
+        crowds[1][1].feed(**inputs_fed)
+        for crowd, _ in crowds:
+            crowd.update()
+        a, b = (crowd.entries(None, "body") for crowd, _ in crowds)
+        assert np.abs(a - b).max() > 1e-3, f"feeding {inputs_fed} did not show in the next update"
+        crowds[0][1].feed(**inputs_fed)  # both fed alike again from here
+
+
+def test_live_controller_refuses_bad_inputs():
+    controller = locomotion()
+    with pytest.raises(ValidationError, match="unknown input"):
+        controller.feed(sped=1.0)
+    with pytest.raises(ValidationError):
+        controller.feed(speed=-1.0)
+    with pytest.raises(ValidationError):
+        controller.feed(turn=float("inf"))

@@ -999,7 +999,59 @@ class RootMotionWrapsEachLoop(Strider):
         return super().root_motion(np.mod(t, self.clip.duration))
 
 
+class BatchIgnoresRate(Walker):
+    """Batches as if every player ran at its clip's own speed."""
+
+    def __init__(self, **params):
+        super().__init__(rate=1.5, **params)
+
+    def batch(self, controllers):
+        return ClipPlayer.batch(self, [ClipPlayer(clip=c.clip) for c in controllers])
+
+
+from flockkit_controllers import Locomotion  # noqa: E402
+
+
+class Locomotor(Locomotion):
+    """The built-in live controller on the kit's walker: idle (its first frame held) and walking."""
+
+    def __init__(self, **params):
+        walker = inputs.walker()
+        idle = walker.resampled(walker.fps)
+        idle = type(walker)(skeleton=walker.skeleton, fps=walker.fps, rotations=idle.rotations[:1],
+                            translations=idle.translations[:1], name="idle")  # fmt: skip
+        super().__init__(clips=(idle, walker), speeds=(0.0, 1.4), **params)
+
+
+class FedInputsOneFrameLate(Locomotor):
+    """Shows what was fed only from the frame after."""
+
+    def feed(self, **values):
+        waiting = dict(getattr(self, "_waiting", {}))
+        object.__setattr__(self, "_waiting", values)
+        if waiting:
+            super().feed(**waiting)
+
+
+class RandomPhase(Locomotor):
+    """Starts each pose at a random phase: the same inputs do not give the same poses."""
+
+    def pose(self, times):
+        self._state["phase"] = float(np.random.default_rng().random())
+        return super().pose(times)
+
+
+class AcceptsAnyInput(Locomotor):
+    def feed(self, **values):
+        known = {k: v for k, v in values.items() if k in self.inputs and np.isfinite(v) and v >= self.inputs[k][0]}
+        super().feed(**known)
+
+
 BROKEN_BY_KIND["controller"] = {
+    "check_batch_equals_pose": BatchIgnoresRate,
+    "check_live_input_shows_in_the_next_pose": FedInputsOneFrameLate,
+    "check_live_same_inputs_same_poses": RandomPhase,
+    "check_live_rejects_bad_inputs": AcceptsAnyInput,
     "check_interface": type("NoPose", (), {"events": lambda self, a, b: []}),
     "check_poses_fit_the_skeleton": DropsAJoint,
     "check_pose_is_a_function_of_time": RemembersTheLastCall,

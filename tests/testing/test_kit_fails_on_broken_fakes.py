@@ -20,6 +20,7 @@ from .fakes import (
     IcaKmeans,
     IcpHungarian,
     Kovar,
+    Locomotor,
     RandomVelocity,
     RandomWalk,
     Retime,
@@ -51,6 +52,7 @@ def test_every_check_has_a_broken_fake(kind):
         ("segmenter", IcaKmeans()),
         ("controller", Walker()),
         ("controller", Strider()),
+        ("controller", Locomotor()),
     ]
 )
 def test_correct_components_pass(component, check):
