@@ -2,6 +2,7 @@
 evaluation of every part's own clip.
 
     python bench/crowd.py [--agents 65000] [--streams 1024] [--frames 120] [--clips stream|skeleton]
+                          [--running all|half]   # all: every stream Running (the acceptance case)
     python bench/crowd.py --quick      # 8 000 agents, 128 streams, 30 frames, 512 transitions
 
 65 000 agents x 4 part clusters (body: 82 joints; flag: 25; scarf and hat: 24), 1 024 streams
