@@ -92,6 +92,44 @@ def stages(scene: flockkit.Scene, sample: int) -> dict:
     return times
 
 
+def check(scene: flockkit.Scene, objects: int) -> str:
+    """Walks `objects` objects (spread over the scene) with the annotated walk's compiled loops
+    and with its Python reference (annotated._COMPILED = False), first without and then avoiding
+    their neighbours' frames, here in one process: raises unless every walk is the same, and
+    says the seconds each side took per object and walk."""
+    from flockkit_walks import annotated
+
+    from flockkit.scene.scene import _walk_object
+
+    placement = scene.place()
+    targets = scene.targets(placement)
+    seeds = np.random.SeedSequence(scene.seed).spawn(2)[1].spawn(placement.n_objects)
+    picked = np.linspace(0, placement.n_objects - 1, min(objects, placement.n_objects)).round().astype(int)
+    walks = [_walk_object(scene, i, placement, targets[i], int(seeds[i].generate_state(1)[0]), None)
+             for i in range(placement.n_objects)]  # fmt: skip
+    animation = flockkit.SceneAnimation(templates=scene.templates, placement=placement, walks=walks,
+                                        dt=scene.frame_time, n_frames=scene.n_frames)  # fmt: skip
+    frames, near = animation.source_frames(), animation.neighbours()
+    seconds = {}
+    made = {}
+    for compiled in (True, False):
+        annotated._COMPILED = compiled
+        clock = time.perf_counter()
+        made[compiled] = [
+            _walk_object(scene, int(i), placement, targets[i], int(seeds[i].generate_state(2)[1]), avoid)
+            for i in picked
+            for avoid in (None, frames[near[i]] if len(near[i]) else None)
+        ]
+        seconds[compiled] = (time.perf_counter() - clock) / len(made[compiled])
+    annotated._COMPILED = True
+    if made[True] != made[False]:
+        raise AssertionError("compiled walks differ from the reference's")
+    return (
+        f"check: {len(made[True])} walks of {len(picked)} objects (without and avoiding neighbours) the same "
+        f"compiled and in Python; {seconds[True]:.3f} s against {seconds[False]:.3f} s per object's walk"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
@@ -100,6 +138,8 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=120.0)
     parser.add_argument("--sample", type=int, default=10, help="objects whose vertices are synthesized")
     parser.add_argument("--profile", action="store_true")
+    parser.add_argument("--check", type=int, default=0,
+                        help="objects walked compiled and by the Python reference, which must be the same")  # fmt: skip
     args = parser.parse_args()
     warnings.simplefilter("ignore", flockkit.errors.FlockkitWarning)
     clock = time.perf_counter()
@@ -123,6 +163,8 @@ def main() -> None:
             f"{k} {v:.3g}" + (" s" if isinstance(v, float) and k[0] not in "ipm" else "")
             for k, v in figures.items()) + f"; scene (placement to de-sync) {walking:.1f} s = "
               f"{1000 * walking / count:.0f} ms per object; all {total:.1f} s", flush=True)  # fmt: skip
+    if args.check:
+        print(check(scene_of(layers, max(args.objects), args.jobs, args.seconds), args.check), flush=True)
     parts = [(k, g) for k, t in enumerate(layers) for g in template_view(t).graphs]
     shown = [(k, len(g.nodes), len(g.transitions), int(np.count_nonzero(g.shifts)), g.period) for k, g in parts]
     print("template parts (template, nodes, transitions, phase shifts, period):", shown)

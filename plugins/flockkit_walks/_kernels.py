@@ -6,9 +6,9 @@ frames are numpy's pairwise sums (``_pairwise``, as ``ndarray.sum`` adds float64
 contiguous axis), products and sums keep the Python code's order, and random numbers are drawn
 by the caller, in the order the Python pass draws them, and handed in.
 
-Frame errors come from the walk's tables: ``distinct[arrow_of[frame], run[t]]`` (the error of a
-source frame's arrow against the target at output frame t), plus ``in_step`` where ``step[frame,
-t]`` (in step with an avoided walk; ``step`` has no rows without walks to avoid).
+The frame error of source frame f at output frame t is the norm of ``features[f] - track[t]``
+(the source arrow against the target), plus ``in_step`` where ``step[f, t]`` (in step with an
+avoided walk; ``step`` has no rows without walks to avoid).
 """
 
 from __future__ import annotations
@@ -84,9 +84,14 @@ def _block(a, lo, n):
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _error(distinct, arrow_of, run, step, in_step, frame, t, react):
-    """frame_error of source `frame` at output frame t (in step counted while react > 0)."""
-    error = distinct[arrow_of[frame], run[t]]
+def _error(features, track, step, in_step, frame, t, react):
+    """frame_error of source `frame` at output frame t (in step counted while react > 0): the
+    norm of the arrows' difference as numpy.linalg.norm makes it (squares added in order)."""
+    total = 0.0
+    for d in range(features.shape[1]):
+        x = features[frame, d] - track[t, d]
+        total += x * x
+    error = np.sqrt(total)
     if react > 0 and step.shape[0] > 0 and step[frame, t]:
         error += in_step
     return error
@@ -109,9 +114,8 @@ def initial(
     trans_target,
     shift,
     straight,
-    distinct,
-    arrow_of,
-    run,
+    features,
+    track,
     step,
     ints,
     floats,
@@ -166,7 +170,7 @@ def initial(
                 k = keep[q]
                 row = edge_ahead[node, k]
                 for c in range(m):
-                    error[c] = _error(distinct, arrow_of, run, step, in_step, straight[row, c], t + c,
+                    error[c] = _error(features, track, step, in_step, straight[row, c], t + c,
                                       avoiding * (c < limit))  # fmt: skip
                 value = alpha * (_pairwise(error, m) * dt) + edge_fixed[node, k]
                 if any_shift:
@@ -196,7 +200,7 @@ def initial(
 
 @numba.njit(cache=True, nogil=True)
 def replace(old_kind, old_index, suffix, out, out_count, trans_target, trans_cost, shift, clip_frames, clip_target,
-            nodes, distinct, arrow_of, run, step, ints, floats, best_kind, best_index):  # fmt: skip
+            nodes, features, track, step, ints, floats, best_kind, best_index):  # fmt: skip
     """_Problem.replace's search on tables: the best alternative to the old edges (old_kind,
     old_index: 0 clip, 1 transition) written to best_kind and best_index; returns how many
     edges it has, -1 when none lowers E. `suffix`: the source frames the path plays after the
@@ -265,7 +269,7 @@ def replace(old_kind, old_index, suffix, out, out_count, trans_target, trans_cos
                     else:
                         n = max(needed - t, 0)
                         for c in range(n):
-                            error[c] = _error(distinct, arrow_of, run, step, in_step, suffix[c], t + c, avoiding)
+                            error[c] = _error(features, track, step, in_step, suffix[c], t + c, avoiding)
                         rest = alpha * dt * _pairwise(error, n)
                 total = cost + rest
                 if total < best_cost:
@@ -291,7 +295,7 @@ def replace(old_kind, old_index, suffix, out, out_count, trans_target, trans_cos
                 frame = nodes[node] + c
                 if period > 0:
                     frame %= period
-                error[c] = _error(distinct, arrow_of, run, step, in_step, frame, t + c, avoiding)
+                error[c] = _error(features, track, step, in_step, frame, t + c, avoiding)
             parent[lists], e_kind[lists], e_index[lists], length[lists] = own, 0, node, length[own] + 1
             s_node[top], s_since[top], s_frames[top], s_list[top] = clip_target[node], since + n, frames + n, lists
             s_trans[top], s_cost[top] = n_trans, cost + alpha * dt * _pairwise(error, m)

@@ -432,12 +432,21 @@ class _Problem:
 
     def _tables(self) -> None:
         """Where the graph does not turn, the played arrow of a source frame is its own arrow, so
-        frame_error is a lookup made once per walk: the error of each distinct source arrow
-        against each run of one target arrow (error_table[arrow_of[frame], run[t]]), and where in
-        step with an avoided walk (within one frame, around the loop). Each entry is the value
-        frame_error computes (the same norm of the same difference), so walks are the same."""
+        frame_error needs no played arrows: the compiled loops (_kernels) compute each error from
+        the source and target arrows where they need it, and the Python reference looks it up in
+        a table made once per walk, the error of each distinct source arrow against each run of
+        one target arrow (error_table[arrow_of[frame], run[t]]); both, where walks are avoided,
+        look up whether in step with one (within one frame, around the loop) in step_table. Each
+        error is the value frame_error computes (the same norm of the same difference), so walks
+        are the same."""
         self.error_table = self.step_table = None
+        self.compiled = False
         if self.rotating or self.needed == 0:
+            return
+        if self.avoid is not None:
+            self.step_table = self._step_table()
+        self.compiled = _COMPILED and (self.avoid is None or self.step_table is not None)
+        if self.compiled:
             return
         if self.shared._arrows is None or not np.array_equal(self.shared._arrows[0], self.features):
             arrows, arrow_of = np.unique(self.features, axis=0, return_inverse=True)
@@ -445,14 +454,17 @@ class _Problem:
         _, arrows, self.arrow_of = self.shared._arrows
         targets = self.track[np.flatnonzero(np.append(True, np.diff(self.run)))]  # one per run of one arrow
         # (distinct arrows, runs of one target arrow): output frame t's column is run[t]
-        self.error_table = np.ascontiguousarray(np.linalg.norm(arrows[:, None, :] - targets[None, :, :], axis=2))
-        if self.avoid is None:
-            return
+        self.error_table = np.linalg.norm(arrows[:, None, :] - targets[None, :, :], axis=2)
+
+    def _step_table(self) -> np.ndarray | None:
+        """(source frames, output frames): whether a source frame played then is within one
+        frame of an avoided walk's (around the loop); None where the walks avoided play frames
+        no walk of this graph plays (left to in_step_frames)."""
         frames = len(self.features)
         others = self.avoid[:, : self.needed]
         valid = others >= 0
         if np.any(others >= (frames if self.period is None else self.period)):
-            return  # frames no walk of this graph plays: left to in_step_frames
+            return None
         table = np.zeros((frames, self.needed), dtype=bool)
         columns = np.broadcast_to(np.arange(self.needed), others.shape)[valid]
         for step in (-1, 0, 1):
@@ -461,7 +473,7 @@ class _Problem:
                 near %= self.period
             inside = (near >= 0) & (near < frames)
             table[near[inside], columns[inside]] = True
-        self.step_table = table
+        return table
 
     def _table_error(self, frames, t) -> np.ndarray:
         """frame_error of `frames` (..., m) played from output frame t, from the tables."""
@@ -605,11 +617,11 @@ class _Problem:
     def _compiled(self) -> bool:
         """Whether the compiled loops (_kernels) walk this problem: with the tables (a graph that
         does not turn), in-step tables included where walks are avoided."""
-        return _COMPILED and self.error_table is not None and (self.avoid is None or self.step_table is not None)
+        return self.compiled
 
     def _kernel_tables(self) -> tuple:
         step = self.step_table if self.step_table is not None else np.zeros((0, 0), dtype=bool)
-        return self.error_table, self.arrow_of, self.run, step
+        return np.ascontiguousarray(self.features), np.ascontiguousarray(self.track), step
 
     def _initial_compiled(self, rng, node) -> list:
         """The edges of initial's loop from `node`, by _kernels.initial: the same choices from
