@@ -211,6 +211,7 @@ class _Path:
 
     def __init__(self, problem, start, edges):
         self.problem, self.start, self.edges = problem, start, edges
+        self.stretches = None  # what pick weighs, made at its first pick
         # per edge, and after the last: the node it leaves, its first output frame, clip frames
         # since the last transition and the rotation (as problem.step goes, all at once)
         is_transition = np.array([kind == "transition" for kind, _ in edges], dtype=bool)
@@ -633,8 +634,8 @@ class _Problem:
                          -1 if self.react is None else self.react, self.avoid is not None], dtype=np.int64)  # fmt: skip
         floats = np.array([self.alpha, self.dt, self.noise, self.vary, self.in_step], dtype=np.float64)
         saved = rng.bit_generator.state
-        uniforms = rng.random(max(64, self.needed))
-        kind = np.zeros(max(16, self.needed // 4), dtype=np.int64)
+        uniforms = rng.random(max(64, 2 * self.needed))
+        kind = np.zeros(2 * self.needed + 16, dtype=np.int64)  # a clip plays a frame at least, a transition none
         index = np.zeros_like(kind)
         try:
             while True:
@@ -697,16 +698,19 @@ class _Problem:
     def pick(self, path: _Path, rng, tried):
         """A stretch (first edge, edge after it) whose share of E per second exceeds the
         threshold, chosen with odds in proportion to the excess; None when there is none."""
-        at = np.asarray(path.at[:-1])
-        starts = np.flatnonzero(at < self.needed)
-        stops = np.searchsorted(at, at[starts] + self.segment_frames)
-        window = np.concatenate([[0.0], np.cumsum(path.error)])
-        ends = np.minimum(at[starts] + self.segment_frames, self.needed)
-        cost = self.alpha * self.dt * (window[ends] - window[at[starts]])
-        running = path.running_cost
-        cost += running[np.minimum(stops, len(path.edges))] - running[starts]
-        rate = cost / (self.segment_frames * self.dt)
-        excess = np.where(rate > self.threshold, rate - self.threshold, 0.0)
+        if path.stretches is None:  # the path's stretches and their excess, the same at each pick
+            at = np.asarray(path.at[:-1])
+            starts = np.flatnonzero(at < self.needed)
+            stops = np.searchsorted(at, at[starts] + self.segment_frames)
+            window = np.concatenate([[0.0], np.cumsum(path.error)])
+            ends = np.minimum(at[starts] + self.segment_frames, self.needed)
+            cost = self.alpha * self.dt * (window[ends] - window[at[starts]])
+            running = path.running_cost
+            cost += running[np.minimum(stops, len(path.edges))] - running[starts]
+            rate = cost / (self.segment_frames * self.dt)
+            path.stretches = starts, stops, np.where(rate > self.threshold, rate - self.threshold, 0.0)
+        starts, stops, excess = path.stretches
+        excess = excess.copy()
         for i, j in tried:  # starts are 0, 1, ...: stretch k starts at edge k
             if i < len(starts) and min(stops[i], len(path.edges)) == j:
                 excess[i] = 0.0
