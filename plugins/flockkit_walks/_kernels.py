@@ -231,6 +231,9 @@ def replace(old_kind, old_index, suffix, out, out_count, trans_target, trans_cos
     for k in range(len(clip_frames)):
         longest_clip = max(longest_clip, clip_frames[k])
     error = np.empty(max(longest_clip, len(suffix), 1))
+    # the rest's cost by the frames the replacement plays (within slack of the old: done ends there)
+    low = old_frames - slack
+    rests = np.full(2 * slack + 1, np.nan)
     s_node[0], s_since[0], s_frames[0], s_list[0], s_trans[0], s_cost[0] = start, since0, 0, 0, 0, 0.0
     top = 1
     expanded = 0
@@ -266,11 +269,14 @@ def replace(old_kind, old_index, suffix, out, out_count, trans_target, trans_cos
                     t = t0 + frames
                     if t + len(suffix) - 1 < needed:
                         rest = np.inf
+                    elif rests[frames - low] == rests[frames - low]:  # made before: not NaN
+                        rest = rests[frames - low]
                     else:
                         n = max(needed - t, 0)
                         for c in range(n):
                             error[c] = _error(features, track, step, in_step, suffix[c], t + c, avoiding)
                         rest = alpha * dt * _pairwise(error, n)
+                        rests[frames - low] = rest
                 total = cost + rest
                 if total < best_cost:
                     best, best_cost = own, total
