@@ -16,8 +16,15 @@
    group radius inside the video frame;
 8. with the shared data present, 2 000 Foxes driven by a 2 000-agent boids flock for 10 s: idle,
    or walking at the stream whose playback speed matches theirs, and at 4 s half of them run for
-   3 s (a cue into a Stopped stream, dilated over 2 s); 64 of them written to USD (with usd-core)
-   and drawn from above.
+   3 s (a cue into a Stopped stream, dilated over 2 s); the 100 nearest the flock's centre drawn
+   from above and written to USD as skinned Foxes (with usd-core);
+9. with the shared data present, a scene of 8 Foxes walking out of step as a flow turns them
+   from east to north (paper 002 with an animal), written to USD;
+10. where a Python with Blender's bpy is found (FLOCKKIT_BPY_PYTHON, or this one), the
+    synthesized flock, the Foxes' scene and the crowd of Foxes rendered in Blender (Cycles, small
+    and few samples); otherwise the summary says the renders were skipped and why.
+
+Every step is timed in summary.json's "seconds", drawing and rendering included.
 """
 
 from __future__ import annotations
@@ -113,7 +120,7 @@ def run_demo(out, *, data=None, progress=False, report=print) -> dict:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     tour = _Tour(out, progress)
-    data_driven, graph = _data_driven(tour)
+    data_driven, graph, synthesized = _data_driven(tour)
     summary = {
         **data_driven,
         "come-from-behind": _constrained(tour),
@@ -124,9 +131,12 @@ def run_demo(out, *, data=None, progress=False, report=print) -> dict:
     if folder is None:
         summary["sticklebacks"] = "skipped: ../shared/data/sticklebacks-5 not found (use --data)"
         summary["foxes"] = "skipped: ../shared/data/fox-gltf not found (use --data)"
+        summary["fox scene"] = "skipped: ../shared/data/fox-gltf not found (use --data)"
     else:
         summary["sticklebacks"] = _sticklebacks(tour, folder)
         summary["foxes"] = _foxes(tour, folder)
+        summary["fox scene"] = _fox_scene(tour, folder)
+    summary["renders"] = _renders(tour, synthesized, summary)
     summary["seconds"] = {**tour.timings, "the whole demo": round(time.perf_counter() - begin, 2)}
     tour.path("summary.json").write_text(json.dumps(summary, indent=2, default=float))
     for path in tour.written:
@@ -134,9 +144,9 @@ def run_demo(out, *, data=None, progress=False, report=print) -> dict:
     return summary
 
 
-def _data_driven(tour: _Tour) -> tuple[dict, object]:
+def _data_driven(tour: _Tour) -> tuple[dict, object, object]:
     """Paper 000: a recording in an arena, its graph, and 2 minutes synthesized inside a box;
-    the summary and the graph."""
+    the summary, the graph and the synthesized motion."""
     from .. import viz
 
     fence = arena(15.0, posts=24)
@@ -167,15 +177,19 @@ def _data_driven(tour: _Tour) -> tuple[dict, object]:
     com = synthesized.center_of_mass()
     inside = bool(box.contains(com).all())
     crossed = (com.max(axis=0) - com.min(axis=0)) / (box.upper - box.lower)
-    return {
-        "graph": graph.stats(),
-        "synthesized": {
-            "seconds": synthesized.duration,
-            "agents": synthesized.n_agents,
-            "center of mass in the box": inside,
-            "share of the box crossed": [round(float(c), 3) for c in crossed],
+    return (
+        {
+            "graph": graph.stats(),
+            "synthesized": {
+                "seconds": synthesized.duration,
+                "agents": synthesized.n_agents,
+                "center of mass in the box": inside,
+                "share of the box crossed": [round(float(c), 3) for c in crossed],
+            },
         },
-    }, graph
+        graph,
+        synthesized,
+    )
 
 
 def _scene(tour: _Tour, graph) -> dict:
@@ -269,13 +283,17 @@ FOX_LEGS = [("b_LeftLeg01_015", "b_LeftLeg02_016", "b_LeftFoot02_018"),
             ("b_RightUpperArm_06", "b_RightForeArm_07", "b_RightHand_08"),
             ("b_LeftUpperArm_09", "b_LeftForeArm_010", "b_LeftHand_011")]  # fmt: skip
 FOX_FEET = [foot for _, _, foot in FOX_LEGS]
+# The Foxes the demo keeps of its crowd (drawn, written to USD, rendered): a group near the flock's
+# centre, each big enough to see in a 640-pixel GIF, and few enough that Blender imports them in
+# seconds (the whole 2 000 take it a minute).
+FOX_GROUP = 100
 
 
 def _foxes(tour: _Tour, folder: Path) -> dict:
-    """Paper 003 driven by paper 004's model: a few thousand Foxes follow a boids flock."""
+    """Paper 003 driven by paper 004's model: a few thousand Foxes follow a boids flock; the
+    FOX_GROUP nearest the flock's centre at the start are kept, drawn and written to USD."""
     from .. import viz
     from ..crowd import Crowd, Cue, Driver, Gait, StateMachine, Stream, StreamPool, ground_speed, plant_feet, record
-    from ..crowd.record import export_usd
     from ..io import read_clips
     from ..io.skin import read_skin
     from ..registry import get
@@ -296,41 +314,109 @@ def _foxes(tour: _Tour, folder: Path) -> dict:
     runners = np.arange(0, n, 2)
     cue = Cue(time=4.0, agents=runners, stream=4, duration=3.0, time_to_dilate=2.0, name="run")
     flock = simulate(n_agents=n, steps=int(seconds * fps), dt=1 / fps, seed=3)
-
-    def foxes():
-        crowd = Crowd(StreamPool(streams, fps=fps), n_agents=n, clusters={"body": 1}, seed=4)
-        return Driver(crowd, flock, machine, scale=scale, cues=[cue])
+    start = flock.positions[0]
+    group = np.sort(np.argsort(np.linalg.norm(start - start.mean(axis=0), axis=1))[:FOX_GROUP])
 
     with tour.step("2 000 Foxes driven by a boids flock for 10 s"):
-        driver = foxes()
-        crowd = driver.crowd
+        pool = StreamPool(streams, fps=fps)
+        driver = Driver(Crowd(pool, n_agents=n, clusters={"body": 1}, seed=4), flock, machine, scale=scale,
+                        cues=[cue])  # fmt: skip
         synchrony = {}
 
         def watch(crowd, frame):
             if frame in (int(4.0 * fps) + 1, int(6.0 * fps) + 1):
                 synchrony[frame / fps] = crowd.synchrony("body", runners)
 
-        shown = record(driver, seconds, agents=np.arange(64), on_frame=watch)
+        shown = record(driver, seconds, agents=group, on_frame=watch)
     usd = "skipped: usd-core is not installed (pip install 'flockkit[usd]')"
-    try:  # every Fox, skinned, the same run again
-        with tour.step("2 000 skinned Foxes written to USD"):
-            export_usd(foxes(), tour.path("foxes.usdc"), seconds, mesh=read_skin(folder / FOX))
+    try:
+        with tour.step(f"{FOX_GROUP} of the Foxes written to USD, skinned"):
+            shown.export_usd(tour.path("foxes.usdc"), mesh=read_skin(folder / FOX))
         usd = "foxes.usdc"
     except MissingDependencyError:
         tour.written.pop()
-    with tour.step("draw 64 of the Foxes (gif)"):
-        viz.animate_recording(shown, tour.path("foxes.gif"), progress=tour.progress)
+    title = f"{FOX_GROUP} of {n:,} Foxes, those nearest the flock's centre"
+    with tour.step(f"draw {FOX_GROUP} of the Foxes (gif)"):
+        viz.animate_recording(shown, tour.path("foxes.gif"), pool=pool, fps=12, size=(600, 640), title=title,
+                              progress=tour.progress)  # fmt: skip
     root = driver.roots[:, :2, 3]
     return {
         "agents": n,
+        "shown and written": FOX_GROUP,
         "frames": shown.n_frames,
         "streams": [s.name for s in streams],
         "stream switches": driver.switches,
         "runners in step with another (just after the cue, 2 s later)": [round(v, 3) for v in synchrony.values()],
         "roots on their trajectories": bool(np.allclose(root, flock.positions[shown.n_frames - 1, :, :2], atol=1e-9)),
         "usd": usd,
-        "memory (bytes)": crowd.pool.memory(),
+        "memory (bytes)": pool.memory(),
     }
+
+
+def _fox_scene(tour: _Tour, folder: Path) -> dict:
+    """Paper 002 with an animal: Foxes walking out of step across a meadow, moved and turned by a
+    flow that turns from east to north, their paws planted (the Fox's walk played in place at
+    the rate that matches the speed asked)."""
+    from .. import build_layers
+    from ..io import read_mesh_animation
+    from ..regions import Polygon
+    from ..scene import Arrow, Features, FlowField, Scene
+
+    with tour.step("a scene of 8 walking Foxes for 8 s"):
+        fox = read_mesh_animation(folder / FOX, clip="Walk", fps=24).to_flockkit_axes(meters_per_unit="cm")
+        stride = Features.from_stride(fox.motion, forward=[0, -1])  # the Fox faces -y in flockkit's axes
+        layers = build_layers(fox, features=stride, seed=0)
+        turning = FlowField(arrows=[Arrow(position=[6.0, 6.0], keyframes=[(0.0, [0.7, 0.0]), (3.0, [0.7, 0.0]),
+                                                                          (6.0, [0.0, 0.7])])])  # fmt: skip
+        meadow = Polygon(vertices=[[0.0, 0.0], [12.0, 0.0], [12.0, 12.0], [0.0, 12.0]])  # metres
+        scene = Scene(templates=[layers], region=meadow, counts=[8], duration=8.0, constraints=[turning], seed=2,
+                      headings="aligned", max_turn=np.radians(60))  # fmt: skip
+        animation = scene.synthesize(progress=tour.progress)
+    usd = "skipped: usd-core is not installed (pip install 'flockkit[usd]')"
+    try:
+        with tour.step("the Foxes' scene written to USD"):
+            animation.export(tour.path("fox-scene.usdc"))
+        usd = "fox-scene.usdc"
+    except MissingDependencyError:
+        tour.written.pop()
+    speeds = np.linalg.norm(np.diff(animation.paths.positions, axis=1), axis=2) / animation.dt
+    return {
+        "foxes": animation.placement.n_objects,
+        "seconds": animation.n_frames * animation.dt,
+        "speed (m/s, least and most)": [round(float(speeds.min()), 3), round(float(speeds.max()), 3)],
+        "neighbours in step (before, after)": [animation.report["in_step_before"], animation.report["in_step_after"]],
+        "usd": usd,
+    }
+
+
+# Renders: small and few samples, so that each takes seconds on two cores.
+RENDER_SIZE, RENDER_SAMPLES = (480, 270), 8
+
+
+def _renders(tour: _Tour, synthesized, summary: dict) -> dict | str:
+    """The flock, the scene of Foxes and the crowd of Foxes rendered in Blender, where a Python
+    with bpy is found (FLOCKKIT_BPY_PYTHON); what was skipped and why, otherwise."""
+    from ..viz.render import blender_python, render_blender
+
+    try:
+        blender_python()
+    except MissingDependencyError as exc:
+        return f"skipped: {exc}"
+    jobs = [("the flock", synthesized, "render-flock.png", 60.0)]
+    for name, file, when in (("the Foxes' scene", "fox-scene.usdc", 6.0), ("the crowd of Foxes", "foxes.usdc", 6.0)):
+        part = summary.get("fox scene" if "scene" in name else "foxes")
+        if isinstance(part, dict) and part["usd"] == file:
+            jobs.append((name, tour.out / file, f"render-{file.split('.')[0]}.png", when))
+    done = {}
+    try:
+        for name, source, picture, when in jobs:
+            with tour.step(f"render {name} in Blender"):
+                render_blender(source, tour.path(picture), time=when, size=RENDER_SIZE, samples=RENDER_SAMPLES)
+            done[name] = f"{picture} (at {when:g} s)"
+    except MissingDependencyError as exc:  # a flock is exported to USD first
+        tour.written.pop()
+        done[name] = f"skipped: {exc}"
+    return done
 
 
 def _constrained(tour: _Tour) -> dict:

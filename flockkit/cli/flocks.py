@@ -7,6 +7,7 @@ import sys
 
 import flockkit
 
+from ..errors import ValidationError
 from ._options import (
     Component,
     add_components,
@@ -104,6 +105,8 @@ def _cmd_info(args) -> int:
 def _cmd_render(args) -> int:
     from ..viz import ANIMATION_SUFFIXES, PICTURE_SUFFIXES
 
+    if args.blender:
+        return _render_in_blender(args)
     output = require_suffix(args.output, PICTURE_SUFFIXES + ANIMATION_SUFFIXES, "-o")
     if is_mesh_source(args.motion):
         from .. import viz
@@ -140,6 +143,29 @@ def _cmd_render(args) -> int:
         )
     else:
         viz.plot_motion(motion, output, problem=problem, regions=regions)
+    print(f"wrote {output}")
+    return 0
+
+
+def _render_in_blender(args) -> int:
+    from ..viz.render import SOURCE_SUFFIXES, render_blender
+
+    output = require_suffix(args.output, (".png", ".gif"), "-o (with --blender)")
+    source = args.motion
+    if not source.lower().endswith(SOURCE_SUFFIXES):
+        if is_mesh_source(source):
+            kinds = ", ".join(SOURCE_SUFFIXES)
+            raise ValidationError(f"render --blender {source}: expected a motion (.npz) or a file Blender imports "
+                                  f"({kinds}), such as flockkit scene's scene.usda")  # fmt: skip
+        source = flockkit.Motion.load(source)
+    time = None
+    if args.time is not None:
+        try:
+            time = tuple(float(t) for t in args.time.split(":")) if ":" in args.time else float(args.time)
+        except ValueError:
+            raise ValidationError(f"--time {args.time!r}: expected seconds T, or START:END for an animation") from None
+    size = (640, 360) if args.size is None else pixel_size(args.size)
+    render_blender(source, output, time=time, fps=args.fps, size=size, engine=args.engine, samples=args.samples)
     print(f"wrote {output}")
     return 0
 
@@ -192,9 +218,13 @@ def _render_arguments(parser) -> None:
     )
     parser.add_argument("--parts", help="colour an animated mesh's parts from this segmentation (.npz)")
     parser.add_argument("--clip", help="the clip of an animated-mesh file (default: its first), read at 30 fps")
-    parser.add_argument("--fps", type=float, help="animation frames per second (default: real time, at most 25)")
     parser.add_argument(
-        "--size", help="animation size WIDTHxHEIGHT in pixels (default: 600 on the scene's longer side, in proportion)"
+        "--fps", type=float, help="animation frames per second (default: real time, at most 25; with --blender 12)"
+    )
+    parser.add_argument(
+        "--size",
+        help="animation size WIDTHxHEIGHT in pixels (default: 600 on the scene's longer side, in proportion; "
+        "with --blender the image's, 640x360)",
     )
     parser.add_argument("--trail", type=float, default=1.0, help="seconds of path behind each agent (default 1)")
     add_output(parser, "out.png | out.pdf | out.svg | out.gif | out.mp4 (needs flockkit[viz])")
@@ -204,6 +234,21 @@ def _render_arguments(parser) -> None:
         action="append",
         help="also draw this region (repeatable): box:x0,y0,x1,y1 | ball:cx,cy,r | polygon:x0,y0,x1,y1,...",
     )
+    parser.add_argument(
+        "--blender",
+        action="store_true",
+        help="render in Blender (a Python with bpy: $FLOCKKIT_BPY_PYTHON, or this one): a motion (.npz, exported to "
+        "USD) or an export (.usd*, .glb, .gltf: a flock, scene.usda, a crowd) to -o .png or .gif",
+    )
+    parser.add_argument(
+        "--time", help="with --blender: seconds of the still (default the middle), START:END of a .gif (default all)"
+    )
+    parser.add_argument(
+        "--engine",
+        choices=("cycles", "workbench", "eevee"),
+        help="with --blender: cycles (default for a .png), workbench (default for a .gif), eevee",
+    )
+    parser.add_argument("--samples", type=int, default=8, help="with --blender, cycles: samples a pixel (8)")
     add_quiet(parser)
 
 

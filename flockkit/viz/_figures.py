@@ -48,16 +48,19 @@ def draw_region(ax, region, **style):
 def scene_figure(plt, low, high, size, *, keyed: bool, longer: int = 600):
     """A figure and axes for the scene from `low` to `high`: `size` (width, height) in pixels, by
     default `longer` on the scene's longer side in its proportions (within 1:3 and 3:1), with
-    room above for the title and below for tick labels and, if `keyed`, the legend."""
-    title, key = 30, (75 if keyed else 25)  # pixels
+    room (in pixels, so that an animation, saved without a tight bounding box, keeps them) above
+    for the title, left for the y tick labels and axis name, below for the x tick labels and
+    axis name and, if `keyed`, the legend."""
+    title, left, right, key = 30, 62, 12, (92 if keyed else 42)  # pixels
     if size is None:
         ratio = float(np.clip((high[1] - low[1]) / max(high[0] - low[0], 1e-12), 1 / 3, 3))
         width = longer if ratio <= 1 else round(longer / ratio)
-        size = (width, round(0.88 * width * ratio) + title + key)
+        size = (width, round((width - left - right) * ratio) + title + key)
     width, height = (integer(v, "animate: size", minimum=16) for v in pair(size))
     figure = plt.figure(figsize=(width / 100, height / 100), dpi=100)
     bottom, top = min(key / height, 0.4), max(1 - title / height, 0.6)
-    return figure, figure.add_axes((0.08, bottom, 0.88, top - bottom))
+    start = min(left / width, 0.3)
+    return figure, figure.add_axes((start, bottom, max(1 - start - right / width, 0.4), top - bottom))
 
 
 def unit(vectors) -> np.ndarray:
@@ -186,7 +189,8 @@ def save_animation(figure, draw, frames, path, rate: float, progress: bool) -> N
             canvas.restore_region(background)
             for artist in changed:
                 figure.draw_artist(artist)
-            return Image.fromarray(np.array(canvas.buffer_rgba())[..., :3])
+            width, height = canvas.get_width_height(physical=True)
+            return Image.frombuffer("RGBA", (width, height), canvas.buffer_rgba(), "raw", "RGBA", 0, 1).convert("RGB")
 
         picks = np.unique(np.linspace(0, len(frames) - 1, PALETTE_SAMPLES).round().astype(int))
         palette = shared_palette([render(frames[k]) for k in picks])

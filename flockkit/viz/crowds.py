@@ -19,14 +19,16 @@ from ._figures import (
 )
 
 
-def animate_recording(recording, path, *, layout="world", axes=None, fps=None, size=None, progress=False, pool=None):
+def animate_recording(recording, path, *, layout="world", axes=None, fps=None, size=None, progress=False, pool=None,
+                      title=None):  # fmt: skip
     """A recorded crowd (``flockkit.crowd.record``) as stick figures, joints joined to their
     parents, coloured by the stream each agent's part reads (while blending, by the stream it
     blends to, drawn thicker), seen along `axes` (horizontal, vertical). A legend below the
     figures names each stream's colour: by its ``Stream.name`` in `pool` (the StreamPool the crowd
     read) where it has one, else by its index; unique slots are one entry. `layout` "world": where
     they are (`axes` default "xy", from above); "grid": each agent in a cell of a grid, in place
-    (`axes` default "xz", from the front), to see the poses of many. Returns the path."""
+    (`axes` default "xz", from the front), to see the poses of many. The title says `title`
+    (default: how many agents) and the time. Returns the path."""
     path = movie_path(path)
     if layout not in ("world", "grid"):
         raise ValidationError(f"animate_recording: layout must be 'world' or 'grid'; got {layout!r}")
@@ -34,7 +36,7 @@ def animate_recording(recording, path, *, layout="world", axes=None, fps=None, s
     joints = recording.world()[..., :3, 3][..., _crowd_axes(axes)]
     if layout == "world":
         return _animate_skeletons(recording, joints, path, fps=fps, size=size, progress=progress, ticks=True,
-                                  names=tuple(axes), pool=pool)  # fmt: skip
+                                  names=tuple(axes), pool=pool, title=title)  # fmt: skip
     agents = joints.shape[1]  # (frames, agents, J, 2)
     extent = np.ptp(joints.reshape(-1, 2), axis=0).max() if joints.size else 1.0
     spacing = 0.8 * max(float(np.ptp(joints[..., 0], axis=-1).max()), 1e-9) + 0.4 * extent / max(agents, 1) ** 0.5
@@ -43,7 +45,8 @@ def animate_recording(recording, path, *, layout="world", axes=None, fps=None, s
     grid = np.stack([np.arange(agents) % columns, -(np.arange(agents) // columns)], axis=1)
     centers = joints.mean(axis=(0, 2))  # each agent's mean joint position: figures stay in their cells
     placed = joints - centers[None, :, None] + (grid * [spacing, height])[None, :, None]
-    return _animate_skeletons(recording, placed, path, fps=fps, size=size, progress=progress, ticks=False, pool=pool)
+    return _animate_skeletons(recording, placed, path, fps=fps, size=size, progress=progress, ticks=False, pool=pool,
+                              title=title)  # fmt: skip
 
 
 def _crowd_axes(axes) -> list[int]:
@@ -71,13 +74,15 @@ def _stream_key(streams, pool) -> list[tuple[int, str]]:
     return key
 
 
-def _animate_skeletons(recording, placed, path, *, fps, size, progress, ticks: bool, names=("x", "y"), pool=None):
+def _animate_skeletons(recording, placed, path, *, fps, size, progress, ticks: bool, names=("x", "y"), pool=None,
+                       title=None):  # fmt: skip
     """Draw `placed` (frames, agents, J, 2) joint positions of `recording` as stick figures, on
     axes named `names` (in metres) where `ticks`, with a legend of the streams' colours below."""
     parents = recording.skeleton.parents
     frames, rate = timeline(1.0 / recording.fps, recording.n_frames, fps, None, "animate_recording")
     plt = pyplot()
     from matplotlib.collections import LineCollection
+    from matplotlib.colors import to_rgba
     from matplotlib.lines import Line2D
 
     low, high = placed.reshape(-1, 2).min(axis=0), placed.reshape(-1, 2).max(axis=0)
@@ -94,22 +99,26 @@ def _animate_skeletons(recording, placed, path, *, fps, size, progress, ticks: b
     def colour(stream):
         return UNIQUE_COLOUR if stream >= UNIQUE else palette(int(stream) % 10)
 
+    tens, unique_rgba = np.array([palette(k) for k in range(10)]), np.array(to_rgba(UNIQUE_COLOUR))
     key = _stream_key(recording.streams[frames], pool)
     handles = [Line2D([], [], color=colour(s), lw=2) for s, _ in key]
     # in the band scene_figure keeps below the axes, under the tick labels: it covers no figure
     figure.legend(handles, [label for _, label in key], loc="lower center", bbox_to_anchor=(0.5, 0.0),
-                  ncol=min(len(key), 4), fontsize=8, frameon=False)  # fmt: skip
+                  ncol=min(len(key), max(1, round(figure.bbox.width / 120))), fontsize=8, frameon=False)  # fmt: skip
     lines = LineCollection([], zorder=3)
     ax.add_collection(lines)
     label = ax.set_title("")
+    title = title or f"{recording.n_agents} agents coloured by stream"
 
     def draw(index):
         frame = frames[index]
         segments = np.stack([placed[frame][:, bones], placed[frame][:, parents[bones]]], axis=2).reshape(-1, 2, 2)
         lines.set_segments(segments)
-        lines.set_color([colour(s) for s in recording.streams[frame] for _ in bones])
-        lines.set_linewidth([2.2 if b else 1.0 for b in recording.blending[frame] for _ in bones])
-        label.set_text(f"{recording.n_agents} agents coloured by stream, t = {(frame + 1) / recording.fps:.1f} s")
+        streams = recording.streams[frame]
+        rgba = np.where((streams >= UNIQUE)[:, None], unique_rgba, tens[streams % 10])  # (agents, 4)
+        lines.set_color(np.repeat(rgba, len(bones), axis=0))
+        lines.set_linewidth(np.repeat(np.where(recording.blending[frame], 2.2, 1.0), len(bones)))
+        label.set_text(f"{title}, t = {frame / recording.fps:.1f} s")
         return [lines, label]
 
     try:

@@ -184,7 +184,10 @@ def animate(
     if keyed:
         _legend(ax, problem, obstacles, regions, ends=False)
     colors = _roles(motion.n_agents, problem)
-    trails = [ax.plot([], [], color=c, alpha=0.35, linewidth=0.8)[0] for c in colors]
+    from matplotlib.collections import LineCollection
+
+    trails = LineCollection([], colors=colors, alpha=0.35, linewidths=0.8)  # one artist: drawn in one call
+    ax.add_collection(trails)
     arrows = ax.quiver(
         xy[0, :, 0], xy[0, :, 1], heading[0, :, 0], heading[0, :, 1], angles="xy", scale_units="xy",
         scale=1.0 / (ARROW * extent), units="dots", width=2.5, headwidth=3.5, headlength=4, color=colors, zorder=4,
@@ -196,10 +199,9 @@ def animate(
         arrows.set_offsets(xy[frame])
         arrows.set_UVC(heading[frame, :, 0], heading[frame, :, 1])
         first = max(0, frame - behind)
-        for agent, line in enumerate(trails):
-            line.set_data(xy[first : frame + 1, agent, 0], xy[first : frame + 1, agent, 1])
+        trails.set_segments(np.swapaxes(xy[first : frame + 1], 0, 1))  # (agents, points, 2)
         label.set_text(f"t = {frame * motion.dt:.1f} s")
-        return [arrows, label, *trails]
+        return [arrows, label, trails]
 
     try:
         save_animation(figure, draw, frames, path, rate, progress)
