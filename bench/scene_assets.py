@@ -8,9 +8,10 @@ object. Prints the seconds of each stage: reading and building the layers (once)
 targets, the walks per template part (first pass), de-synchronisation (rounds of walks again),
 and the synthesis of vertices (SceneAnimation.motion, timed over a sample of objects and scaled
 to all of them; a scene is never held in memory whole), with ``--profile`` the functions where
-the walks spend their time (cProfile, one job).
+the walks spend their time (cProfile, one job), with ``--check N`` N objects walked by the
+annotated walk's compiled loops and by its Python reference, which must be the same.
 
-    python bench/scene_assets.py --objects 60 --jobs 2 [--data ../shared/data] [--profile]
+    python bench/scene_assets.py --objects 60 --jobs 2 [--data ../shared/data] [--profile] [--check 4]
 """
 
 from __future__ import annotations
