@@ -83,7 +83,7 @@ def paint(colour):
     import bpy
 
     material = bpy.data.materials.new("flockkit")
-    material.diffuse_color = workbench(colour)
+    material.diffuse_color = workbench(colour, 0.7)
     bsdf = material.node_tree.nodes["Principled BSDF"]
     bsdf.inputs["Base Color"].default_value = (*colour, 1.0)
     bsdf.inputs["Roughness"].default_value = 0.6
@@ -127,7 +127,7 @@ def stage(scene, low, high, job):
     floor.location = (centre.x, centre.y, low.z)
     floor.scale = (4 * extent,) * 3
     soil = bpy.data.materials.new("ground")
-    soil.diffuse_color = workbench(GROUND[:3])
+    soil.diffuse_color = workbench(GROUND[:3], 1 / 2.2)
     soil.node_tree.nodes["Principled BSDF"].inputs["Base Color"].default_value = GROUND
     ground.materials.append(soil)
     scene.collection.objects.link(floor)
@@ -173,10 +173,11 @@ def stage(scene, low, high, job):
     scene.render.film_transparent = False
 
 
-def workbench(colour):
-    """The colour Workbench shows for linear RGB `colour`: its studio light, without the sky's
-    light that Cycles adds, shows linear colours about a gamma darker."""
-    return (*(c ** (1 / 2.2) for c in colour), 1.0)
+def workbench(colour, lift: float):
+    """The colour to give Workbench for linear RGB `colour`: its studio light, without the sky's
+    light that Cycles adds, shows colours darker, the ground's most (it faces up, away from the
+    studio's key light); raised to `lift`, they look about as Cycles shows them."""
+    return (*(c**lift for c in colour), 1.0)
 
 
 def fmt(vector):

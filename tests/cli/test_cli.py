@@ -1,4 +1,5 @@
 import json
+import os
 import shutil
 import subprocess
 from pathlib import Path
@@ -276,11 +277,42 @@ def test_render_draws_motions_and_refuses_graphs(capsys, tmp_path, recording):
     assert code == 1 and "expected a 'motion' file" in err and not (tmp_path / "graph.gif").exists()
 
 
+DEMO_STEPS = [
+    "simulate 60 s of 20 boids",
+    "build the motion graph",
+    "draw the recording, its differences and its graph",
+    "synthesize 2 min in a box",
+    "draw the synthesized flock (png, gif)",
+    "solve come-from-behind",
+    "draw come-from-behind and its trace",
+    "a scene of 12 flocks for 40 s",
+    "draw the scene (png, gif)",
+    "a crowd of 48 for 5 s",
+    "draw the crowd (gif) and its offsets",
+    "sticklebacks graph and 60 s walk",
+    "draw the sticklebacks (png, gif)",
+    "2 000 Foxes driven by a boids flock for 10 s",
+    "100 of the Foxes written to USD, skinned",
+    "draw 100 of the Foxes (gif)",
+    "a scene of 8 walking Foxes for 8 s",
+    "the Foxes' scene written to USD",
+]
+DEMO_RENDERS = {"render-flock.png": "the flock", "render-fox-scene.png": "the Foxes' scene",
+                "render-foxes.png": "the crowd of Foxes"}  # fmt: skip
+
+
 def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data):
+    """Every picture and file, the summary's figures, every step timed in order (drawing and
+    rendering included); the renders where FLOCKKIT_BPY_PYTHON names a Python with bpy (as in
+    .ci/run), else the summary says they were skipped and why."""
+    from PIL import Image
+
     code, out, err = run(capsys, "demo", "-o", str(tmp_path / "demo"), "--data", str(shared_data), "--quiet")
     assert code == 0, err
     names = {p.name for p in (tmp_path / "demo").iterdir()}
-    assert names == {
+    summary = json.loads((tmp_path / "demo" / "summary.json").read_text())
+    rendered = bool(os.environ.get("FLOCKKIT_BPY_PYTHON"))
+    assert names == set(DEMO_RENDERS if rendered else ()) | {
         "recording.png",
         "difference-matrix.png",
         "graph.png",
@@ -297,9 +329,9 @@ def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data
         "crowd-offsets.png",
         "foxes.gif",
         "foxes.usdc",
+        "fox-scene.usdc",
         "summary.json",
     }
-    summary = json.loads((tmp_path / "demo" / "summary.json").read_text())
     assert summary["synthesized"]["seconds"] >= 120 and summary["synthesized"]["center of mass in the box"]
     assert min(summary["synthesized"]["share of the box crossed"]) > 0.6  # the box binds: the walk turns at its walls
     assert summary["sticklebacks"]["center kept in the video frame"]
@@ -317,9 +349,22 @@ def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data
     assert just_after == 1.0 and later < 0.05  # the cue's dilation spreads the runners within its 2 s
     assert max(summary["come-from-behind"]["residuals"]) <= 0.3 and summary["sticklebacks"]["transitions"] >= 3
     assert str((tmp_path / "demo").resolve()) in out
-    steps = summary["seconds"]  # every step is timed, drawing included, and the whole
-    assert {"draw the scene (png, gif)", "draw 64 of the Foxes (gif)", "the whole demo"} <= set(steps)
+    assert foxes["shown and written"] == 100
+    assert summary["fox scene"]["foxes"] == 8 and summary["fox scene"]["usd"] == "fox-scene.usdc"
+    assert summary["fox scene"]["neighbours in step (before, after)"][1] <= 0.05
+    steps = summary["seconds"]  # every step is timed, drawing and rendering included, and the whole
+    renders = [f"render {name} in Blender" for name in DEMO_RENDERS.values()] if rendered else []
+    assert list(steps) == DEMO_STEPS + renders + ["the whole demo"]
+    assert all(isinstance(v, float) and v >= 0 for v in steps.values())
     assert sum(v for k, v in steps.items() if k != "the whole demo") <= steps["the whole demo"]
+    if rendered:
+        assert summary["renders"] == {name: f"{file} (at {60 if file == 'render-flock.png' else 6} s)"
+                                      for file, name in DEMO_RENDERS.items()}  # fmt: skip
+        for file in DEMO_RENDERS:
+            with Image.open(tmp_path / "demo" / file) as image:
+                assert image.size == (480, 270) and np.asarray(image.convert("L")).std() > 5  # not blank
+    else:
+        assert summary["renders"].startswith("skipped:") and "FLOCKKIT_BPY_PYTHON" in summary["renders"]
 
 
 def test_the_issue_region_walk_on_a_default_flock_from_the_command_line(capsys, tmp_path):
