@@ -452,8 +452,8 @@ def _sticklebacks(tour: _Tour, folder: Path) -> dict:
     title = "60 s synthesized from 20 s of five sticklebacks, kept in the video frame"
     shown = {"video frame (1280 x 720 px)": frame, "where the school's center is kept": inner}
     with tour.step("draw the sticklebacks (png, gif)"):
-        viz.plot_motion(fish_walk, tour.path("sticklebacks.png"), regions=shown, title=title)
-        viz.animate(fish_walk, tour.path("sticklebacks.gif"), regions=shown, progress=tour.progress)
+        viz.plot_motion(fish_walk, tour.path("sticklebacks.png"), regions=shown, title=title, unit="px")
+        viz.animate(fish_walk, tour.path("sticklebacks.gif"), regions=shown, unit="px", progress=tour.progress)
     return {
         **fish_graph.stats(),
         "center kept in the video frame": bool(inner.contains(fish_walk.center_of_mass()).all()),

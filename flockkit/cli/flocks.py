@@ -140,9 +140,10 @@ def _cmd_render(args) -> int:
             size=size,
             trail=args.trail,
             progress=shows_progress(args),
+            unit=args.unit,
         )
     else:
-        viz.plot_motion(motion, output, problem=problem, regions=regions)
+        viz.plot_motion(motion, output, problem=problem, regions=regions, unit=args.unit)
     print(f"wrote {output}")
     return 0
 
@@ -227,6 +228,7 @@ def _render_arguments(parser) -> None:
         "with --blender the image's, 640x360)",
     )
     parser.add_argument("--trail", type=float, default=1.0, help="seconds of path behind each agent (default 1)")
+    parser.add_argument("--unit", default="m", help="the unit the axes name (default m; px for a capture in pixels)")
     add_output(parser, "out.png | out.pdf | out.svg | out.gif | out.mp4 (needs flockkit[viz])")
     parser.add_argument("--scenario", help="also draw this scenario's constraints and obstacles (.toml)")
     parser.add_argument(

@@ -20,22 +20,23 @@ from ._figures import (
     save_animation,
     scene_figure,
     timeline,
-    unit,
 )
+from ._figures import unit as normalized
 
 _PINNED, _FREE = "tab:red", "tab:blue"
 
 _REGION_COLORS = ("tab:green", "tab:olive", "tab:cyan", "tab:brown")
 
 
-def plot_motion(motion: Motion, path=None, *, problem=None, obstacles=(), regions=(), ax=None, title=None):
+def plot_motion(motion: Motion, path=None, *, problem=None, obstacles=(), regions=(), ax=None, title=None, unit="m"):
     """Draw every agent's trajectory (x-y plane), its start (dot) and end (arrow along its last
     heading, ARROW of the scene's extent long), obstacles (grey), `regions` (outlined; a
     sequence, or a mapping from legend label to region) and, with a `problem`, its
     constraints: point targets (crosses), COM targets (stars) and shapes (dashed),
     and its point-constrained agents in red, the others in blue. The legend names every kind of
-    mark; the figure takes the scene's proportions. Returns the matplotlib Figure; writes it to
-    `path` if given (.png, .pdf or .svg; atomically)."""
+    mark; the figure takes the scene's proportions; the axes say `unit`, the unit of the
+    positions (flockkit's metres by default; "px" for a capture in a video's pixels). Returns the
+    matplotlib Figure; writes it to `path` if given (.png, .pdf or .svg; atomically)."""
     if not isinstance(motion, Motion):
         raise ValidationError(f"plot_motion needs a flockkit.Motion; got {type(motion).__name__}")
     if path is not None:
@@ -52,8 +53,8 @@ def plot_motion(motion: Motion, path=None, *, problem=None, obstacles=(), region
         ax.plot(xy[:, agent, 0], xy[:, agent, 1], color=colors[agent], linewidth=1.6 if pinned[agent] else 0.8,
                 alpha=0.9 if pinned[agent] else 0.6)  # fmt: skip
     ax.scatter(xy[0, :, 0], xy[0, :, 1], s=10, color="0.3", zorder=3)
-    extent = fit_view(ax, low, high)
-    heading = unit(motion.velocities()[-1, :, :2]) * ARROW * extent
+    extent = fit_view(ax, low, high, unit=unit)
+    heading = normalized(motion.velocities()[-1, :, :2]) * ARROW * extent
     ax.quiver(xy[-1, :, 0], xy[-1, :, 1], heading[:, 0], heading[:, 1], color=colors, angles="xy",
               scale_units="xy", scale=1.0, width=0.004, zorder=4)  # fmt: skip
     _draw_scene(ax, problem, obstacles, regions)
@@ -156,6 +157,7 @@ def animate(
     trail=1.0,
     max_frames=None,
     progress=False,
+    unit="m",
 ):
     """An animation of `motion`: agents as arrows facing their velocity, each with a trail, the
     scene as in plot_motion (with a `problem`, its point-constrained agents in red). ``.gif``
@@ -167,7 +169,8 @@ def animate(
     proportions within 1:3 and 3:1, plus room for the title and legend), `trail` the seconds of
     path drawn behind each agent (0: none), `max_frames` an optional cap on the frames drawn
     (frames are then skipped evenly and the animation plays faster). Arrows are ARROW (5%) of
-    the scene's extent long, whatever its units (a capture in pixels too). `progress` shows a bar over the frames."""
+    the scene's extent long, whatever its units (a capture in pixels too); the axes say `unit` (as
+    for plot_motion). `progress` shows a bar over the frames."""
     if not isinstance(motion, Motion):
         raise ValidationError(f"animate needs a flockkit.Motion; got {type(motion).__name__}")
     path = movie_path(path)
@@ -175,12 +178,12 @@ def animate(
     trail = number(trail, "animate: trail (seconds)", minimum=0)
     plt = pyplot()
     frames, rate = timeline(motion.dt, motion.n_frames, fps, max_frames, "animate")
-    xy, heading = motion.positions[..., :2], unit(motion.velocities()[..., :2])
+    xy, heading = motion.positions[..., :2], normalized(motion.velocities()[..., :2])
     low, high = _scene_bounds(xy, problem, obstacles, regions)
     keyed = problem is not None or bool(obstacles) or bool(regions)
     figure, ax = scene_figure(plt, low, high, size, keyed=keyed)
     _draw_scene(ax, problem, obstacles, regions)
-    extent = fit_view(ax, low, high)
+    extent = fit_view(ax, low, high, unit=unit)
     if keyed:
         _legend(ax, problem, obstacles, regions, ends=False)
     colors = _roles(motion.n_agents, problem)

@@ -112,7 +112,8 @@ def test_a_blender_gif_lasts_the_span_rendered(tmp_path):
 @needs_blender
 def test_a_gltf_export_gets_the_scene_range_of_its_keys(tmp_path):
     """Blender's glTF importer keys an animation of 5 s at frames 0 to 120 (24 fps) but leaves the
-    scene's range at 1-250; the render script sets it to the keys' span."""
+    scene's range at 1-250; the render script and examples/blender/import_flockkit.py set it to
+    the keys' span."""
     from flockkit.viz import render
 
     flockkit.io.export(flockkit.simulate(n_agents=4, steps=50, seed=3), tmp_path / "flock.glb")
@@ -125,3 +126,6 @@ def test_a_gltf_export_gets_the_scene_range_of_its_keys(tmp_path):
     assert done.returncode == 0, done.stderr[-2000:]
     assert "frames 0 to 120" in done.stdout and "rendered 1 frames (120 to 120)" in done.stdout
     assert (tmp_path / "end.png").stat().st_size > 0
+    example = Path(__file__).resolve().parents[2] / "examples" / "blender" / "import_flockkit.py"
+    done = subprocess.run([BLENDER_PYTHON, str(example), str(tmp_path / "flock.glb")], capture_output=True, text=True)
+    assert done.returncode == 0 and "scene frames 0 to 120 at 24 fps" in done.stdout, done.stderr[-2000:]

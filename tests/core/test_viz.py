@@ -276,6 +276,8 @@ def test_every_world_axis_says_its_unit(solved):
     figure = viz.plot_motion(solution.motion, problem=problem)
     ax = figure.axes[0]
     assert (ax.get_xlabel(), ax.get_ylabel()) == ("x (m)", "y (m)")
+    pixels = viz.plot_motion(solution.motion, unit="px").axes[0]  # a capture in a video's pixels
+    assert (pixels.get_xlabel(), pixels.get_ylabel()) == ("x (px)", "y (px)")
     assert [unit_name(f) for f in (1.0, 0.01, 0.0254, None, 0.3)] == ["m", "cm", "in", "units", "× 0.3 m"]
 
 
