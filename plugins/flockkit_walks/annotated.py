@@ -233,9 +233,9 @@ class _Path:
             self.rotation = [np.eye(problem.dims)] * (len(edges) + 1)
         # the source frame each output frame plays, as synthesis plays it (flockkit.graphs.played_frames):
         # each clip's frames but its last, then the frame of the node the walk ends at
-        clips = [k for k, (kind, _) in enumerate(edges) if kind == "clip"]
-        lengths = problem.clip_frames[[edges[k][1] for k in clips]]
-        first = problem.nodes[[edges[k][1] for k in clips]]
+        clips = np.flatnonzero(~is_transition)
+        lengths = problem.clip_frames[index[clips]]
+        first = problem.nodes[index[clips]]
         self.frames = problem.wrap(
             np.append(np.repeat(first - np.cumsum(lengths) + lengths, lengths) + np.arange(lengths.sum()),
                       problem.nodes[self.node[-1]])
@@ -249,14 +249,12 @@ class _Path:
         self.error = np.zeros(problem.needed)
         self.error[:n] = problem.frame_error(self.played[:n], self.frames[:n], 0)
         # each edge's share of C_T + beta N_T, and its running sum (what pick weighs stretches by)
-        self.edge_cost = np.array(
-            [
-                problem.trans_cost[i] + problem.beta * (not problem.shift[i]) if k == "transition" else 0.0
-                for k, i in edges
-            ]  # fmt: skip
-        )
+        transitions = index[is_transition]
+        ordinary = problem.shift[transitions] == 0
+        self.edge_cost = np.zeros(len(edges))
+        self.edge_cost[is_transition] = problem.trans_cost[transitions] + problem.beta * ordinary
         self.running_cost = np.concatenate([[0.0], np.cumsum(self.edge_cost)])
-        taken = [index for kind, index in edges if kind == "transition" and not problem.shift[index]]
+        taken = transitions[ordinary]
         self.c_t = float(problem.trans_cost[taken].sum())
         self.n_t = len(taken)
 
