@@ -239,9 +239,9 @@ def _crowd(tour: _Tour) -> dict:
     cheer = get("controller", "blend", a=get("controller", "clip", clip=clip, rate=2.6),
                 b=get("controller", "clip", clip=walker(swing=70.0), rate=0.8), weight=0.6)  # fmt: skip
     streams = [
-        Stream(controller=get("controller", "clip", clip=clip), history=60),
-        Stream(controller=get("controller", "clip", clip=clip, rate=1.3), history=45),
-        Stream(controller=cheer, history=60, default="Stopped"),
+        Stream(controller=get("controller", "clip", clip=clip), history=60, name="walk"),
+        Stream(controller=get("controller", "clip", clip=clip, rate=1.3), history=45, name="walk x1.3"),
+        Stream(controller=cheer, history=60, default="Stopped", name="cheer"),
     ]
     pool = StreamPool(streams, fps=30.0)
     crowd = Crowd(pool, n_agents=48, clusters={"body": np.arange(48) % 2}, seed=3)
@@ -260,7 +260,8 @@ def _crowd(tour: _Tour) -> dict:
         recording = record(crowd, 5.0, agents=range(48), on_frame=script)
     offsets = np.array(offsets)
     with tour.step("draw the crowd (gif) and its offsets"):
-        viz.animate_recording(recording, tour.path("crowd.gif"), layout="grid", axes="yz", progress=tour.progress)
+        viz.animate_recording(recording, tour.path("crowd.gif"), layout="grid", axes="yz", pool=pool,
+                              progress=tour.progress)  # fmt: skip
         viz.plot_offsets((30 + np.arange(len(offsets))) / 30.0, offsets, tour.path("crowd-offsets.png"),
                          title="offsets of the cheering half after the cheer stream starts")  # fmt: skip
     return {
@@ -299,23 +300,24 @@ def _foxes(tour: _Tour, folder: Path) -> dict:
     from ..registry import get
 
     fps, seconds, n = 24.0, 10.0, 2000
-    clips = read_clips(folder / FOX)
-    clips["Walk"] = plant_feet(clips["Walk"], FOX_LEGS)  # its paws otherwise slide at any rate
-    scale = 0.01  # the Fox is modelled in centimetres; the flock moves in metres
-    natural = ground_speed(clips["Walk"], FOX_FEET, scale=scale)
-    rates = (0.8, 1.0, 1.25)
-    streams = [Stream(controller=get("controller", "clip", clip=clips["Survey"]), history=60, name="idle")]
-    streams += [Stream(controller=get("controller", "clip", clip=clips["Walk"], rate=r), history=40, name=f"walk x{r}")
-                for r in rates]  # fmt: skip
-    streams.append(Stream(controller=get("controller", "clip", clip=clips["Run"]), history=48, default="Stopped",
-                          name="run"))  # fmt: skip
-    walking = Gait(name="walk", streams=[1, 2, 3], speeds=[natural * r for r in rates], low=0.2)
-    machine = StateMachine([Gait(name="idle", streams=0, high=0.2), walking])
-    runners = np.arange(0, n, 2)
-    cue = Cue(time=4.0, agents=runners, stream=4, duration=3.0, time_to_dilate=2.0, name="run")
-    flock = simulate(n_agents=n, steps=int(seconds * fps), dt=1 / fps, seed=3)
-    start = flock.positions[0]
-    group = np.sort(np.argsort(np.linalg.norm(start - start.mean(axis=0), axis=1))[:FOX_GROUP])
+    with tour.step("read the Fox's clips and simulate a 2 000-boid flock"):
+        clips = read_clips(folder / FOX)
+        clips["Walk"] = plant_feet(clips["Walk"], FOX_LEGS)  # its paws otherwise slide at any rate
+        scale = 0.01  # the Fox is modelled in centimetres; the flock moves in metres
+        natural = ground_speed(clips["Walk"], FOX_FEET, scale=scale)
+        rates = (0.8, 1.0, 1.25)
+        streams = [Stream(controller=get("controller", "clip", clip=clips["Survey"]), history=60, name="idle")]
+        streams += [Stream(controller=get("controller", "clip", clip=clips["Walk"], rate=r), history=40,
+                           name=f"walk x{r}") for r in rates]  # fmt: skip
+        streams.append(Stream(controller=get("controller", "clip", clip=clips["Run"]), history=48, default="Stopped",
+                              name="run"))  # fmt: skip
+        walking = Gait(name="walk", streams=[1, 2, 3], speeds=[natural * r for r in rates], low=0.2)
+        machine = StateMachine([Gait(name="idle", streams=0, high=0.2), walking])
+        runners = np.arange(0, n, 2)
+        cue = Cue(time=4.0, agents=runners, stream=4, duration=3.0, time_to_dilate=2.0, name="run")
+        flock = simulate(n_agents=n, steps=int(seconds * fps), dt=1 / fps, seed=3)
+        start = flock.positions[0]
+        group = np.sort(np.argsort(np.linalg.norm(start - start.mean(axis=0), axis=1))[:FOX_GROUP])
 
     with tour.step("2 000 Foxes driven by a boids flock for 10 s"):
         pool = StreamPool(streams, fps=fps)
@@ -440,12 +442,12 @@ def _sticklebacks(tour: _Tour, folder: Path) -> dict:
     from .. import viz
     from ..io import read_wide
 
-    fish = read_wide(folder / STICKLEBACKS, fps=15, image_height=720)  # pixels, y down in the video
-    com = fish.center_of_mass()
-    radius = float(np.sqrt(np.mean(np.sum((fish.positions - com[:, None]) ** 2, axis=-1))))
-    frame = Box(lower=[0.0, 0.0], upper=[1280.0, 720.0])
-    inner = Box(lower=[radius, radius], upper=[1280.0 - radius, 720.0 - radius])
-    with tour.step("sticklebacks graph and 60 s walk"):
+    with tour.step("sticklebacks: read, graph and a 60 s walk"):
+        fish = read_wide(folder / STICKLEBACKS, fps=15, image_height=720)  # pixels, y down in the video
+        com = fish.center_of_mass()
+        radius = float(np.sqrt(np.mean(np.sum((fish.positions - com[:, None]) ** 2, axis=-1))))
+        frame = Box(lower=[0.0, 0.0], upper=[1280.0, 720.0])
+        inner = Box(lower=[radius, radius], upper=[1280.0 - radius, 720.0 - radius])
         # fish swim 200 px/s and turn fast: short blends and 30 degree turns every second keep them in the frame
         fish_graph = build_graph(fish, seed=0, blend_time=1.0, turn_angle=30.0, turn_interval=1.0)
         fish_walk = synthesize(fish_graph, walk(fish_graph, strategy="region", region=inner, duration=60, seed=3))
@@ -470,6 +472,8 @@ def _cmd_demo(args) -> int:
         f"{max(summary['come-from-behind']['residuals']):.3g}; sticklebacks: "
         f"{'built' if isinstance(summary['sticklebacks'], dict) else summary['sticklebacks']}"
     )
+    renders = summary["renders"]
+    print(f"renders in Blender: {', '.join(renders.values()) if isinstance(renders, dict) else renders}")
     print(f"done in {time.perf_counter() - begin:.0f} s; everything is in {Path(args.output).resolve()}")
     return 0
 
