@@ -21,8 +21,9 @@
 9. with the shared data present, a scene of 8 Foxes walking out of step as a flow turns them
    from east to north (paper 002 with an animal), written to USD;
 10. where a Python with Blender's bpy is found (FLOCKKIT_BPY_PYTHON, or this one), the
-    synthesized flock, the Foxes' scene and the crowd of Foxes rendered in Blender (Cycles, small
-    and few samples); otherwise the summary says the renders were skipped and why.
+    synthesized flock, the Foxes' scene and the crowd of Foxes rendered in Blender (stills by
+    Cycles, small and few samples; the Foxes turning as a short GIF by Workbench); otherwise the
+    summary says the renders were skipped and why.
 
 Every step is timed in summary.json's "seconds", drawing and rendering included.
 """
@@ -391,33 +392,42 @@ def _fox_scene(tour: _Tour, folder: Path) -> dict:
     }
 
 
-# Renders: small and few samples, so that each takes seconds on two cores.
+# Renders: small and few samples, so that each takes seconds on two cores; the video (Workbench)
+# smaller still, at 8 frames a second, over the seconds the Foxes' flow turns them.
 RENDER_SIZE, RENDER_SAMPLES = (480, 270), 8
+VIDEO_SIZE, VIDEO_FPS, VIDEO_TIME = (320, 180), 8.0, (2.0, 6.0)
 
 
 def _renders(tour: _Tour, synthesized, summary: dict) -> dict | str:
-    """The flock, the scene of Foxes and the crowd of Foxes rendered in Blender, where a Python
-    with bpy is found (FLOCKKIT_BPY_PYTHON); what was skipped and why, otherwise."""
+    """The flock, the scene of Foxes (a still and a short video) and the crowd of Foxes rendered
+    in Blender, where a Python with bpy is found (FLOCKKIT_BPY_PYTHON); what was skipped and why,
+    otherwise."""
     from ..viz.render import blender_python, render_blender
 
     try:
         blender_python()
     except MissingDependencyError as exc:
         return f"skipped: {exc}"
-    jobs = [("the flock", synthesized, "render-flock.png", 60.0)]
-    for name, file, when in (("the Foxes' scene", "fox-scene.usdc", 6.0), ("the crowd of Foxes", "foxes.usdc", 6.0)):
-        part = summary.get("fox scene" if "scene" in name else "foxes")
-        if isinstance(part, dict) and part["usd"] == file:
-            jobs.append((name, tour.out / file, f"render-{file.split('.')[0]}.png", when))
+    still = {"size": RENDER_SIZE, "samples": RENDER_SAMPLES}
+    jobs = [("the flock", synthesized, "render-flock.png", {"time": 60.0, **still})]
+    scene, crowd = summary.get("fox scene"), summary.get("foxes")
+    if isinstance(scene, dict) and scene["usd"] == "fox-scene.usdc":
+        jobs.append(("the Foxes' scene", tour.out / "fox-scene.usdc", "render-fox-scene.png", {"time": 6.0, **still}))
+        video = {"time": VIDEO_TIME, "fps": VIDEO_FPS, "size": VIDEO_SIZE}
+        jobs.append(("the Foxes' scene as they turn", tour.out / "fox-scene.usdc", "render-fox-scene.gif", video))
+    if isinstance(crowd, dict) and crowd["usd"] == "foxes.usdc":
+        jobs.append(("the crowd of Foxes", tour.out / "foxes.usdc", "render-foxes.png", {"time": 6.0, **still}))
     done = {}
-    try:
-        for name, source, picture, when in jobs:
+    for name, source, picture, options in jobs:
+        try:
             with tour.step(f"render {name} in Blender"):
-                render_blender(source, tour.path(picture), time=when, size=RENDER_SIZE, samples=RENDER_SAMPLES)
-            done[name] = f"{picture} (at {when:g} s)"
-    except MissingDependencyError as exc:  # a flock is exported to USD first
-        tour.written.pop()
-        done[name] = f"skipped: {exc}"
+                render_blender(source, tour.path(picture), **options)
+        except MissingDependencyError as exc:  # a flock is exported to USD first
+            tour.written.pop()
+            done[name] = f"skipped: {exc}"
+            continue
+        when = options["time"]
+        done[name] = f"{picture} ({f'{when[0]:g} to {when[1]:g} s' if isinstance(when, tuple) else f'at {when:g} s'})"
     return done
 
 

@@ -167,6 +167,7 @@ def stage(scene, low, high, job):
         shading.light, shading.color_type = "STUDIO", "MATERIAL"
         shading.show_shadows, shading.shadow_intensity = True, 0.4
         shading.show_cavity = False
+        scene.display.render_aa = "FXAA"  # its 8 default samples take 5 times as long on a CPU
     scene.view_settings.view_transform = "Standard"  # AgX greys a sunny ground and a fox's orange
     scene.render.image_settings.file_format = "PNG"
     scene.render.image_settings.compression = 90

@@ -298,8 +298,9 @@ DEMO_STEPS = [
     "a scene of 8 walking Foxes for 8 s",
     "the Foxes' scene written to USD",
 ]
-DEMO_RENDERS = {"render-flock.png": "the flock", "render-fox-scene.png": "the Foxes' scene",
-                "render-foxes.png": "the crowd of Foxes"}  # fmt: skip
+DEMO_RENDERS = {"render-flock.png": ("the flock", "at 60 s"), "render-fox-scene.png": ("the Foxes' scene", "at 6 s"),
+                "render-fox-scene.gif": ("the Foxes' scene as they turn", "2 to 6 s"),
+                "render-foxes.png": ("the crowd of Foxes", "at 6 s")}  # fmt: skip
 
 
 def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data):
@@ -354,16 +355,17 @@ def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data
     assert summary["fox scene"]["foxes"] == 8 and summary["fox scene"]["usd"] == "fox-scene.usdc"
     assert summary["fox scene"]["neighbours in step (before, after)"][1] <= 0.05
     steps = summary["seconds"]  # every step is timed, drawing and rendering included, and the whole
-    renders = [f"render {name} in Blender" for name in DEMO_RENDERS.values()] if rendered else []
+    renders = [f"render {name} in Blender" for name, _ in DEMO_RENDERS.values()] if rendered else []
     assert list(steps) == DEMO_STEPS + renders + ["the whole demo"]
     assert all(isinstance(v, float) and v >= 0 for v in steps.values())
     assert sum(v for k, v in steps.items() if k != "the whole demo") <= steps["the whole demo"]
     if rendered:
-        assert summary["renders"] == {name: f"{file} (at {60 if file == 'render-flock.png' else 6} s)"
-                                      for file, name in DEMO_RENDERS.items()}  # fmt: skip
+        assert summary["renders"] == {name: f"{file} ({when})" for file, (name, when) in DEMO_RENDERS.items()}
         for file in DEMO_RENDERS:
             with Image.open(tmp_path / "demo" / file) as image:
-                assert image.size == (480, 270) and np.asarray(image.convert("L")).std() > 5  # not blank
+                assert image.size == ((320, 180) if file.endswith(".gif") else (480, 270))
+                assert np.asarray(image.convert("L")).std() > 5  # not blank
+                assert file.endswith(".png") or image.n_frames == 33  # 2 to 6 s at 8 fps
     else:
         assert summary["renders"].startswith("skipped:") and "FLOCKKIT_BPY_PYTHON" in summary["renders"]
 
