@@ -40,7 +40,7 @@ import numpy as np
 from flockkit import build_graph, simulate, synthesize, walk
 
 from ..constrained.problem import ComConstraint, PointConstraint, Problem
-from ..errors import MissingDependencyError, ValidationError
+from ..errors import FlockkitError, MissingDependencyError, ValidationError
 from ..regions import Box
 from ..regions import fence as arena
 from ._options import add_quiet, shows_progress
@@ -107,8 +107,10 @@ class _Tour:
     @contextlib.contextmanager
     def step(self, name: str):
         begin = time.perf_counter()
-        yield
-        self.timings[name] = round(time.perf_counter() - begin, 2)
+        try:
+            yield
+        finally:  # a step that fails (a render the summary reports as failed) is timed too
+            self.timings[name] = round(time.perf_counter() - begin, 2)
 
     def path(self, name: str) -> Path:
         self.written.append(str(self.out / name))
@@ -425,6 +427,10 @@ def _renders(tour: _Tour, synthesized, summary: dict) -> dict | str:
         except MissingDependencyError as exc:  # a flock is exported to USD first
             tour.written.pop()
             done[name] = f"skipped: {exc}"
+            continue
+        except FlockkitError as exc:  # Blender failed: the rest of the tour stands, and says so
+            tour.written.pop()
+            done[name] = f"failed: {exc}"
             continue
         when = options["time"]
         done[name] = f"{picture} ({f'{when[0]:g} to {when[1]:g} s' if isinstance(when, tuple) else f'at {when:g} s'})"

@@ -98,8 +98,9 @@ def render_blender(source, path, *, time=None, fps=None, size=(640, 360), engine
         script = Path(__file__).with_name("_in_blender.py")
         done = subprocess.run([python, str(script), str(work / "job.json")], capture_output=True, text=True)
         if done.returncode != 0 or not all(Path(o).is_file() for o in outputs):
-            tail = (done.stdout + done.stderr).strip().splitlines()[-12:]
-            raise FlockkitError(f"Blender ({python}) did not render {source.name}:\n" + "\n".join(tail))
+            tail = "\n".join((done.stdout + done.stderr).strip().splitlines()[-12:]) or "no output"
+            raise FlockkitError(f"Blender ({python}) did not render {source.name} (exit status {done.returncode}): "
+                                f"{tail}")  # fmt: skip
         with atomic_path(path) as tmp:
             if moving:
                 _gif([Path(o) for o in outputs], tmp, fps or RENDER_FPS)

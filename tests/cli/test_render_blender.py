@@ -129,3 +129,23 @@ def test_a_gltf_export_gets_the_scene_range_of_its_keys(tmp_path):
     example = Path(__file__).resolve().parents[2] / "examples" / "blender" / "import_flockkit.py"
     done = subprocess.run([BLENDER_PYTHON, str(example), str(tmp_path / "flock.glb")], capture_output=True, text=True)
     assert done.returncode == 0 and "scene frames 0 to 120 at 24 fps" in done.stdout, done.stderr[-2000:]
+
+
+def test_a_blender_that_fails_is_named_and_the_demo_goes_on(tmp_path, monkeypatch):
+    """A Python without bpy given as Blender's: render_blender raises a FlockkitError with
+    Blender's last lines and writes nothing; the demo's renders report the failure in the
+    summary, timed, and the tour goes on."""
+    import sys
+
+    from flockkit.cli import demo
+    from flockkit.errors import FlockkitError
+
+    motion = flockkit.simulate(n_agents=4, steps=20, seed=1)
+    with pytest.raises(FlockkitError, match=r"exit status 1\): .*No module named 'bpy'"):
+        viz.render_blender(motion, tmp_path / "flock.png", python=sys.executable)
+    assert list(tmp_path.iterdir()) == []
+    monkeypatch.setenv("FLOCKKIT_BPY_PYTHON", sys.executable)
+    tour = demo._Tour(tmp_path, progress=False)
+    done = demo._renders(tour, motion, {})
+    assert list(done) == ["the flock"] and done["the flock"].startswith("failed: Blender")
+    assert list(tour.timings) == ["render the flock in Blender"] and tour.written == []
