@@ -799,10 +799,9 @@ def _primitive(document, where, primitive, weights, frames):
     return points, triangles.reshape(-1, 3).astype(np.int64)
 
 
-def _skinned(document, where, skin, s, primitive, points, joint_world):
-    """Linear blend skinning: sum over the vertex's joints of weight * (joint world @ inverse
-    bind), on blocks of frames so that the per-vertex matrices stay small."""
-    attributes = primitive["attributes"]
+def _skin_attributes(document, where: str, attributes: dict, n: int, s: int):
+    """A skinned primitive's JOINTS_n and WEIGHTS_n, read in pairs and concatenated: joints (V, K)
+    checked to index skins[s]'s `n` joints, weights (V, K) as stored."""
     sets = sorted(k for k in attributes if k.startswith("JOINTS_"))
     if not sets or sorted(k for k in attributes if k.startswith("WEIGHTS_")) != [k.replace("JOINTS", "WEIGHTS")
                                                                                    for k in sets]:  # fmt: skip
@@ -812,9 +811,16 @@ def _skinned(document, where, skin, s, primitive, points, joint_world):
     weights = np.concatenate([document.typed(attributes[k.replace("JOINTS", "WEIGHTS")],
                                              f"{where}.attributes.{k.replace('JOINTS', 'WEIGHTS')}", ("VEC4",),
                                              (5121, 5123, FLOAT)) for k in sets], axis=1)  # fmt: skip
-    n = len(skin["joints"])
     if joints.max() >= n:
         document.fail(f"{where}.attributes.{sets[0]}", f"refer to joint {joints.max()}; skins[{s}] has {n}")
+    return joints, weights
+
+
+def _skinned(document, where, skin, s, primitive, points, joint_world):
+    """Linear blend skinning: sum over the vertex's joints of weight * (joint world @ inverse
+    bind), on blocks of frames so that the per-vertex matrices stay small."""
+    n = len(skin["joints"])
+    joints, weights = _skin_attributes(document, where, primitive["attributes"], n, s)
     inverse = (
         document.accessor(skin["inverseBindMatrices"])[:n].reshape(-1, 4, 4).transpose(0, 2, 1)
         if "inverseBindMatrices" in skin

@@ -390,17 +390,7 @@ def _influences_of(document, placed: list, column: dict, group: set):
 def _influences(document, where: str, attributes: dict, n: int, s: int):
     """Each vertex's skin joints (V, K) (indices into skins[s].joints) and weights (V, K), the
     weights normalized to sum 1 (spec 3.7.3.1: they should; exporters round)."""
-    sets = sorted(k for k in attributes if k.startswith("JOINTS_"))
-    if not sets or sorted(k for k in attributes if k.startswith("WEIGHTS_")) != [k.replace("JOINTS", "WEIGHTS")
-                                                                                   for k in sets]:  # fmt: skip
-        document.fail(f"{where}.attributes", "of a skinned mesh need JOINTS_n and WEIGHTS_n in pairs")
-    joints = np.concatenate([document.typed(attributes[k], f"{where}.attributes.{k}", ("VEC4",), (5121, 5123))
-                             for k in sets], axis=1)  # fmt: skip
-    weights = np.concatenate([document.typed(attributes[k.replace("JOINTS", "WEIGHTS")],
-                                             f"{where}.attributes.{k.replace('JOINTS', 'WEIGHTS')}", ("VEC4",),
-                                             (5121, 5123, gltf.FLOAT)) for k in sets], axis=1)  # fmt: skip
-    if joints.max() >= n:
-        document.fail(f"{where}.attributes.{sets[0]}", f"refer to joint {joints.max()}; skins[{s}] has {n}")
+    joints, weights = gltf._skin_attributes(document, where, attributes, n, s)
     if weights.min() < 0:
         document.fail(f"{where}.attributes.WEIGHTS_0", "hold negative weights")
     total = weights.sum(axis=1, keepdims=True)
