@@ -171,6 +171,30 @@ def _edge(value) -> tuple[str, int]:
     return kind, int(index)
 
 
+_EDGE_KINDS = {"clip": False, "transition": True}
+
+
+def _edges(value) -> tuple:
+    """Walk.edges as a tuple of (kind, int index) pairs. A walk strategy hands over thousands of
+    edges: they are checked all at once (every entry a pair whose kind is one of the two names
+    and whose index is a non-negative integer, not a bool), and one by one by :func:`_edge` only
+    to name the first bad one."""
+    edges = _sequence(value, "Walk.edges")
+    if not edges:
+        return ()
+    if set(map(type, edges)) <= {tuple, list} and set(map(len, edges)) == {2}:
+        kinds, indices = zip(*edges)
+        types = set(map(type, indices))
+        if set(kinds) <= _EDGE_KINDS.keys() and set(map(type, kinds)) == {str}:
+            if types == {int} and min(indices) >= 0:  # pairs as they should be: kept, not made again
+                return tuple(edges) if set(map(type, edges)) == {tuple} else tuple(zip(kinds, indices))
+            if all(issubclass(t, int | np.integer) and not issubclass(t, bool | np.bool_) for t in types):
+                indices = [int(i) for i in indices]
+                if min(indices) >= 0:
+                    return tuple(zip(kinds, indices))
+    return tuple(_edge(e) for e in edges)
+
+
 @attrs.frozen(kw_only=True, eq=False)
 class Walk:
     """A path through a MotionGraph: where it starts, how the source is placed, and its edges.
@@ -199,7 +223,7 @@ class Walk:
     """
 
     start: int = attrs.field(converter=lambda v: integer(v, "Walk.start", minimum=0))
-    edges: tuple = attrs.field(converter=lambda edges: tuple(_edge(e) for e in _sequence(edges, "Walk.edges")))
+    edges: tuple = attrs.field(converter=_edges)
     rotation: np.ndarray = attrs.field(default=None, converter=lambda v: _start_rotation(v))
     translation: np.ndarray = attrs.field(default=None, converter=lambda v: _start_translation(v))
     _is_transition: np.ndarray = attrs.field(init=False, repr=False, eq=False)
@@ -213,10 +237,9 @@ class Walk:
                 f"Walk.translation must have one entry per dimension of Walk.rotation ({len(self.rotation)}); "
                 f"got {len(self.translation)}"
             )
-        object.__setattr__(
-            self, "_is_transition", np.array([kind == "transition" for kind, _ in self.edges], dtype=bool)
-        )
-        object.__setattr__(self, "_index", np.array([index for _, index in self.edges], dtype=np.int64))
+        kinds, indices = zip(*self.edges) if self.edges else ((), ())
+        object.__setattr__(self, "_is_transition", np.array([_EDGE_KINDS[kind] for kind in kinds], dtype=bool))
+        object.__setattr__(self, "_index", np.array(indices, dtype=np.int64))
 
     @property
     def edge_arrays(self) -> tuple[np.ndarray, np.ndarray]:
