@@ -17,8 +17,11 @@ annotated walk's compiled loops and by its Python reference, which must be the s
 from __future__ import annotations
 
 import argparse
+import contextlib
 import cProfile
+import os
 import pstats
+import resource
 import time
 import warnings
 from pathlib import Path
@@ -28,7 +31,7 @@ import numpy as np
 
 import flockkit
 from flockkit.scene import Arrow, FlowField
-from flockkit.scene.desync import largest_in_step, pairs_in_step, stacked
+from flockkit.scene.desync import largest_in_step, pairs_in_step
 from flockkit.scene.templates import footprint, template_view
 
 
@@ -56,26 +59,45 @@ def scene_of(layers, count: int, jobs: int, duration: float = 120.0) -> flockkit
                           duration=duration, constraints=[wind], seed=1, headings="aligned", n_jobs=jobs)  # fmt: skip
 
 
+def cpu_seconds() -> float:
+    """User + system CPU seconds of this process and its workers (live ones through psutil, where
+    it is installed, and those ended and waited for): less sensitive to other work on the
+    machine than the wall clock."""
+    own, ended = (resource.getrusage(who) for who in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN))
+    total = own.ru_utime + own.ru_stime + ended.ru_utime + ended.ru_stime
+    try:
+        import psutil
+    except ImportError:
+        return total
+    for child in psutil.Process().children(recursive=True):
+        with contextlib.suppress(psutil.Error):
+            times = child.cpu_times()
+            total += times.user + times.system
+    return total
+
+
 def stages(scene: flockkit.Scene, sample: int) -> dict:
     """Scene.synthesize's stages, timed one by one (the same calls, in the same order)."""
     times = {}
+    cpu = cpu_seconds()
     clock = time.perf_counter()
     placement = scene.place()
     times["placement"], clock = time.perf_counter() - clock, time.perf_counter()
     targets = scene.targets(placement)
     times["targets"], clock = time.perf_counter() - clock, time.perf_counter()
     seeds = np.random.SeedSequence(scene.seed).spawn(2)[1].spawn(placement.n_objects)
-    items = [(i, targets[i], int(seeds[i].generate_state(1)[0]), None) for i in range(placement.n_objects)]
-    walks, played = scene._walk_many(placement, items, None, "walks")
-    times["walks"], clock = time.perf_counter() - clock, time.perf_counter()
-    animation = flockkit.SceneAnimation(templates=scene.templates, placement=placement, walks=walks,
-                                        dt=scene.frame_time, n_frames=scene.n_frames, constraints=scene.constraints,
+    animation = flockkit.SceneAnimation(templates=scene.templates, placement=placement,
+                                        walks=[None] * placement.n_objects, dt=scene.frame_time,
+                                        n_frames=scene.n_frames, constraints=scene.constraints,
                                         region=scene.region)  # fmt: skip
-    frames, neighbours = stacked(played, scene.n_frames), animation.neighbours()
+    neighbours = animation.neighbours()
+    walks, frames, rounds = scene._first_walks(placement, targets, seeds, neighbours, None)
+    times["walks"], clock = time.perf_counter() - clock, time.perf_counter()
+    animation = attrs.evolve(animation, walks=walks)
     before = largest_in_step(frames, neighbours), pairs_in_step(frames, neighbours)
-    redone = frames.copy()
-    walks = scene._desynchronise(animation, targets, seeds, frames, neighbours, None)
+    walks, again = scene._desynchronise(animation, targets, seeds, frames, neighbours, None)
     times["de-sync"], clock = time.perf_counter() - clock, time.perf_counter()
+    times["cpu"] = cpu_seconds() - cpu  # placement to de-sync, user + system, workers included
     animation = attrs.evolve(animation, walks=walks)
     picked = np.linspace(0, placement.n_objects - 1, min(sample, placement.n_objects)).round().astype(int)
     vertices = 0
@@ -83,7 +105,7 @@ def stages(scene: flockkit.Scene, sample: int) -> dict:
         vertices += animation.motion(int(i)).n_agents
     took = time.perf_counter() - clock
     times["synthesis (scaled)"] = took * placement.n_objects / len(picked)
-    times["walked again"] = int(np.any(redone != frames, axis=(1, 2)).sum())
+    times["first rounds"], times["walked again"] = rounds, again
     times["in step before"], times["pairs before"] = before
     times["in step after"], times["pairs after"] = (
         largest_in_step(frames, neighbours),
@@ -160,10 +182,13 @@ def main() -> None:
             profile.disable()
             pstats.Stats(profile).sort_stats("tottime").print_stats(25)
         walking = figures["placement"] + figures["targets"] + figures["walks"] + figures["de-sync"]
+        cpu = figures.pop("cpu")
         print(f"{count} objects x {args.seconds:g} s, {args.jobs} jobs: " + ", ".join(
             f"{k} {v:.3g}" + (" s" if isinstance(v, float) and k[0] not in "ipm" else "")
             for k, v in figures.items()) + f"; scene (placement to de-sync) {walking:.1f} s = "
-              f"{1000 * walking / count:.0f} ms per object; all {total:.1f} s", flush=True)  # fmt: skip
+              f"{1000 * walking / count:.0f} ms per object, CPU (user + system, workers included) {cpu:.1f} s = "
+              f"{1000 * cpu / count:.0f} ms per object; all {total:.1f} s; load average "
+              f"{' '.join(f'{x:.2f}' for x in os.getloadavg())}", flush=True)  # fmt: skip
     if args.check:
         print(check(scene_of(layers, max(args.objects), args.jobs, args.seconds), args.check), flush=True)
     parts = [(k, g) for k, t in enumerate(layers) for g in template_view(t).graphs]

@@ -239,7 +239,7 @@ class Walk:
             )
         kinds, indices = zip(*self.edges) if self.edges else ((), ())
         object.__setattr__(self, "_is_transition", np.array([_EDGE_KINDS[kind] for kind in kinds], dtype=bool))
-        object.__setattr__(self, "_index", np.array(indices, dtype=np.int64))
+        object.__setattr__(self, "_index", np.fromiter(indices, dtype=np.int64, count=len(indices)))
 
     @property
     def edge_arrays(self) -> tuple[np.ndarray, np.ndarray]:

@@ -4,8 +4,10 @@ Templates (graph layers or plain motion graphs, with feature arrows) are placed 
 uniformly, each with a random heading and scale, so that no two footprints (the axis-aligned
 boxes of their placed outlines) overlap. Each object's parts then walk their graphs with a walk
 strategy that follows the object's target arrows (by default ``annotated``: the paper's E = C_T
-+ alpha C_C + beta N_T), and neighbouring duplicates that play the same source frames at the
-same time are walked again, avoiding each other's frames, until they differ (section 6.2). A part
++ alpha C_C + beta N_T), in rounds of objects no two of which are neighbours, each avoiding the
+frames of its neighbours walked in earlier rounds (section 6.2, from the first walk: each part of
+each object starts at a phase of its own); neighbours still playing the same source frames at
+the same time are walked again, avoiding each other's frames, until they differ. A part
 that still plays in step with a neighbour's on more than MAX_IN_STEP of frames afterwards gets a
 ``flockkit.errors.FlockkitWarning`` naming the template and the part: its graph leaves too few
 ways to differ (a short cycle without phase shifts, or more close neighbours than its cycle has
@@ -41,7 +43,6 @@ from .desync import (
     nearest_in_step,
     pairs_in_step,
     part_in_step,
-    stacked,
 )
 from .features import Features
 from .flow import Arrow, FlowField, SelfMovement, flow_constraints
@@ -52,9 +53,11 @@ from .templates import footprint, template_view
 __all__ = ["Placement", "Scene", "SceneAnimation"]
 
 
-# Batches a scene's walks are split into when walked in parallel (each carries the scene once),
-# and the fewest objects a batch has.
-WALK_BATCHES = 16
+# Batches a stage of a scene's walks is split into per worker when walked in parallel: each
+# carries the scene (megabytes of templates, about 25 MB for bench/scene_assets.py's, a tenth of a
+# second to send and read) once, and a scene is walked in several stages (rounds); two a worker
+# even out batches that take longer than others. And the fewest objects a batch has.
+BATCHES_PER_WORKER = 2
 
 
 MIN_BATCH = 8
@@ -277,19 +280,19 @@ class Scene:
         targets, rates = self._courses(placement)
         seeds = np.random.SeedSequence(self.seed).spawn(2)[1].spawn(placement.n_objects)
         with progress_bar(progress, unit="object") as report:
-            items = [(i, targets[i], int(seeds[i].generate_state(1)[0]), None) for i in range(placement.n_objects)]
-            walks, played = self._walk_many(placement, items, report, "walks")
             animation = SceneAnimation(
-                templates=self.templates, placement=placement, walks=walks, dt=self.frame_time,
-                n_frames=self.n_frames, constraints=self.constraints, region=self.region,
+                templates=self.templates, placement=placement, walks=[None] * placement.n_objects,
+                dt=self.frame_time, n_frames=self.n_frames, constraints=self.constraints, region=self.region,
             )  # fmt: skip
-            frames, neighbours = stacked(played, self.n_frames), animation.neighbours()
+            neighbours = animation.neighbours()
+            walks, frames, rounds = self._first_walks(placement, targets, seeds, neighbours, report)
+            animation = attrs.evolve(animation, walks=walks)
             before, pairs_before = largest_in_step(frames, neighbours), pairs_in_step(frames, neighbours)
-            walks = self._desynchronise(animation, targets, seeds, frames, neighbours, report)
+            walks, again = self._desynchronise(animation, targets, seeds, frames, neighbours, report)
         self._warn_in_step(placement, frames, neighbours)
         report = {"in_step_before": before, "in_step_after": largest_in_step(frames, neighbours),
                   "pairs_in_step_before": pairs_before, "pairs_in_step_after": pairs_in_step(frames, neighbours),
-                  "in_step_frames": IN_STEP_FRAMES}  # fmt: skip
+                  "in_step_frames": IN_STEP_FRAMES, "first_rounds": rounds, "walked_again": again}  # fmt: skip
         animation = attrs.evolve(animation, walks=walks, report=report, paths=self._paths(placement, walks, rates))
         report.update(nearest_in_step(animation))
         return animation
@@ -342,14 +345,18 @@ class Scene:
 
     def _walk_many(self, placement, items, report, stage: str) -> tuple[list, list]:
         """The walks of `items` ((object, target, seed, avoid) each) and the source frames they
-        play ((parts, frames) each), in order: in up to
-        WALK_BATCHES batches of at least MIN_BATCH objects through joblib (the scene and its
-        templates travel once a batch, not once an object), or here when there are too few."""
+        play ((parts, frames) each), in order: in up to BATCHES_PER_WORKER batches a worker, of
+        at least MIN_BATCH objects, through joblib (the scene and its templates travel once a
+        batch, not once an object), or here when there are too few."""
+        from joblib import effective_n_jobs
+
         from ..parallel import imap, jobs
 
         # a batch carries the templates (megabytes): too few objects in it and the trip costs more
         # than the walks; then they are walked here
-        count = 1 if jobs(self.n_jobs) == 1 else max(1, min(WALK_BATCHES, len(items) // MIN_BATCH))
+        workers = jobs(self.n_jobs)
+        most = 1 if workers == 1 else BATCHES_PER_WORKER * effective_n_jobs(workers)
+        count = max(1, min(most, len(items) // MIN_BATCH))
         batches = [items[k::count] for k in range(count)]  # interleaved: neighbours' costs spread evenly
         walks, played = [None] * len(items), [None] * len(items)
         calls = [(self, placement, b) for b in batches]
@@ -359,23 +366,55 @@ class Scene:
                 report(sum(len(b) for b in batches[: k + 1]), len(items), stage)
         return walks, played
 
-    def _desynchronise(self, animation, targets, seeds, frames, near, report) -> list:
-        """Section 6.2: each object in step with a neighbour on more than MAX_IN_STEP of its frames
-        is walked again avoiding its neighbours' frames. They go in rounds of objects no two of
-        which are neighbours (a greedy colouring, in object order), each round in parallel and
-        seeing the walks of the rounds before; an object avoids the neighbours that keep their
-        walks and those walked again in earlier rounds, not those of this round or later ones,
-        which avoid it in turn (so it keeps room to vary): they are passed as walks yet to be made
-        (rows of -1), which count for the room a loop leaves it. `frames`
-        (animation.source_frames()) is kept up to date."""
+    def _first_walks(self, placement, targets, seeds, near, report) -> tuple[list, np.ndarray, int]:
+        """Every object's walk, made in rounds of objects no two of which are neighbours (see
+        _rounds), each round seeing the walks of the rounds before: an object avoids the frames
+        of its neighbours walked in earlier rounds and counts those of later rounds as walks yet
+        to be made (rows of -1), which avoid it in turn. So each part of each object starts at a
+        phase of its own and keeps out of step with its neighbours from the first walk, and
+        de-synchronisation is left only the pairs still in step. Returns the walks, the source
+        frames they play (objects, parts, frames) and the number of rounds."""
+        parts = max(len(template_view(t).graphs) for t in self.templates)
+        frames = np.full((placement.n_objects, parts, self.n_frames), -1, dtype=np.int64)
+        walks = [None] * placement.n_objects
+        colour = self._rounds(range(placement.n_objects), near)
+        rounds = max(colour.values(), default=-1) + 1
+        for c in range(rounds):
+            members = [i for i in range(placement.n_objects) if colour[i] == c]
+            items = [(i, targets[i], int(seeds[i].generate_state(1)[0]), self._avoided(frames, near[i], colour, c))
+                     for i in members]  # fmt: skip
+            made, played = self._walk_many(placement, items, report, f"walks ({c + 1} of {rounds})")
+            for i, walk, own in zip(members, made, played):
+                walks[i] = walk
+                frames[i, : len(own)] = own
+        return walks, frames, rounds
+
+    @staticmethod
+    def _rounds(objects, near) -> dict:
+        """{object: round} for `objects`: a greedy colouring, so that no two neighbours among
+        them share a round, the objects with the most neighbours first (ties in object order):
+        they are walked while most of their neighbours are yet to be made, and those with few
+        neighbours, walked last, have few walks to thread between (and there are fewer rounds)."""
+        colour = {}
+        for i in sorted(objects, key=lambda i: (-len(near[i]), i)):
+            taken = {colour[j] for j in near[i] if j in colour}
+            colour[i] = next(c for c in range(len(taken) + 1) if c not in taken)
+        return colour
+
+    def _desynchronise(self, animation, targets, seeds, frames, near, report) -> tuple[list, int]:
+        """Section 6.2: each object still in step with a neighbour on more than MAX_IN_STEP of its
+        frames is walked again avoiding its neighbours' frames. They go in rounds of objects no
+        two of which are neighbours (see _rounds), each round in parallel and seeing the walks of
+        the rounds before; an object avoids the neighbours that keep their walks and those walked
+        again in earlier rounds, not those of this round or later ones, which avoid it in turn
+        (so it keeps room to vary): they are passed as walks yet to be made (rows of -1), which
+        count for the room a loop leaves it. `frames` (animation.source_frames()) is kept up to
+        date. Returns the walks and how many objects were walked again."""
         walks = list(animation.walks)
         periods = self._periods(animation.placement)
         need = [i for i, nb in enumerate(near)
                 if len(nb) and in_step(frames[i], frames[nb], periods[i]).max() > MAX_IN_STEP]  # fmt: skip
-        colour = {}
-        for i in need:
-            taken = {colour[j] for j in near[i] if j in colour}
-            colour[i] = next(c for c in range(len(need) + 1) if c not in taken)
+        colour = self._rounds(need, near)
         for c in range(max(colour.values(), default=-1) + 1):
             members = [i for i in need if colour[i] == c]
             items = [(i, targets[i], int(seeds[i].generate_state(2)[1]), self._avoided(frames, near[i], colour, c))
@@ -384,7 +423,7 @@ class Scene:
             for i, walk, own in zip(members, again, played):
                 walks[i] = walk
                 frames[i, : len(own)] = own
-        return walks
+        return walks, len(need)
 
     @staticmethod
     def _avoided(frames, near, colour, c):

@@ -263,23 +263,26 @@ def replace(old_kind, old_index, suffix, out, out_count, trans_target, trans_cos
                         same = False
                         break
                     at = parent[at]
+            # the rest's cost is never negative: a replacement whose own cost already reaches the
+            # cost to beat cannot beat it, and its rest need not be made (the same best either way)
             if not same:
-                rest = 0.0
-                if not tail:
-                    t = t0 + frames
-                    if t + len(suffix) - 1 < needed:
-                        rest = np.inf
-                    elif rests[frames - low] == rests[frames - low]:  # made before: not NaN
-                        rest = rests[frames - low]
-                    else:
-                        n = max(needed - t, 0)
-                        for c in range(n):
-                            error[c] = _error(features, track, step, in_step, suffix[c], t + c, avoiding)
-                        rest = alpha * dt * _pairwise(error, n)
-                        rests[frames - low] = rest
-                total = cost + rest
-                if total < best_cost:
-                    best, best_cost = own, total
+                if cost < best_cost:
+                    rest = 0.0
+                    if not tail:
+                        t = t0 + frames
+                        if t + len(suffix) - 1 < needed:
+                            rest = np.inf
+                        elif rests[frames - low] == rests[frames - low]:  # made before: not NaN
+                            rest = rests[frames - low]
+                        else:
+                            n = max(needed - t, 0)
+                            for c in range(n):
+                                error[c] = _error(features, track, step, in_step, suffix[c], t + c, avoiding)
+                            rest = alpha * dt * _pairwise(error, n)
+                            rests[frames - low] = rest
+                    total = cost + rest
+                    if total < best_cost:
+                        best, best_cost = own, total
                 if tail:
                     continue
         if frames > old_frames + slack:

@@ -225,6 +225,7 @@ class _Path:
         sources = index.copy()
         sources[is_transition] = problem.trans_source[index[is_transition]]
         self.node, self.at, self.since = [*sources.tolist(), last], at.tolist(), since.tolist()
+        self.transitions_taken = np.flatnonzero(is_transition)  # the edges that are transitions
         if problem.rotating:
             self.rotation = [np.eye(problem.dims)]
             for edge in edges:
@@ -725,9 +726,8 @@ class _Problem:
         goal = None if tail else path.node[j]
         slack = self.segment_frames // 2
         # frames after the join before the path's next transition: the join must leave room for its blend
-        lead = next(
-            (path.at[k] - path.at[j] for k in range(j, len(path.edges)) if path.edges[k][0] == "transition"), None
-        )
+        later = np.searchsorted(path.transitions_taken, j)
+        lead = path.at[path.transitions_taken[later]] - path.at[j] if later < len(path.transitions_taken) else None
         old_cost = self.alpha * self.dt * path.error[t0:].sum() + path.running_cost[j] - path.running_cost[i]
         old_edges = path.edges[i:j]
         if self._compiled():
