@@ -24,7 +24,8 @@ import numpy as np
 from .. import rigid, validate
 from ..errors import ValidationError
 from ..skeleton import Event, Pose, compose_ground, ground_matrices, relative_ground
-from .pool import StreamPool, UniquePool, blend_entries, entries_pose, namespace
+from . import _kernels
+from .pool import ENTRY_FLOATS, StreamPool, UniquePool, blend_entries, entries_pose, namespace
 
 __all__ = ["Crowd", "CrowdEvent", "Hook", "LookAt", "INSTANCE", "NONE", "STREAMED", "UNIQUE", "DILATION_RATE",
            "MAX_DILATION_RATE"]  # fmt: skip
@@ -721,13 +722,19 @@ class Crowd:
         slots = xp.asarray(self.unique.store[index[unique], :bones]) if len(unique) else taken[:0]
         return _merge(xp, taken, streamed, slots, unique)
 
-    def entries(self, agents=None, cluster=None):
+    def entries(self, agents=None, cluster=None, *, out=None):
         """Store entries (n, J, 12) float32 of `agents` (default all) in `cluster`: sources read at
         their offsets and, while blending, mixed with their targets by α (rotations on the
-        sphere), in the pool's array namespace. Agents without the cluster are refused."""
+        sphere), in the pool's array namespace. Agents without the cluster are refused.
+
+        `out`, for a numpy store: a C-contiguous, writeable float32 array (n, J, 12) to write them
+        into and return, as an engine reuses one pose buffer frame after frame (no new array to
+        allocate and fault in)."""
         c = self.cluster_index(cluster if cluster is not None else self.clusters[0])
         ids = np.arange(self.n_agents) if agents is None else _agent_ids(agents, self.n_agents)
-        entries = self._entries(ids, c)
+        if out is not None:
+            self._check_out(out, (len(ids), self.skeletons[c].n_joints, ENTRY_FLOATS))
+        entries = self._entries(ids, c, out=out)
         overrides = self.overrides.get(self.clusters[c], ())
         if overrides:
             if self.pool.xp is not np:
@@ -766,19 +773,21 @@ class Crowd:
         anchors = self._anchors(ids, c)
         return self.placement[ids] if anchors is None else self.placement[ids] @ anchors
 
-    def _entries(self, ids, c, lag: int = 0):
+    def _entries(self, ids, c, lag: int = 0, *, out=None, compiled: bool = True):
         """`entries` of parts `ids` in cluster index `c`, as they were `lag` frames ago (offsets
-        `lag` frames older, up to the oldest frame held; α then)."""
+        `lag` frames older, up to the oldest frame held; α then). A numpy store is read by the
+        compiled loop (`_kernels.read_entries`), into `out` when given; `compiled=False`, or a
+        store in another namespace, reads through the array API."""
         record = self._buffer[ids, c]
         if np.any(record["kind"] == NONE):
             raise ValidationError(f"agent {int(ids[record['kind'] == NONE][0])} has no {self.clusters[c]!r} cluster")
         bones = self.skeletons[c].n_joints
+        then = self.time - lag / self.pool.fps
+        if self.pool.xp is np and compiled:
+            return self._entries_compiled(record, bones, lag, then, out)
 
         def read(kind, index, offset):
-            if lag:
-                held = np.where(kind == STREAMED, self.pool.filled[np.where(kind == STREAMED, index, 0)], 1)
-                offset = np.minimum(offset + lag, held - 1)
-            return self._read(kind, index, offset, bones)
+            return self._read(kind, index, self._lagged(kind, index, offset, lag), bones)
 
         blending = np.flatnonzero(record["blend_time"] > 0)
         if not len(blending):
@@ -787,7 +796,6 @@ class Crowd:
         steady = np.flatnonzero(record["blend_time"] <= 0)
         r = record[blending]
         target = read(r["target_kind"], r["target"], r["target_offset"])
-        then = self.time - lag / self.pool.fps
         alpha = xp.asarray(np.clip((then - r["blend_start"]) / r["blend_time"], 0, 1).astype(np.float32))
         if xp is np:  # every source at once, the blending rows mixed in place: no merge of two reads
             out = read(record["kind"], record["stream"], record["offset"])
@@ -799,25 +807,95 @@ class Crowd:
         s = record[steady]
         return _merge(xp, read(s["kind"], s["stream"], s["offset"]), steady, mixed, blending)
 
-    def poses(self, agents=None, cluster=None, *, space: str = "local"):
+    def _lagged(self, kind, index, offset, lag: int):
+        """Offsets `lag` frames older, up to the oldest frame each stream holds."""
+        if not lag:
+            return offset
+        held = np.where(kind == STREAMED, self.pool.filled[np.where(kind == STREAMED, index, 0)], 1)
+        return np.minimum(offset + lag, held - 1)
+
+    def _rows(self, kind, index, offset):
+        """Where parts reading (kind, stream or slot, offset) find their entries: the newer and the
+        older of the two frames either side of the offset (floats into the store; a unique slot's
+        row of its store where `unique`), how far between them (float32; 0: the newer alone)."""
+        streamed = kind == STREAMED
+        behind = np.asarray(offset, dtype=np.float64)
+        whole = np.floor(behind)
+        share = np.where(streamed, behind - whole, 0).astype(np.float32)
+        streams, frame = np.where(streamed, index, 0), np.where(streamed, whole, 0).astype(np.int64)
+        newer = self.pool.rows(streams, frame)
+        older = np.where(share > 0, self.pool.rows(streams, frame + 1), newer)
+        unique = kind == UNIQUE
+        if unique.any():
+            width = self.unique.max_bones * ENTRY_FLOATS
+            newer = np.where(unique, index.astype(np.int64) * width, newer)
+            older = np.where(unique, newer, older)
+        return newer, older, share, unique
+
+    def _entries_compiled(self, record, bones: int, lag: int, then: float, out):
+        """`_entries` of a numpy store by `_kernels.read_entries`: every part's source, and its
+        target while blending, read and mixed in one pass into `out` (made when None)."""
+        n = len(record)
+        if out is None:
+            out = np.empty((n, bones, ENTRY_FLOATS), dtype=np.float32)
+        rows = np.empty((n, 4), dtype=np.int64)
+        shares = np.zeros((n, 2), dtype=np.float32)
+        on_unique = np.zeros((n, 2), dtype=np.bool_)
+        source = record["kind"], record["stream"], record["offset"]
+        rows[:, 0], rows[:, 1], shares[:, 0], on_unique[:, 0] = self._rows(*source[:2], self._lagged(*source, lag))
+        alpha = np.full(n, -1.0, dtype=np.float32)  # not blending: the source alone
+        blending = np.flatnonzero(record["blend_time"] > 0)
+        rows[:, 2:] = rows[:, :2]
+        if len(blending):
+            r = record[blending]
+            target = r["target_kind"], r["target"], r["target_offset"]
+            rows[blending, 2], rows[blending, 3], shares[blending, 1], on_unique[blending, 1] = self._rows(
+                *target[:2], self._lagged(*target, lag)
+            )
+            alpha[blending] = np.clip((then - r["blend_start"]) / r["blend_time"], 0, 1)
+        unique = self.unique.store.reshape(-1) if self.unique is not None else np.zeros(0, dtype=np.float32)
+        _kernels.read_entries(self.pool.store, unique, rows, on_unique, shares, alpha, out)
+        return out
+
+    def poses(self, agents=None, cluster=None, *, space: str = "local", out=None):
         """The poses of `agents` (default all) in `cluster`, vectorized: ``space="local"`` a
         float32 Pose (n, J) of local rotations and translations; ``"world"`` world (model-space)
         joint matrices (n, J, 4, 4) float32 by forward kinematics: in the agent's model space
         (what ``placement`` or a Driver's roots take into the scene), a hooked cluster placed at
-        its parent joint (``Hook``)."""
+        its parent joint (``Hook``).
+
+        `out` (numpy store): where to write them, reused frame after frame: for local poses the
+        entries (n, J, 12) float32 the Pose views (``entries``'s `out`), for world poses the
+        matrices (n, J, 4, 4) float32; C-contiguous and writeable."""
         if space not in ("local", "world"):
             raise ValidationError(f"space must be 'local' or 'world'; got {space!r}")
-        entries = self.entries(agents, cluster)
-        pose = entries_pose(entries)
         if space == "local":
-            return pose
+            return entries_pose(self.entries(agents, cluster, out=out))
         if self.pool.xp is not np:
             raise ValidationError("world poses are computed with numpy: read local poses from a store on a device")
         c = self.cluster_index(cluster if cluster is not None else self.clusters[0])
-        world = self.skeletons[c].world(Pose._adopt(pose.rotations, pose.translations), dtype=np.float32)
         ids = np.arange(self.n_agents) if agents is None else _agent_ids(agents, self.n_agents)
+        skeleton = self.skeletons[c]
+        if out is None:
+            out = np.empty((len(ids), skeleton.n_joints, 4, 4), dtype=np.float32)
+        else:
+            self._check_out(out, (len(ids), skeleton.n_joints, 4, 4))
+        entries = self.entries(ids, self.clusters[c])
+        _kernels.world_matrices(entries, skeleton.parents, skeleton.scales.astype(np.float32), out)
         anchors = self._anchors(ids, c)
-        return world if anchors is None else (anchors[:, None] @ world).astype(np.float32)
+        if anchors is not None:
+            out[:] = anchors[:, None] @ out
+        return out
+
+    def _check_out(self, out, shape) -> None:
+        if self.pool.xp is not np:
+            raise ValidationError("out is for a store in numpy; a store on a device returns new arrays")
+        if (not isinstance(out, np.ndarray) or out.dtype != np.float32 or out.shape != shape
+                or not out.flags.c_contiguous or not out.flags.writeable):  # fmt: skip
+            raise ValidationError(
+                f"out must be a C-contiguous, writeable float32 numpy array of shape {shape}; got "
+                f"{type(out).__name__} {getattr(out, 'dtype', '')} {getattr(out, 'shape', '')}"
+            )
 
     def instance_buffer(self) -> np.ndarray:
         """What a skinning shader needs per agent part (N, C), a structured array of INSTANCE
