@@ -375,7 +375,9 @@ class Scene:
         de-synchronisation is left only the pairs still in step. Returns the walks, the source
         frames they play (objects, parts, frames) and the number of rounds."""
         parts = max(len(template_view(t).graphs) for t in self.templates)
-        frames = np.full((placement.n_objects, parts, self.n_frames), -1, dtype=np.int64)
+        # int32: the frames travel to workers as the walks to avoid, and back (a thousand objects'
+        # 9 parts over 3 600 frames are 130 MB so)
+        frames = np.full((placement.n_objects, parts, self.n_frames), -1, dtype=np.int32)
         walks = [None] * placement.n_objects
         colour = self._rounds(range(placement.n_objects), near)
         rounds = max(colour.values(), default=-1) + 1
@@ -486,7 +488,7 @@ def _walk_batch(scene: Scene, placement: Placement, items) -> list:
         walk = _walk_object(scene, i, placement, target, seed, avoid)
         template = scene.templates[placement.templates[i]]
         clock = target.clock if isinstance(target, Course) else None
-        results.append((walk, SceneAnimation._frames_of(template, walk, scene.n_frames, clock)))
+        results.append((walk, SceneAnimation._frames_of(template, walk, scene.n_frames, clock).astype(np.int32)))
     return results
 
 

@@ -508,7 +508,7 @@ class _Problem:
             return self._table_error(frames[: len(played)], t)
         error = np.linalg.norm(played - self.track[t : t + len(played)], axis=1)
         if self.avoid is not None:
-            error += self.in_step * self.in_step_frames(frames, t)
+            error += self.in_step * self._in_step_table(frames, t + np.arange(frames.shape[-1]))
         return error
 
     def _check_reach(self, reach):
@@ -715,7 +715,11 @@ class _Problem:
                 excess[i] = 0.0
         if not excess.any():
             return None
-        k = int(rng.choice(len(starts), p=excess / excess.sum()))
+        # rng.choice(len(starts), p=excess / excess.sum()) as numpy makes it (the same draw and
+        # index), without its checks of p
+        cdf = np.cumsum(excess / excess.sum())
+        cdf /= cdf[-1]
+        k = int(cdf.searchsorted(rng.random(), side="right"))
         return int(starts[k]), int(min(stops[k], len(path.edges)))
 
     def replace(self, path: _Path, i: int, j: int) -> _Path | None:
