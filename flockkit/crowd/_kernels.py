@@ -102,6 +102,15 @@ def _blend(a, b, w, out):  # pragma: no cover - compiled
 
 
 @numba.njit(inline="always", **_FAST)
+def _copy(a, out):  # pragma: no cover - compiled
+    """out[:] = a, element by element: numba's slice assignment guards against overlap with a
+    temporary copy (an allocation per part)."""
+    for j in range(a.shape[0]):
+        for c in range(12):
+            out[j, c] = a[j, c]
+
+
+@numba.njit(inline="always", **_FAST)
 def _entry(store, unique, row, on_unique, width):  # pragma: no cover - compiled
     """The `width` floats at `row` of the store, or of the unique pool's store (flat)."""
     if on_unique:
@@ -110,26 +119,26 @@ def _entry(store, unique, row, on_unique, width):  # pragma: no cover - compiled
 
 
 @numba.njit(parallel=True, **_FAST)
-def read_entries(store, unique, rows, unique_rows, shares, alpha, out):  # pragma: no cover - compiled
-    """Each part's entries into `out` (n, J, 12): its source read between the entries at
+def read_entries(store, unique, rows, unique_rows, shares, alpha, places, out):  # pragma: no cover - compiled
+    """Each part i's entries into out[places[i]] (J, 12): its source read between the entries at
     rows[i, 0] (newer) and rows[i, 1] (older) shares[i, 0] of the way, and, where alpha[i] > 0,
     blended by alpha[i] towards its target, read likewise at rows[i, 2:4] and shares[i, 1].
 
     Rows are float offsets into `store` (flat), or into `unique` (flat) where unique_rows[i, 0]
     (source) or unique_rows[i, 1] (target) is set. A share of 0 reads the newer entry alone; an
     alpha of 0 or less the source alone, 1 or more the target alone, exactly."""
-    n, bones = out.shape[0], out.shape[1]
+    n, bones = len(places), out.shape[1]
     width = bones * 12
     for chunk in numba.prange((n + CHUNK - 1) // CHUNK):
         target = np.empty((bones, 12), dtype=np.float32)
         for i in range(chunk * CHUNK, min(n, (chunk + 1) * CHUNK)):
-            o = out[i]
+            o = out[places[i]]
             a = _entry(store, unique, rows[i, 0], unique_rows[i, 0], width).reshape(bones, 12)
             if shares[i, 0] > 0:
                 older = _entry(store, unique, rows[i, 1], unique_rows[i, 0], width).reshape(bones, 12)
                 _between(a, older, shares[i, 0], o)
             else:
-                o[:] = a
+                _copy(a, o)
             w = alpha[i]
             if w <= 0:
                 continue
@@ -139,7 +148,7 @@ def read_entries(store, unique, rows, unique_rows, shares, alpha, out):  # pragm
                 _between(b, older, shares[i, 1], target)
                 b = target
             if w >= 1:
-                o[:] = b
+                _copy(b, o)
             else:
                 _blend(o, b, w, o)
 

@@ -28,7 +28,7 @@ from . import _kernels
 from .pool import ENTRY_FLOATS, StreamPool, UniquePool, blend_entries, entries_pose, namespace
 
 __all__ = ["Crowd", "CrowdEvent", "Hook", "LookAt", "INSTANCE", "NONE", "STREAMED", "UNIQUE", "DILATION_RATE",
-           "MAX_DILATION_RATE"]  # fmt: skip
+           "MAX_DILATION_RATE", "MAX_LOD"]  # fmt: skip
 
 NONE, STREAMED, UNIQUE = 0, 1, 2  # what an agent part reads (kind, target_kind)
 INSTANCE = np.dtype(
@@ -51,6 +51,9 @@ DILATION_RATE = 0.25
 # has written since it started: at most this changeRate, no part falls below half speed (a rate
 # of 1 would freeze it at the stream's first frame, above 1 play it backwards).
 MAX_DILATION_RATE = 0.5
+# Levels of detail: an agent at level k is refreshed every 2^k frames (1, 2, 4, 8); past 8 frames
+# (a quarter second at 30 fps) a held part's dilation and blend landing lag visibly.
+MAX_LOD = 3
 
 
 @attrs.frozen
@@ -334,6 +337,8 @@ class Crowd:
         self._dilate_to = np.full((n, c), np.nan, dtype=np.float32)  # NaN: not dilating
         self._rate = np.zeros((n, c), dtype=np.float32)
         self._changing = np.zeros(0, dtype=np.int64)  # flat indices (agent * C + cluster) dilating or blending
+        self._since = np.zeros((n, c), dtype=np.int64)  # the frame each part's dilation last moved
+        self._lod = np.zeros(n, dtype=np.uint8)  # each agent's level of detail (set_lod)
         reading = buffer["kind"] == STREAMED
         pool.acquire(buffer["stream"][reading])
         for _ in range(int(pool.history.max()) - 1):  # fill every running stream's history
@@ -408,24 +413,27 @@ class Crowd:
         out[streamed] = self.pool.root_at(stream[streamed], offset[streamed])
         return out
 
-    def _advance_roots(self) -> None:
-        """Each agent's root moves by what its root-motion part read since the last frame."""
+    def _advance_roots(self, ids=None) -> None:
+        """Each agent of `ids` (default all) moves by what its root-motion part read since it last
+        moved (the last frame, or its last refresh at a level of detail above 0; a blend mixes the
+        two streams' steps by α now)."""
+        ids = np.arange(self.n_agents) if ids is None else ids
         r = self.cluster_index(self.root_motion)
-        record = self._buffer[:, r]
+        record = self._buffer[ids, r]
         up = self.skeletons[r].up_axis
         now = self._root_reads(record["kind"], record["stream"], record["offset"])
-        step = relative_ground(self._read_source, now, up)
-        self._read_source = now
+        step = relative_ground(self._read_source[ids], now, up)
+        self._read_source[ids] = now
         blending = np.flatnonzero(record["blend_time"] > 0)
         if len(blending):
-            b = record[blending]
+            b, moving = record[blending], ids[blending]
             target = self._root_reads(b["target_kind"], b["target"], b["target_offset"])
-            into = relative_ground(self._read_target[blending], target, up)
-            self._read_target[blending] = target
+            into = relative_ground(self._read_target[moving], target, up)
+            self._read_target[moving] = target
             alpha = np.clip((self.time - b["blend_start"]) / b["blend_time"], 0, 1)[:, None]
             step[blending] = (1 - alpha) * step[blending] + alpha * into
         step[record["kind"] == NONE] = 0
-        self._ground = compose_ground(self._ground, step, up)
+        self._ground[ids] = compose_ground(self._ground[ids], step, up)
 
     def roots(self) -> np.ndarray:
         """Each agent's root (N, 4, 4) float64 in its character's model space and units: where the
@@ -571,6 +579,7 @@ class Crowd:
         if self.root_motion is not None and self.clusters[c] == self.root_motion:
             self._read_target[ids] = self._root_reads(np.full(len(ids), kind), np.full(len(ids), target), offsets)
         self._changing = np.union1d(self._changing, ids * len(self.clusters) + c)
+        self._since[ids, c] = self.frame
         record = self._buffer[ids, c]
         record["target_kind"], record["target"], record["target_offset"] = kind, target, offsets
         record["blend_start"], record["blend_time"] = self.time, blend_time
@@ -608,17 +617,27 @@ class Crowd:
         users stop if Stopped by default). Streams always move one frame (their history is in
         frames, section 4.3's fixed-step simulation); blends run on the crowd's clock, which
         advances `dt` seconds (default 1 / pool.fps), as a shader's global timer does. Returns
-        the events the streams' heads reached."""
+        the events the streams' heads reached.
+
+        Agents at a level of detail above 0 (``set_lod``) are refreshed only on their frames
+        (``due``): their parts' offsets dilate by the frames since they last moved, their
+        finished blends land and their roots move then, and their instance-buffer records are
+        held in between, so the work of a frame falls with the share of agents due."""
         dt = 1.0 / self.pool.fps if dt is None else validate.number(dt, "update: dt", minimum=0, strict=True)
         events = [CrowdEvent(stream=s, event=e) for s, e in self.pool.advance()]
         if self.unique is not None:
             events += [CrowdEvent(stream=s, event=e, unique=True) for s, e in self.unique.advance()]
         self.frame += 1
         self.time += dt
-        flat = self._changing
+        flat, held = self._changing, self._changing[:0]
+        lod = bool(self._lod.any())
+        if lod:
+            due = self._due(flat // len(self.clusters))
+            flat, held = flat[due], flat[~due]
         if not len(flat):
             if self.root_motion is not None:
-                self._advance_roots()
+                self._advance_roots(np.flatnonzero(self.due()) if lod else None)
+            self._changing = held
             return events
         agents, clusters = np.divmod(flat, len(self.clusters))
         buffer = self._buffer  # field by field: gathering whole records is slower
@@ -632,7 +651,10 @@ class Crowd:
             a, c = agents[which], clusters[which]
             if not len(a):
                 continue
-            step, target = buffer[field][a, c] + self._rate[a, c], goal[which]
+            rate = self._rate[a, c]
+            if lod:  # the frames since the part last moved (1 at level 0)
+                rate = rate * (self.frame - self._since[a, c]).astype(np.float32)
+            step, target = buffer[field][a, c] + rate, goal[which]
             # float32 steps that sum to the target can fall short of it by rounding: within a
             # thousandth of a frame is there
             step = np.where(step >= target - 1e-3, target, step)
@@ -641,15 +663,85 @@ class Crowd:
             arrived = moved >= target
             self._dilate_to[a[arrived], c[arrived]] = np.nan
             goal[np.flatnonzero(which)[arrived]] = np.nan
+        self._since[agents, clusters] = self.frame
         if self.root_motion is not None:
-            self._advance_roots()
+            self._advance_roots(np.flatnonzero(self.due()) if lod else None)
         finished = blending & (
             self.time - buffer["blend_start"][agents, clusters] >= buffer["blend_time"][agents, clusters] - 1e-6
         )
         if finished.any():
             self._collapse(agents[finished], clusters[finished])
-        self._changing = flat[~np.isnan(goal) | (blending & ~finished)]
+        kept = flat[~np.isnan(goal) | (blending & ~finished)]
+        self._changing = np.union1d(held, kept) if len(held) else kept
         return events
+
+    # -- levels of detail -----------------------------------------------------------------------
+
+    def _due(self, agents) -> np.ndarray:
+        """Whether each of `agents` is refreshed this frame: level k every 2^k frames, agent a on
+        the frames f with (f + a) mod 2^k = 0 (staggered, so a level's work spreads evenly)."""
+        period = np.left_shift(1, self._lod[agents].astype(np.int64))
+        return ((self.frame + agents) & (period - 1)) == 0
+
+    def due(self) -> np.ndarray:
+        """Each agent's refresh (N,) bool: True where the last ``update`` refreshed it (every agent
+        at level 0)."""
+        return self._due(np.arange(self.n_agents))
+
+    @property
+    def lod(self) -> np.ndarray:
+        """Each agent's level of detail (N,) uint8, read-only: 0 to MAX_LOD, refreshed every 2^level
+        frames."""
+        view = self._lod.view()
+        view.setflags(write=False)
+        return view
+
+    def set_lod(self, agents, level) -> None:
+        """Set `agents`' level of detail (one level for all, or one each): integers 0 to MAX_LOD.
+        At level k an agent is refreshed every 2^k frames, staggered by its id (``due``): its
+        instance-buffer records, dilation, blend landing and root motion move then and are held
+        in between, and ``refresh`` rewrites its pose then. A skinning shader goes on playing
+        a held part from its stream (the stream's head moves every frame); what is held is the
+        part's offset and blend state. A new level takes effect at the next update."""
+        ids = _agent_ids(agents, self.n_agents)
+        levels = np.asarray(level)
+        if levels.dtype.kind not in "iu" or levels.ndim > 1 or (levels.ndim == 1 and len(levels) != len(ids)):
+            raise ValidationError(f"lod: levels must be integers 0..{MAX_LOD}, one for all agents or one each; "
+                                  f"got {level!r}")  # fmt: skip
+        if levels.size and (levels.min() < 0 or levels.max() > MAX_LOD):
+            raise ValidationError(f"lod: levels must lie in 0..{MAX_LOD}; got {int(levels.min())}..{int(levels.max())}")
+        self._lod[ids] = levels
+
+    def lod_from_camera(self, camera, bands) -> np.ndarray:
+        """Set every agent's level of detail from its distance to `camera` (a world point, 3) and
+        `bands` (1 to MAX_LOD increasing distances): level 0 nearer than bands[0], level k from
+        bands[k - 1] on. Distances are from each agent's ``placement`` (which a Driver sets every
+        frame). Returns the levels (N,)."""
+        eye = np.asarray(camera, dtype=np.float64) if not isinstance(camera, str) else None
+        if eye is None or eye.shape != (3,) or not np.all(np.isfinite(eye)):
+            raise ValidationError(f"camera must be a finite world point (x, y, z); got {camera!r}")
+        edges = np.atleast_1d(np.asarray(bands, dtype=np.float64)) if not isinstance(bands, str) else None
+        if (edges is None or edges.ndim != 1 or not 1 <= len(edges) <= MAX_LOD or not np.all(np.isfinite(edges))
+                or edges[0] <= 0 or np.any(np.diff(edges) <= 0)):  # fmt: skip
+            raise ValidationError(f"bands must be 1 to {MAX_LOD} increasing positive distances; got {bands!r}")
+        distance = np.linalg.norm(self.placement[:, :3, 3] - eye, axis=1)
+        levels = np.searchsorted(edges, distance, side="right").astype(np.uint8)
+        self._lod[:] = levels
+        return levels
+
+    def refresh(self, out, cluster=None) -> np.ndarray:
+        """Rewrite in `out` (N, J, 12) float32, a numpy store's pose buffer of every agent, the
+        entries (``entries``) of the agents the last update refreshed (``due``) that have
+        `cluster`, leaving the others' rows as they were: far agents' poses held between their
+        refreshes, their cost paid on their frames only. Returns the ids written."""
+        c = self.cluster_index(cluster if cluster is not None else self.clusters[0])
+        self._check_out(out, (self.n_agents, self.skeletons[c].n_joints, ENTRY_FLOATS))
+        ids = np.flatnonzero(self.due() & (self._buffer["kind"][:, c] != NONE))
+        if self.overrides.get(self.clusters[c]):
+            out[ids] = self.entries(ids, self.clusters[c])
+        else:
+            self._entries(ids, c, out=out, places=ids)
+        return ids
 
     # -- reading --------------------------------------------------------------------------------
 
@@ -773,18 +865,19 @@ class Crowd:
         anchors = self._anchors(ids, c)
         return self.placement[ids] if anchors is None else self.placement[ids] @ anchors
 
-    def _entries(self, ids, c, lag: int = 0, *, out=None, compiled: bool = True):
+    def _entries(self, ids, c, lag: int = 0, *, out=None, compiled: bool = True, places=None):
         """`entries` of parts `ids` in cluster index `c`, as they were `lag` frames ago (offsets
         `lag` frames older, up to the oldest frame held; α then). A numpy store is read by the
         compiled loop (`_kernels.read_entries`), into `out` when given; `compiled=False`, or a
-        store in another namespace, reads through the array API."""
+        store in another namespace, reads through the array API. `places`: the rows of `out`
+        the parts go to (default 0..n - 1)."""
         record = self._buffer[ids, c]
         if np.any(record["kind"] == NONE):
             raise ValidationError(f"agent {int(ids[record['kind'] == NONE][0])} has no {self.clusters[c]!r} cluster")
         bones = self.skeletons[c].n_joints
         then = self.time - lag / self.pool.fps
         if self.pool.xp is np and compiled:
-            return self._entries_compiled(record, bones, lag, then, out)
+            return self._entries_compiled(record, bones, lag, then, out, places)
 
         def read(kind, index, offset):
             return self._read(kind, index, self._lagged(kind, index, offset, lag), bones)
@@ -832,7 +925,7 @@ class Crowd:
             older = np.where(unique, newer, older)
         return newer, older, share, unique
 
-    def _entries_compiled(self, record, bones: int, lag: int, then: float, out):
+    def _entries_compiled(self, record, bones: int, lag: int, then: float, out, places=None):
         """`_entries` of a numpy store by `_kernels.read_entries`: every part's source, and its
         target while blending, read and mixed in one pass into `out` (made when None)."""
         n = len(record)
@@ -854,7 +947,8 @@ class Crowd:
             )
             alpha[blending] = np.clip((then - r["blend_start"]) / r["blend_time"], 0, 1)
         unique = self.unique.store.reshape(-1) if self.unique is not None else np.zeros(0, dtype=np.float32)
-        _kernels.read_entries(self.pool.store, unique, rows, on_unique, shares, alpha, out)
+        places = np.arange(n) if places is None else places
+        _kernels.read_entries(self.pool.store, unique, rows, on_unique, shares, alpha, places, out)
         return out
 
     def poses(self, agents=None, cluster=None, *, space: str = "local", out=None):

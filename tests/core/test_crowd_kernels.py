@@ -64,7 +64,8 @@ def test_one_pass_equals_interpolating_then_blending(frames, flips, shares, alph
         return
     expected = np.where(alphas[:, None, None] < 0, source, blend_entries(source.copy(), target, np.maximum(alphas, 0)))
     out = np.empty((6, 5, 12), dtype=np.float32)
-    read_entries(store.reshape(-1), np.zeros(0, np.float32), rows, np.zeros((6, 2), bool), shares, alphas, out)
+    read_entries(store.reshape(-1), np.zeros(0, np.float32), rows, np.zeros((6, 2), bool), shares, alphas,
+                 np.arange(6), out)  # fmt: skip
     assert_same_entries(out, expected)
     # weights 0 and 1 give the source and the target as read, a frame read whole exactly
     np.testing.assert_array_equal(out[(alphas <= 0) & (shares[:, 0] == 0)], a[(alphas <= 0) & (shares[:, 0] == 0)])
