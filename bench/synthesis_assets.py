@@ -11,13 +11,16 @@ part's blended frames ((1 - w) old + w new, ``flockkit.graphs.blended_frames``) 
 every frame, every welded copy given its point's position, then SEAM_PASSES passes of the
 documented smoothing over all frames at once (each zone point's displacement from its mean source
 position replaced by the mean of its neighbours', a sparse matrix product per pass), and the
-largest difference between the two relative to the object's size. Target: at most 1 ms per
-second of output per 1 000 vertices.
+largest difference between the two relative to the object's size. Beside them, the floor: making
+and filling an array of the output's size (``numpy.empty`` then ``fill``: the fresh pages and the
+bytes written, which any synthesis into new memory pays), and the load average when the clip
+ran (the machine is shared). Target: at most 1 ms per second of output per 1 000 vertices.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 from pathlib import Path
 
 import numpy as np
@@ -48,8 +51,7 @@ def plainly(layers, walk) -> np.ndarray:
         positions[:, points] = own[:frames]
     if layers.welds is not None:
         positions = positions[:, layers.welds]
-    seams = module._seam_shares(layers) if layers.faces is not None and layers.n_parts > 1 else None
-    if seams is None or module.SEAM_PASSES < 1:
+    if module._seams(layers) is None:
         return positions
     adjacency = module._adjacency(layers.source.n_agents, module.welded_faces(layers))
     zone = np.zeros(layers.source.n_agents, dtype=bool)
@@ -73,7 +75,7 @@ def main() -> None:
     args = parser.parse_args()
     data = Path(args.data)
     print(f"{'clip':>28} {'vertices':>8} {'frames':>6} {'parts':>5} {'flockkit ms/s/1k':>16} {'peer ms/s/1k':>12} "
-          f"{'largest difference':>18}")  # fmt: skip
+          f"{'largest difference':>18} {'fill ms/s/1k':>12} {'load':>5}")  # fmt: skip
     for asset in ASSETS:
         for clip in flockkit.io.list_clips(data / asset):
             mesh = flockkit.io.read_mesh_animation(data / asset, clip=clip)
@@ -81,10 +83,12 @@ def main() -> None:
             walk = flockkit.walk(layers, duration=args.seconds, seed=1)
             played, ours = timed(lambda layers=layers, walk=walk: flockkit.synthesize(layers, walk), repeat=3)
             expected, peer = timed(lambda layers=layers, walk=walk: plainly(layers, walk), repeat=3)
+            _, fill = timed(lambda shape=played.positions.shape: np.empty(shape).fill(0.0), repeat=3)
             scale = 1000 / played.duration / (mesh.motion.n_agents / 1000)
             gap = np.abs(played.positions - expected).max() / object_size(mesh)
             print(f"{mesh.name[-28:]:>28} {mesh.motion.n_agents:>8} {mesh.motion.n_frames:>6} {layers.n_parts:>5} "
-                  f"{ours * scale:>16.2f} {peer * scale:>12.2f} {gap:>18.1e}", flush=True)  # fmt: skip
+                  f"{ours * scale:>16.2f} {peer * scale:>12.2f} {gap:>18.1e} {fill * scale:>12.2f} "
+                  f"{os.getloadavg()[0]:>5.2f}", flush=True)  # fmt: skip
 
 
 if __name__ == "__main__":

@@ -38,11 +38,11 @@ def _smoothstep(u: np.ndarray) -> np.ndarray:
     return u * u * (3.0 - 2.0 * u)
 
 
-def _plan(graph: MotionGraph, walk: Walk):
+def _plan(graph: MotionGraph, walk: Walk, *, placed: bool = True):
     """Lay `walk` out over `graph`: per segment (a stretch between transitions) its output start,
-    source start and length, and its rotation, translation and correspondence; per transition
-    taken, where its blend starts in the output, its source frame, the segment it leaves and its
-    blend length."""
+    source start and length, and its rotation, translation and correspondence (None for each
+    unless `placed`: composing them is a step per transition); per transition taken, where its
+    blend starts in the output, its source frame, the segment it leaves and its blend length."""
     tables = graph.tables
     is_transition, clip_index, transition_index = _edges(graph, walk)
     # A graph of one node (a transition looping on it) has no clips at all.
@@ -61,7 +61,9 @@ def _plan(graph: MotionGraph, walk: Walk):
             f"Walk.edges[{int(at[first])}] takes a transition {int(since[first])} frames after the previous one, "
             f"whose blend needs {int(previous[first])}"
         )
-    rotations, translations, mappings = _compose(walk, tables, taken, graph.motion.n_agents, graph.motion.dims)
+    rotations = translations = mappings = None
+    if placed:
+        rotations, translations, mappings = _compose(walk, tables, taken, graph.motion.n_agents, graph.motion.dims)
     # A segment (the stretch between two transitions) starts at a node and plays consecutive
     # clips, so it is one slice of the source from that node's frame.
     output_start = np.append(0, before[at])
@@ -164,7 +166,7 @@ def played_positions(graph: MotionGraph, walk: Walk, n_frames: int | None = None
 
 def played_length(graph: MotionGraph, walk: Walk) -> int:
     """How many frames `walk` plays."""
-    return int(_plan(graph, walk)[0][2].sum())
+    return int(_plan(graph, walk, placed=False)[0][2].sum())
 
 
 def blended_frames(graph: MotionGraph, walk: Walk) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -172,7 +174,7 @@ def blended_frames(graph: MotionGraph, walk: Walk) -> tuple[np.ndarray, np.ndarr
     (F,), the source frame blended out of (F,; the same frame outside blends), the weight of the
     first (F,; 1 outside blends)), for playing other data of the source frames (a skeleton's
     poses) as synthesize plays positions. Raises ValidationError as synthesize does."""
-    (_, source_start, length), _, _, _, blends = _plan(graph, walk)
+    (_, source_start, length), _, _, _, blends = _plan(graph, walk, placed=False)
     frames = _wrap(graph, _runs(source_start, length))
     previous, weight = frames.copy(), np.ones(len(frames))
     if len(blends[0]):

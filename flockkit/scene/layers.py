@@ -18,6 +18,7 @@ in the file's order. :func:`crack_width` measures how far a motion pulls such co
 from __future__ import annotations
 
 import attrs
+import numba
 import numpy as np
 from scipy.sparse import coo_matrix, diags, identity
 
@@ -50,8 +51,8 @@ PLAIN_LAYERS_FORMAT_VERSION = 1
 # rings and 8 passes, which cost more time: bench/layers.py).
 SEAM_RINGS = 1
 SEAM_PASSES = 4
-# Synthesis gathers the points into place in blocks of frames whose indices take about this many
-# bytes, small enough to stay in cache.
+# crack_width measures the copies in blocks of frames whose gaps take about this many bytes, small
+# enough to stay in cache.
 GATHER_BLOCK_BYTES = 1 << 20
 
 
@@ -92,7 +93,7 @@ class GraphLayers:
     faces: np.ndarray | None = attrs.field(default=None, converter=_faces_or_none)
     features: Features | None = attrs.field(default=None)
     welds: np.ndarray | None = attrs.field(default=None, converter=_welds_or_none)
-    _seams: object = attrs.field(init=False, default=None, repr=False, eq=False)  # made by synthesis
+    _playback: object = attrs.field(init=False, default=None, repr=False, eq=False)  # made by synthesis
 
     def __attrs_post_init__(self):
         if self.features is not None and (
@@ -267,95 +268,116 @@ def synthesize_layers(layers: GraphLayers, walk: LayeredWalk) -> Motion:
     their neighbours, and every copy plays that point's position: the output has every source
     point, in the source's order, and welded points never part.
 
-    One gather writes every frame: each part contributes a table of rows (its source frames and
-    its blended frames, or its placed frames where its walk moves it) and the row each output
-    frame plays. The smoothing is linear, so each part's share of it is a table played the same
-    way, summed for a block of frames at a time."""
+    One compiled pass writes every frame once: each point reads its part's source frame, or
+    blends two of them where the part's walk blends (``flockkit.graphs.blended_frames``), or reads
+    the part's placed frames where its walk moves it. The smoothing is linear, so each part's
+    share of it is made once per source frame and played the same way, summed per frame."""
     if not isinstance(walk, LayeredWalk) or len(walk.walks) != layers.n_parts:
         raise ValidationError(f"synthesizing {layers.n_parts} layers needs a LayeredWalk of {layers.n_parts} walks")
-    frames = min(played_length(graph, w) for graph, w in zip(layers.graphs, walk.walks))
-    plays = [_Play.of(graph, w, frames) for graph, w in zip(layers.graphs, walk.walks)]
-    seams = _seam_shares(layers)
-    n, d = layers.source.n_agents, layers.source.dims
-    smoothed = 0 if seams is None else len(seams.smoothed)
-    step = max(1, GATHER_BLOCK_BYTES // (8 * n))
-    # items: every part's table, then the smoothed points of one block of frames
-    width = [graph.motion.n_agents for graph in layers.graphs] + [smoothed]
-    offsets = np.cumsum([0] + [play.n_rows * w for play, w in zip(plays, width)])
-    items = np.empty((offsets[-1] + step * smoothed, d))
-    for play, graph, first, last, w in zip(plays, layers.graphs, offsets, offsets[1:], width):
-        play.table(graph.motion.positions, out=items[first:last].reshape(-1, w, d))
-    # the item of point v at frame t: start[t, its column] + its index in the column
-    start = np.empty((frames, layers.n_parts + 1), dtype=np.int64)
-    for k, play in enumerate(plays):
-        start[:, k] = offsets[k] + play.rows * width[k]
-    column, local = layers.segmentation.labels.astype(np.int64), _local_index(layers.segmentation)
-    shares = []
-    if seams is not None:
-        column[seams.smoothed], local[seams.smoothed] = layers.n_parts, np.arange(smoothed)
-        shares = [(play, part, part.table(play)) for play, part in zip(plays, seams.parts) if part is not None]
-    if layers.welds is not None:  # every copy reads the item of the point it is welded to
-        column, local = column[layers.welds], local[layers.welds]
-    positions = np.empty((frames, n, d))
-    block = items[offsets[-1] :].reshape(step, smoothed, d)
-    for first in range(0, frames, step):
-        stop = min(first + step, frames)
-        if seams is not None:
-            block[...] = seams.offset
-            for play, part, table in shares:
-                taken = np.take(table, play.rows[first:stop], axis=0)
-                for a, b, row in part.runs:
-                    block[: stop - first, a:b] += taken[:, row : row + b - a]
-        start[first:stop, -1] = offsets[-1] + np.arange(stop - first) * smoothed
-        index = np.take(start[first:stop], column, axis=1) + local
-        np.take(items, index, axis=0, out=positions[first:stop], mode="clip")  # clip: no buffering
+    pairs = list(zip(layers.graphs, walk.walks))
+    in_place = [_stays_in_place(graph, w) for graph, w in pairs]
+    blends = [blended_frames(graph, w) if still else None for (graph, w), still in zip(pairs, in_place)]
+    frames = min(len(b[0]) if b is not None else played_length(graph, w) for (graph, w), b in zip(pairs, blends))
+    playback = _playback(layers)
+    k_parts, d = layers.n_parts, layers.source.dims
+    # per frame and part: the first item of the frame blended into (or played), of the frame
+    # blended out of, and the weight of the first; the same for the part's share of the seams
+    new_row, old_row = np.empty((frames, k_parts), dtype=np.int64), np.empty((frames, k_parts), dtype=np.int64)
+    share_new, share_old = np.zeros((frames, k_parts), dtype=np.int64), np.zeros((frames, k_parts), dtype=np.int64)
+    weight = np.ones((frames, k_parts))
+    part_moving, share_moving = np.zeros(k_parts, dtype=np.bool_), np.zeros(k_parts, dtype=np.bool_)
+    moving, moved_rows = [], 0
+    for k, ((graph, w), blend) in enumerate(zip(pairs, blends)):
+        n_k, share = graph.motion.n_agents, playback.shares[k]
+        if blend is not None:
+            new, old, weight[:, k] = (a[:frames] for a in blend)
+            new_row[:, k], old_row[:, k] = playback.base[k] + new * n_k, playback.base[k] + old * n_k
+            if share is not None:
+                share_new[:, k], share_old[:, k] = share.base + new * share.width, share.base + old * share.width
+            continue
+        # the part's walk moves it: its placed frames (and their share of the seams) are its items
+        placed = played_positions(graph, w, frames)
+        part_moving[k] = True
+        new_row[:, k] = old_row[:, k] = moved_rows + np.arange(frames) * n_k
+        moving.append(placed.reshape(-1, d))
+        moved_rows += placed.shape[0] * n_k
+        if share is not None:
+            share_moving[k] = True
+            share_new[:, k] = share_old[:, k] = moved_rows + np.arange(frames) * share.width
+            moving.append(_apply(share.operator, placed[:, share.columns]).reshape(-1, d))
+            moved_rows += frames * share.width
+    moving = np.concatenate(moving) if moving else np.empty((0, d))
+    positions = np.empty((frames, layers.source.n_agents, d))
+    _play(playback.items, moving, part_moving, new_row, old_row, weight, share_moving, share_new, share_old,
+              playback.runs, playback.offset, playback.points, playback.local, playback.first, positions)  # fmt: skip
     return Motion._adopt(positions, layers.source.dt)
 
 
-@attrs.frozen(eq=False)
-class _Play:
-    """How a part plays its first frames: frame t plays row `rows[t]` of the part's table. Where
-    the part's walk moves it, the table is `placed`, its placed frames; otherwise the table is the
-    source frames followed by the frames blended from `old` into `new` with `weight`, so frames
-    outside blends read the source itself."""
+@numba.njit(cache=True, nogil=True)
+def _play(items, moving, part_moving, new_row, old_row, weight, share_moving, share_new, share_old, runs, offset,
+          points, local, first, out):  # fmt: skip
+    """Write every frame of `out` (T, N, D): part k's points (``points[first[k]:first[k + 1]]``)
+    read their items, row ``new_row[t, k] + local`` of `items` (of `moving` where
+    ``part_moving[k]``), blended as ``(1 - w) * old + w * new`` with the row from ``old_row``
+    where the part's weight w is below 1; the smoothed points (the last group) read `offset` plus
+    every part's share, summed in `runs` (part, first, stop, first row of the share) order.
 
-    rows: np.ndarray
-    placed: np.ndarray | None = None
-    old: np.ndarray | None = None
-    new: np.ndarray | None = None
-    weight: np.ndarray | None = None
-    n_source: int = 0
+    It works on flat views and spells out D = 3 (a mesh's case): a loop over the coordinates
+    there ran at half the speed. It runs on one thread: it moves the output's bytes about as fast
+    as filling it does, and a second thread gave nothing on 2 cores."""
+    n, dims = out.shape[1], out.shape[2]
+    flat, items, moving = out.reshape(-1), items.reshape(-1), moving.reshape(-1)
+    smoothed = np.empty(offset.size)
+    for t in range(weight.shape[0]):
+        _play_frame(items, moving, part_moving, new_row, old_row, weight, share_moving, share_new, share_old, runs,
+                    offset, points, local, first, flat, smoothed, t, n, dims)  # fmt: skip
 
-    @classmethod
-    def of(cls, graph, walk, frames: int) -> _Play:
-        if not _stays_in_place(graph, walk):
-            return cls(rows=np.arange(frames), placed=played_positions(graph, walk, frames))
-        new, old, weight = (a[:frames] for a in blended_frames(graph, walk))
-        blending = np.flatnonzero(weight < 1)
-        rows = new.copy()
-        rows[blending] = graph.motion.n_frames + np.arange(len(blending))
-        return cls(rows=rows, old=old[blending], new=new[blending], weight=weight[blending, None, None],
-                   n_source=graph.motion.n_frames)  # fmt: skip
 
-    @property
-    def n_rows(self) -> int:
-        return len(self.placed) if self.placed is not None else self.n_source + len(self.old)
-
-    def table(self, source: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
-        """The table of `source` (values of the part's points at every source frame, or of
-        anything linear in them), into `out` if given."""
-        if out is None:
-            out = np.empty((self.n_rows, *source.shape[1:]))
-        if self.placed is not None:
-            out[...] = self.placed
-            return out
-        out[: self.n_source] = source
-        mixed = np.take(source, self.old, axis=0, out=out[self.n_source :], mode="clip")
-        mixed *= 1 - self.weight  # as synthesize blends: (1 - w) * old + w * new
-        blended_into = np.take(source, self.new, axis=0)
-        blended_into *= self.weight
-        mixed += blended_into
-        return out
+@numba.njit(cache=True, nogil=True)
+def _play_frame(items, moving, part_moving, new_row, old_row, weight, share_moving, share_new, share_old, runs,
+                offset, points, local, first, flat, smoothed, t, n, dims):  # fmt: skip
+    """Frame t of :func:`_play` into `flat` (the output's flat view), the smoothed points summed in
+    `smoothed`."""
+    n_parts = weight.shape[1]
+    if len(runs):
+        smoothed[:] = offset.reshape(-1)
+        for r in range(len(runs)):
+            k = runs[r, 0]
+            source = moving if share_moving[k] else items
+            w = weight[t, k]
+            a, size = runs[r, 1] * dims, (runs[r, 2] - runs[r, 1]) * dims
+            into = (share_new[t, k] + runs[r, 3]) * dims
+            if w == 1.0:
+                for j in range(size):
+                    smoothed[a + j] += source[into + j]
+            else:
+                out_of = (share_old[t, k] + runs[r, 3]) * dims
+                for j in range(size):
+                    smoothed[a + j] += (1 - w) * source[out_of + j] + w * source[into + j]
+    frame = t * n * dims
+    for k in range(n_parts):
+        source = moving if part_moving[k] else items
+        w = weight[t, k]
+        into, out_of = new_row[t, k] * dims, old_row[t, k] * dims
+        if dims == 3 and w == 1.0:
+            for p in range(first[k], first[k + 1]):
+                o, s = frame + points[p] * 3, into + local[p] * 3
+                flat[o], flat[o + 1], flat[o + 2] = source[s], source[s + 1], source[s + 2]
+        elif dims == 3:
+            for p in range(first[k], first[k + 1]):
+                o, s, q = frame + points[p] * 3, into + local[p] * 3, out_of + local[p] * 3
+                flat[o] = (1 - w) * source[q] + w * source[s]
+                flat[o + 1] = (1 - w) * source[q + 1] + w * source[s + 1]
+                flat[o + 2] = (1 - w) * source[q + 2] + w * source[s + 2]
+        else:
+            for p in range(first[k], first[k + 1]):
+                o, s, q = frame + points[p] * dims, into + local[p] * dims, out_of + local[p] * dims
+                for c in range(dims):
+                    flat[o + c] = source[s + c] if w == 1.0 else (1 - w) * source[q + c] + w * source[s + c]
+    for p in range(first[n_parts], first[n_parts + 1]):
+        o, s = frame + points[p] * dims, local[p] * dims
+        for c in range(dims):
+            flat[o + c] = smoothed[s + c]
 
 
 def _stays_in_place(graph, walk) -> bool:
@@ -399,42 +421,79 @@ def seam_points(layers: GraphLayers) -> np.ndarray:
 
 
 @attrs.frozen(eq=False)
-class _SeamShare:
-    """One part's share of the seam smoothing: operator @ (the part's points `columns`), whose rows
-    are added to the smoothed points in `runs` of (first, stop, first row of the share); `shares`
-    is that share at every source frame (T, rows, D)."""
+class _Share:
+    """One part's share of the seam smoothing: `operator` (sparse, `width` rows) applied to the
+    part's points `columns`; its rows at source frame f are items ``base + f * width`` on."""
 
     columns: np.ndarray
-    runs: list
     operator: object
-    shares: np.ndarray
-
-    def table(self, play: _Play) -> np.ndarray:
-        """The share's table for `play` (worked out from the placed frames where the part moves)."""
-        if play.placed is not None:
-            return _apply(self.operator, play.placed[:, self.columns])
-        return play.table(self.shares)
+    base: int
+    width: int
 
 
 @attrs.frozen(eq=False)
-class _Seams:
-    """The seam smoothing of some layers: the smoothed points' positions are offset plus the sum
-    of every part's share. The smoothed points are ordered by the parts that give them a share,
-    so each part's rows are a few runs: slices add far faster than indices."""
+class _Playback:
+    """What synthesis of some layers reads whatever the walk (made once per layers, SEAM_RINGS and
+    SEAM_PASSES): `items`, every part's source frames (part k's frame f from row ``base[k] + f *
+    n_k``) followed by every part's share of the smoothing at each of them; `shares`, a _Share
+    per part (None for a part that gives none); `runs` (part, first, stop, first row of the share)
+    adding the shares to the smoothed points, whose positions are `offset` plus those sums; and
+    the points grouped by what they read: ``points[first[k]:first[k + 1]]`` read part k's items
+    at their `local` index, the last group the smoothed points at theirs."""
 
-    passes: int
-    smoothed: np.ndarray
+    key: tuple
+    items: np.ndarray
+    base: np.ndarray
+    shares: list
+    runs: np.ndarray
     offset: np.ndarray
-    parts: list  # a _SeamShare per part, None for a part that gives no share
+    points: np.ndarray
+    local: np.ndarray
+    first: np.ndarray
 
 
-def _seam_shares(layers: GraphLayers) -> _Seams | None:
-    """The seam smoothing of `layers` (made once per layers and SEAM_PASSES), None where there
-    is none."""
+def _playback(layers: GraphLayers) -> _Playback:
+    key = (SEAM_RINGS, SEAM_PASSES)
+    if layers._playback is not None and layers._playback.key == key:
+        return layers._playback
+    k_parts, d = layers.n_parts, layers.source.dims
+    items = [graph.motion.positions.reshape(-1, d) for graph in layers.graphs]
+    base = np.cumsum([0] + [len(block) for block in items])
+    column, local = layers.segmentation.labels.astype(np.int64), _local_index(layers.segmentation)
+    shares, runs, offset = [None] * k_parts, np.zeros((0, 4), dtype=np.int64), np.zeros((0, d))
+    seams = _seams(layers)
+    if seams is not None:
+        smoothed, offset, operators = seams
+        column[smoothed], local[smoothed] = k_parts, np.arange(len(smoothed))
+        rows, runs = int(base[-1]), []
+        for k, (graph, found) in enumerate(zip(layers.graphs, operators)):
+            if found is None:
+                continue
+            columns, own_runs, operator = found
+            shares[k] = _Share(columns=columns, operator=operator, base=rows, width=operator.shape[0])
+            items.append(_apply(operator, graph.motion.positions[:, columns]).reshape(-1, d))
+            rows += len(items[-1])
+            runs += [(k, a, b, row) for a, b, row in own_runs]
+        runs = np.array(runs, dtype=np.int64).reshape(-1, 4)
+    if layers.welds is not None:  # every copy reads what the point it is welded to reads
+        column, local = column[layers.welds], local[layers.welds]
+    points = np.argsort(column, kind="stable")
+    first = np.searchsorted(column[points], np.arange(k_parts + 2))
+    playback = _Playback(key=key, items=np.concatenate(items), base=base[:-1], shares=shares, runs=runs,
+                         offset=np.ascontiguousarray(offset, dtype=np.float64), points=points, local=local[points],
+                         first=first)  # fmt: skip
+    object.__setattr__(layers, "_playback", playback)
+    return playback
+
+
+def _seams(layers: GraphLayers):
+    """The seam smoothing of `layers`, None where there is none: (the smoothed points, the
+    offset of their positions, and per part (None for a part that gives no share) the part's
+    points that its share reads, runs (first, stop, first row of the share) of smoothed points
+    that share adds to, and the share's operator). The smoothed points are ordered by the parts
+    that give them a share, so each part's rows are a few runs."""
     if layers.faces is None or layers.n_parts < 2 or SEAM_PASSES < 1:
         return None
-    if layers._seams is not None and layers._seams.passes == SEAM_PASSES:
-        return layers._seams
     adjacency = _adjacency(layers.source.n_agents, welded_faces(layers))
     zone = np.zeros(layers.source.n_agents, dtype=bool)
     zone[seam_points(layers)] = True
@@ -456,24 +515,19 @@ def _seam_shares(layers: GraphLayers) -> _Seams | None:
     mine = [np.flatnonzero(labels == k) for k in range(layers.n_parts)]
     order = np.lexsort([composed[:, columns].getnnz(axis=1) > 0 for columns in mine])
     composed = composed[order]
-    parts = []
-    for columns, graph in zip(mine, layers.graphs):
+    operators = []
+    for columns in mine:
         operator = composed[:, columns].tocsr()
         touched = np.flatnonzero(operator.getnnz(axis=1))
         if not len(touched):
-            parts.append(None)
+            operators.append(None)
             continue
         breaks = np.flatnonzero(np.diff(touched) != 1) + 1
         firsts, lasts = np.append(0, breaks), np.append(breaks, len(touched)) - 1
         runs = [(touched[a], touched[b] + 1, a) for a, b in zip(firsts.tolist(), lasts.tolist())]
-        operator = operator[touched]
-        shares = _apply(operator, graph.motion.positions[:, local[columns]])
-        parts.append(_SeamShare(columns=local[columns], runs=runs, operator=operator, shares=shares))
+        operators.append((local[columns], runs, operator[touched]))
     rest = layers.source.positions.mean(axis=0)[involved]
-    seams = _Seams(passes=SEAM_PASSES, smoothed=involved[inner][order], offset=rest[inner][order] - composed @ rest,
-                   parts=parts)  # fmt: skip
-    object.__setattr__(layers, "_seams", seams)
-    return seams
+    return involved[inner][order], rest[inner][order] - composed @ rest, operators
 
 
 def _apply(operator, positions: np.ndarray) -> np.ndarray:
