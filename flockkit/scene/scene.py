@@ -23,6 +23,8 @@ self-movement (``Features.speed``: an animal's walk) move and turn after their t
 
 from __future__ import annotations
 
+import contextlib
+import gc
 import math
 import warnings
 
@@ -360,10 +362,11 @@ class Scene:
         batches = [items[k::count] for k in range(count)]  # interleaved: neighbours' costs spread evenly
         walks, played = [None] * len(items), [None] * len(items)
         calls = [(self, placement, b) for b in batches]
-        for k, results in enumerate(imap(_walk_batch, calls, n_jobs=self.n_jobs if count > 1 else 1)):
-            walks[k::count], played[k::count] = zip(*results)
-            if report:
-                report(sum(len(b) for b in batches[: k + 1]), len(items), stage)
+        with _collection_paused():  # the walks arrive as millions of small tuples
+            for k, results in enumerate(imap(_walk_batch, calls, n_jobs=self.n_jobs if count > 1 else 1)):
+                walks[k::count], played[k::count] = zip(*results)
+                if report:
+                    report(sum(len(b) for b in batches[: k + 1]), len(items), stage)
         return walks, played
 
     def _first_walks(self, placement, targets, seeds, near, report) -> tuple[list, np.ndarray, int]:
@@ -480,15 +483,32 @@ class Scene:
             )
 
 
+@contextlib.contextmanager
+def _collection_paused():
+    """Python's cyclic garbage collection paused (as it was, after): walks make and gather
+    millions of small tuples (their edges) and no reference cycles, and each collection would
+    scan the templates' and the walks' objects again (a sixth of the walks' time on
+    bench/scene_assets.py's scene)."""
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if was:
+            gc.enable()
+
+
 def _walk_batch(scene: Scene, placement: Placement, items) -> list:
     """(walk, the source frames it plays) of _walk_object for each (object, target, seed, avoid)
     of `items` (the frames made here, on the worker, where the walk is)."""
     results = []
-    for i, target, seed, avoid in items:
-        walk = _walk_object(scene, i, placement, target, seed, avoid)
-        template = scene.templates[placement.templates[i]]
-        clock = target.clock if isinstance(target, Course) else None
-        results.append((walk, SceneAnimation._frames_of(template, walk, scene.n_frames, clock).astype(np.int32)))
+    with _collection_paused():
+        for i, target, seed, avoid in items:
+            walk = _walk_object(scene, i, placement, target, seed, avoid)
+            template = scene.templates[placement.templates[i]]
+            clock = target.clock if isinstance(target, Course) else None
+            frames = SceneAnimation._frames_of(template, walk, scene.n_frames, clock).astype(np.int32)
+            results.append((walk, frames))
     return results
 
 

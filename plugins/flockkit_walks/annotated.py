@@ -674,12 +674,33 @@ class _Problem:
             if self.period is not None and self.shift.any():
                 # a drifting walk keeps within `drift` frames of going straight on: judge its whole length
                 frames_on = (self.nodes[:, None] + np.arange(self.needed)) % self.period
+            by_phase = frames_on is not frames and np.all(self.avoid[:, : self.needed] < self.period)
             for within in (1, 2 * self.drift + 1) if self.shift.any() else (1,):
-                near = self.in_step_frames(frames_on, 0, within).sum(axis=1)
+                if by_phase:
+                    near = self._in_step_by_phase(within)
+                else:
+                    near = self.in_step_frames(frames_on, 0, within).sum(axis=1)
                 near = np.where(np.isfinite(cost), near, np.iinfo(np.int64).max)
                 cost = np.where(near == near.min(), cost, np.inf)
         good = np.flatnonzero(cost <= cost.min() + 0.1)
         return int(rng.choice(good))
+
+    def _in_step_by_phase(self, within: int) -> np.ndarray:
+        """Per node, the output frames on which going straight on round the loop from it, from
+        output frame 0, plays within `within` frames (around the loop) of an avoided walk: what
+        ``in_step_frames((nodes + t) % period, 0, within).sum(axis=1)`` counts, counted by phase.
+        Straight on from node n plays (n + t) % period at t, within of an avoided walk's frame o
+        where n is within of the phase (o - t) % period; so each avoided frame marks the phases
+        near its own, once per output frame, and each node counts the frames its phase is marked."""
+        period = self.period
+        others = self.avoid[:, : self.needed]
+        valid = others >= 0
+        times = np.broadcast_to(np.arange(self.needed), others.shape)[valid]
+        phase = (others[valid] - times) % period
+        marked = np.zeros((self.needed, period), dtype=bool)
+        for step in range(-within, within + 1):
+            marked[times, (phase + step) % period] = True
+        return marked[:, self.nodes % period].sum(axis=0)
 
     def _monotony(self, edges, shifted, shift=None) -> np.ndarray | float:
         """`vary` on each of `edges` that takes a phase shift in `shifted` (taken before), and on
