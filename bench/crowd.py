@@ -4,6 +4,8 @@ evaluation of every part's own clip.
     python bench/crowd.py [--agents 65000] [--streams 1024] [--frames 120] [--clips stream|skeleton]
                           [--running all|half]   # all: every stream Running (the acceptance case)
     python bench/crowd.py --quick      # 8 000 agents, 128 streams, 30 frames, 512 transitions
+    python bench/crowd.py --device     # also the store in CuPy on a GPU, where CuPy finds one
+    python bench/crowd.py --lod-parts 65000,260000   # the sizes of the level-of-detail section
 
 65 000 agents x 4 part clusters (body: 82 joints; flag: 25; scarf and hat: 24), 1 024 streams
 (half human, a quarter each flag and scarf; half of each Stopped by default) with histories of 20
@@ -14,6 +16,20 @@ scored: celebrations), blending over 0.5 s with time dilation. It prints millise
 `update` (mean and worst over the frames) and per `instance_buffer`, milliseconds to sample the
 blended poses of the 4 096 transitioning parts (local, and world by forward kinematics), and the
 pool's memory (everything it holds, its store against Equations 4-6).
+
+The blend of the 4 096 transitioning parts is timed three ways in the same run: flockkit's
+compiled read (``Crowd.poses(..., out=buffer)``: one pass per part into a buffer reused every
+frame, as an engine's pose buffer is; and without ``out``, a new array each call), the same work
+vectorized with numpy (the array API path ``Crowd._entries(..., compiled=False)``, what a store
+on a GPU runs), and the memory-bandwidth limit: a numpy copy that moves as many bytes. Then
+forward kinematics of those parts (world poses), compiled, against ``Skeleton.world`` (numpy,
+one step per depth).
+
+Level of detail (``Crowd.lod_from_camera``): crowds of about 65 000 and 260 000 agent parts
+(`--lod-parts`) on a square, a camera at one corner and bands placing about a quarter of the agents
+at each level 0-3 (refreshed every 1, 2, 4, 8 frames); a quarter of the body parts transition into
+other streams with time dilation, and update + instance_buffer is timed per frame without and
+with the levels (median of 60 frames, the same crowd run twice from the same seed).
 
 Then, on sampled frames of the same run (best of 3 each), every agent part's local pose two
 ways: flockkit's `update` + `poses()` (shared streams read at each part's offset, the
@@ -35,6 +51,7 @@ import os
 import time
 from pathlib import Path
 
+import numba
 import numpy as np
 from timing import timed  # bench/timing.py: the scripts run from bench/
 
@@ -297,14 +314,51 @@ def load() -> str:
     return ", ".join(f"{x:.2f}" for x in os.getloadavg())
 
 
-def bandwidth(crowd: Crowd, parts: np.ndarray) -> tuple[float, int]:
+def bandwidth(crowd: Crowd, parts: np.ndarray, repeat: int = 5) -> tuple[float, int]:
     """The memory-bandwidth limit of blending `parts`' body poses: ms for a plain numpy copy
     that moves the bytes the blend must move (two store entries read per part and one written:
-    a copy of 1.5 entries a part reads and writes as much), best of 5; and those bytes."""
+    a copy of 1.5 entries a part reads and writes as much), best of `repeat`; and those bytes.
+    (A part read between two frames reads a third entry, which the limit does not count.)"""
     entries = crowd.entries(parts, "body")
     source = np.concatenate([entries, entries[: len(entries) // 2]])
     out = np.empty_like(source)
-    return ms(lambda: np.copyto(out, source)), 2 * source.nbytes
+    return ms(lambda: np.copyto(out, source), repeat=repeat), 2 * source.nbytes
+
+
+def measure_blend(crowd: Crowd, movers: np.ndarray, buffer: np.ndarray) -> dict:
+    """The blend of `movers`' body parts, interleaved best of 7 (the machine's load hits each
+    alike): compiled into `buffer` ("out") and into a new array ("new"), the array API path with
+    numpy ("numpy"), the bandwidth limit ("limit", "bytes"); world poses compiled ("world") and by
+    Skeleton.world ("numpy_world"); how far the two paths differ ("gap") and how many parts read
+    their target between two frames ("between")."""
+    c = crowd.cluster_index("body")
+    threads = numba.get_num_threads()
+
+    def one_thread():
+        numba.set_num_threads(1)
+        try:
+            crowd.poses(movers, "body", out=buffer)
+        finally:
+            numba.set_num_threads(threads)
+
+    rounds = {"out": lambda: crowd.poses(movers, "body", out=buffer), "out1": one_thread,
+              "new": lambda: crowd.poses(movers, "body"),
+              "numpy": lambda: crowd._entries(movers, c, compiled=False)}  # fmt: skip
+    found = dict.fromkeys([*rounds, "limit"], np.inf)
+    for _ in range(7):
+        for name, call in rounds.items():
+            found[name] = min(found[name], ms(call, repeat=1))
+        copy_ms, found["bytes"] = bandwidth(crowd, movers, repeat=1)
+        found["limit"] = min(found["limit"], copy_ms)
+    found["gap"] = np.abs(crowd._entries(movers, c) - crowd._entries(movers, c, compiled=False)).max()
+    found["between"] = int(np.sum(crowd.instance_buffer()["target_offset"][movers, c] % 1 > 0))
+    local, skeleton = crowd.poses(movers, "body"), crowd.skeletons[c]
+    found["world"] = ms(lambda: crowd.poses(movers, "body", space="world"), repeat=3)
+    numba.set_num_threads(1)
+    found["world1"] = ms(lambda: crowd.poses(movers, "body", space="world"), repeat=3)
+    numba.set_num_threads(threads)
+    found["numpy_world"] = ms(lambda: skeleton.world(local, dtype=np.float32), repeat=3)
+    return found
 
 
 def gpu(args, movers, celebrations):
@@ -312,8 +366,14 @@ def gpu(args, movers, celebrations):
     (the array API), where CuPy and a GPU are present."""
     try:
         import cupy
-    except ImportError:
-        print("GPU: CuPy is not installed; the sampling and blending ran on the CPU only")
+
+        found = cupy.cuda.runtime.getDeviceCount()
+    except Exception as exc:  # noqa: BLE001 - no CuPy, or CuPy without a driver or device
+        print(f"--device: no GPU found (CuPy: {type(exc).__name__}: {exc}); the sampling and blending ran on "
+              "the CPU only")  # fmt: skip
+        return
+    if not found:
+        print("--device: CuPy finds no GPU; the sampling and blending ran on the CPU only")
         return
     try:
         pool, clusters, *_ = build(args.agents, args.streams, clips=args.clips, running=args.running)
@@ -347,6 +407,9 @@ def main():
     parser.add_argument("--clips", choices=("stream", "skeleton"), default="stream",
                         help="a clip per stream, or one per skeleton size at each stream's rate")  # fmt: skip
     parser.add_argument("--data", default=str(Path(__file__).resolve().parents[2] / "shared" / "data"))
+    parser.add_argument("--device", action="store_true", help="also sample and blend a store in CuPy on a GPU")
+    parser.add_argument("--lod-parts", default="65000,260000", help="agent parts of the level-of-detail crowds "
+                        "(comma-separated; empty: skip)")  # fmt: skip
     args = parser.parse_args()
     if args.quick:
         args.agents, args.streams, args.frames, args.transitions = 8000, 128, 30, 512
@@ -391,6 +454,7 @@ def main():
         return found
 
     pool.advance = timed_advance
+    pose_buffer = np.empty((len(movers), SKELETONS["body"], 12), np.float32)
     for frame in range(args.frames):
         begin = time.perf_counter()
         crowd.update()
@@ -399,9 +463,8 @@ def main():
         crowd.instance_buffer()
         buffers.append((time.perf_counter() - begin) * 1000)
         if frame == 4:  # mid-blend: sample the transitioning parts
-            blended = ms(lambda: crowd.poses(movers, "body"))
-            limit, moved_bytes = bandwidth(crowd, movers)
-            blended_world = ms(lambda: crowd.poses(movers, "body", space="world"), repeat=3)
+            blend = measure_blend(crowd, movers, pose_buffer)
+            blended, limit, moved_bytes = blend["out"], blend["limit"], blend["bytes"]
             assert np.all(crowd.alphas("body")[movers] > 0)
         if frame in sampled:
             mine, other = compare_poses(crowd, direct, members, SKELETONS, gaps)
@@ -418,11 +481,18 @@ def main():
     updates = np.array(updates)
     print(f"{args.transitions} body parts transition at once: {transition:.1f} ms for the 16 calls")
     print(f"update: mean {updates.mean():.2f} ms, median {np.median(updates):.2f} ms, worst {updates.max():.2f} ms "
+          f"(frame {int(np.argmax(updates))}; the 5 worst {', '.join(f'{u:.1f}' for u in np.sort(updates)[-5:])}) "
           f"over {args.frames} frames (target: update + instance_buffer <= 5 ms)")  # fmt: skip
     print(f"instance_buffer: {buffer:.3f} ms (a read-only view; copying it: {copied:.2f} ms, "
           f"{crowd.instance_buffer().nbytes / 2**20:.1f} MB)")  # fmt: skip
-    print(f"blended poses of {args.transitions} parts: local {blended:.2f} ms (target <= 3 ms), "
-          f"world (forward kinematics) {blended_world:.2f} ms")  # fmt: skip
+    print(f"blended poses of {args.transitions} parts ({blend['between']} reading their target between two frames), "
+          f"interleaved best of 7: compiled into a reused buffer {blended:.2f} ms on {numba.get_num_threads()} threads "
+          f"({blend['out1']:.2f} ms on 1), compiled into a new array "
+          f"{blend['new']:.2f} ms, the same work vectorized with numpy (the array API path) "
+          f"{blend['numpy']:.2f} ms; the two paths differ by at most {blend['gap']:.1e}")  # fmt: skip
+    print(f"world poses (forward kinematics) of those parts: compiled {blend['world']:.2f} ms on "
+          f"{numba.get_num_threads()} threads ({blend['world1']:.2f} ms on 1; blend included), "
+          f"numpy Skeleton.world of the local poses {blend['numpy_world']:.2f} ms")  # fmt: skip
     advances, buffers = np.array(advances), np.array(buffers)
     frame = np.median(updates) + np.median(buffers)
     print(f"budget per frame (median of {args.frames} frames; {'all' if args.running == 'all' else 'half the'} "
@@ -434,7 +504,12 @@ def main():
           f"{'met' if frame <= 5 else 'NOT met'})")  # fmt: skip
     print(f"  blended local poses of {args.transitions} parts       {blended:7.2f} ms; memory-bandwidth limit "
           f"(numpy copy of the {moved_bytes / 2**20:.1f} MiB they read and write) {limit:.2f} ms: "
-          f"{blended / limit:.1f}x the limit (target <= 2x)")  # fmt: skip
+          f"{blended / limit:.1f}x the limit (target <= 2x: {'met' if blended <= 2 * limit else 'NOT met'}; "
+          f"on 1 thread {blend['out1'] / limit:.1f}x); "
+          f"numpy (array API path) {blend['numpy']:.2f} ms, {blend['numpy'] / limit:.1f}x")  # fmt: skip
+    world = min(blend["world"], blend["world1"])
+    print(f"  world poses of those parts                  {world:7.2f} ms (numpy FK alone "
+          f"{blend['numpy_world']:.2f} ms)")  # fmt: skip
     memory = pool.memory_parts()
     total_new = equation_5(bones, histories)
     total_prev = equation_4(bones, histories, transitions=args.transitions)
@@ -445,7 +520,8 @@ def main():
           f"({'equal to the store' if memory['store'] == total_new else 'NOT the store'}); Equation 4 (every stream "
           f"padded to 82 joints and 120 frames, {args.transitions} transition slots) {total_prev / 2**20:.1f} MiB; "
           f"difference (Equation 6) {(total_prev - total_new) / 2**20:.1f} MiB")  # fmt: skip
-    gpu(args, movers, celebrations)
+    if args.device:
+        gpu(args, movers, celebrations)
     ours, theirs = np.array(ours), np.array(theirs)
     produced = ours.mean() + updates.mean()
     print(f"every agent part's local pose, per frame ({parts} parts; best of 3 on each of {len(ours)} frames):")
@@ -458,6 +534,51 @@ def main():
     print(gaps.report("part-frames"))
     print(f"  flockkit update alone (the instance buffer a skinning shader reads, no per-part pose): "
           f"{updates.mean():.2f} ms")  # fmt: skip
+    sizes = [int(p) for p in args.lod_parts.split(",") if p.strip()]
+    if sizes:
+        print(
+            f"level of detail: update + instance_buffer per frame (median of 60 frames; a quarter of the body "
+            f"parts transitioning with time dilation; levels 0-3 by distance bands from a camera; load {load()}):"
+        )
+    for parts_wanted in sizes:
+        lod_section(parts_wanted, args)
+
+
+def lod_section(parts_wanted: int, args) -> None:
+    """update + instance_buffer per frame for a crowd of about `parts_wanted` agent parts, without
+    and with levels of detail from a camera: the same crowd run twice from the same seed."""
+    per_agent = 2.2  # parts an agent has on average (build's shares: 1 + 0.3 + 0.5 + 0.4)
+    n_agents = int(round(parts_wanted / per_agent))
+    side = int(np.ceil(np.sqrt(n_agents)))
+    times, shares = {}, None
+    for with_lod in (False, True):
+        pool, clusters, bones, _, _ = build(n_agents, args.streams, clips=args.clips, running=args.running)
+        crowd = Crowd(pool, n_agents=n_agents, clusters=clusters, seed=1)
+        parts = sum(int(np.sum(s >= 0)) for s in clusters.values())
+        grid = np.arange(n_agents)
+        crowd.placement[:, 0, 3], crowd.placement[:, 1, 3] = grid % side, grid // side  # 1 m apart
+        for _ in range(10):
+            crowd.update()
+        if with_lod:  # a camera at a corner; bands that put about a quarter of the agents at each level
+            distance = np.linalg.norm(crowd.placement[:, :3, 3], axis=1)
+            levels = crowd.lod_from_camera((0.0, 0.0, 0.0), bands=np.quantile(distance, [0.25, 0.5, 0.75]))
+            shares = np.bincount(levels, minlength=4) / n_agents
+        movers = np.random.default_rng(2).choice(n_agents, size=n_agents // 4, replace=False)
+        targets = np.flatnonzero(bones == 82)
+        for k, group in enumerate(np.array_split(movers, 16)):
+            crowd.transition_to_streamed(group, "body", int(targets[k]), blend_time=0.5, time_to_dilate=2.0)
+        frame = []
+        for _ in range(60):
+            begin = time.perf_counter()
+            crowd.update()
+            crowd.instance_buffer()
+            frame.append((time.perf_counter() - begin) * 1000)
+        times[with_lod] = np.median(frame)
+        del crowd, pool
+    refreshed = float(np.sum(shares / 2.0 ** np.arange(4)))
+    print(f"  {parts} parts ({n_agents} agents, {len(movers)} transitioning): all at level 0 {times[False]:6.2f} ms; "
+          f"with levels ({', '.join(f'{s:.0%}' for s in shares)} at 0-3, {refreshed:.0%} of agents refreshed a "
+          f"frame) {times[True]:6.2f} ms")  # fmt: skip
 
 
 if __name__ == "__main__":

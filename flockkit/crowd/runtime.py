@@ -672,7 +672,7 @@ class Crowd:
         if finished.any():
             self._collapse(agents[finished], clusters[finished])
         kept = flat[~np.isnan(goal) | (blending & ~finished)]
-        self._changing = np.union1d(held, kept) if len(held) else kept
+        self._changing = np.concatenate([held, kept]) if len(held) else kept  # any order (union1d sorts)
         return events
 
     # -- levels of detail -----------------------------------------------------------------------

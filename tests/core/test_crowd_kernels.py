@@ -82,7 +82,7 @@ def seam_clip():
                                  translations=clip.translations[:, 0] * 3, name="seam")  # fmt: skip
 
 
-def awkward_crowd():
+def awkward_crowd(xp=None):
     """Streams of one skeleton: a clip, the same clip with every rotation negated (the other
     hemisphere), a clip with a seam, a Stopped one; a unique slot; parts dilating (between two
     frames), blending, blending to a unique slot and steady."""
@@ -101,6 +101,7 @@ def awkward_crowd():
             Stream(controller=play(clip, rate=1.2), history=30, default="Stopped"),
         ],
         fps=30,
+        xp=xp,
     )
     unique = UniquePool(2, max_bones=12, fps=30)
     unique.set(1, play(flipped, rate=2.0))
@@ -190,3 +191,25 @@ def test_world_matrices_of_a_root_only_skeleton_are_its_local_transforms():
     expected[:2, :2] = 2 * np.array([[np.cos(1), -np.sin(1)], [np.sin(1), np.cos(1)]])
     expected[2, 2], expected[:3, 3] = 2, [1, 2, 3]
     np.testing.assert_allclose(out[0, 0], expected, atol=1e-6)
+
+
+def test_a_store_on_a_gpu_gives_the_poses_of_a_numpy_store():
+    """CuPy where a GPU is present: the array API path on the device against the compiled path on
+    the CPU, to float32 tolerance."""
+    cupy = pytest.importorskip("cupy", reason="CuPy is not installed (pip install cupy-cuda12x where a GPU is)")
+    try:
+        found = cupy.cuda.runtime.getDeviceCount()
+    except Exception as exc:  # noqa: BLE001 - CuPy without a driver
+        pytest.skip(f"CuPy finds no GPU: {type(exc).__name__}: {exc}")
+    if not found:
+        pytest.skip("CuPy finds no GPU")
+
+    def run(xp):
+        crowd = awkward_crowd(xp)
+        for _ in range(8):
+            crowd.update()
+        return crowd.entries(cluster="body")
+
+    on_gpu = run(cupy)
+    assert type(on_gpu).__module__.startswith("cupy")
+    assert_same_entries(cupy.asnumpy(on_gpu), run(None))
