@@ -328,6 +328,7 @@ class _Shared:
         self.shift_steps = np.asarray(self.shift, dtype=np.int64)
         self._memos = {}
         self._arrows = None  # the graph's distinct source arrows (see _Problem._tables)
+        self.reach = {}  # the distinct arrows the graph plays, by source arrows (see _Problem._check_reach)
 
     def remembered(self, features: np.ndarray, alpha: float) -> dict:
         """The memo of errors under constant targets for these source arrows and alpha."""
@@ -521,7 +522,22 @@ class _Problem:
 
         # the frames the graph plays: its kept part of the source, or the whole loop
         first, last = (int(self.nodes[0]), int(self.nodes[-1])) if self.period is None else (0, self.period - 1)
-        closest, index = cKDTree(shape(self.features[first : last + 1])).query(shape(self.track))
+        # first by the distinct arrows the graph plays (made once per graph and source arrows; a
+        # source that holds one arrow plays one), with a margin for the rounding of a tree's
+        # distances; only a target that comes near the reach or beyond is looked at again
+        key = (self.features.tobytes(), self.rotating, first, last)
+        if key not in self.shared.reach:
+            arrows = np.unique(shape(self.features[first : last + 1]), axis=0)
+            self.shared.reach = {key: (arrows, cKDTree(arrows) if len(arrows) > 8 else None)}
+        arrows, tree = self.shared.reach[key]
+        points = shape(self.track)
+        if tree is not None:
+            nearest = tree.query(points)[0]
+        else:
+            nearest = np.min([np.linalg.norm(points - arrow, axis=1) for arrow in arrows], axis=0)
+        if len(nearest) and nearest.max() <= reach - 1e-9:
+            return
+        closest, index = cKDTree(shape(self.features[first : last + 1])).query(points)
         index = index + first
         worst = int(np.argmax(closest))
         if closest[worst] > reach:
