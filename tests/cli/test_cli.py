@@ -303,6 +303,22 @@ DEMO_RENDERS = {"render-flock.png": ("the flock", "at 60 s"), "render-fox-scene.
                 "render-foxes.png": ("the crowd of Foxes", "at 6 s")}  # fmt: skip
 
 
+def test_the_demo_solves_the_shipped_come_from_behind():
+    """The demo's race is examples/scenarios/come-from-behind.toml, constraints and solve settings,
+    so the main job shows the scenario the examples ship (within the model's reach: no warning)."""
+    from flockkit.cli.demo import come_from_behind
+    from flockkit.constrained.scenario import load_scenario
+
+    problem, settings = come_from_behind()
+    shipped, shipped_settings = load_scenario(SCENARIOS / "come-from-behind.toml")
+    assert settings == shipped_settings
+    assert (problem.n_agents, problem.duration) == (shipped.n_agents, shipped.duration)
+    assert [type(c) for c in problem.constraints] == [type(c) for c in shipped.constraints]
+    for mine, theirs in zip(problem.constraints, shipped.constraints, strict=True):
+        for field in ("agent", "agents", "time", "position", "velocity"):
+            assert np.array_equal(np.asarray(getattr(mine, field, None)), np.asarray(getattr(theirs, field, None)))
+
+
 def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data):
     """Every picture and file, the summary's figures, every step timed in order (drawing and
     rendering included); the renders where FLOCKKIT_BPY_PYTHON names a Python with bpy (as in
