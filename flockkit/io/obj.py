@@ -8,7 +8,10 @@ frame10); each must be a regular file, and a link in a folder must stay inside i
 from __future__ import annotations
 
 import glob as globbing
+import math
+import os
 import re
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -48,250 +51,433 @@ def _frames(pattern: str) -> list[str]:
 
 def read_sequence(pattern: str) -> tuple[np.ndarray, np.ndarray, str]:
     """(positions (T, V, 3), faces (F, 3 or 4), the first frame's name) of the OBJ sequence
-    `pattern`: a folder, a glob, or one file (a path that exists is never read as a glob)."""
+    `pattern`: a folder, a glob, or one file (a path that exists is never read as a glob).
+
+    Every file is asked into the system's cache first (:func:`_read_ahead`). The first frame is
+    read on its own; the others are read by a pool of threads (as many as
+    numba's, ``numba.get_num_threads()``), each file by one thread straight into its frame of the
+    output, with the compiled pass (:func:`_scan`) that reads the numbers as Python's float and
+    int read them and checks that the faces are the first frame's. A file that pass does not
+    read whole goes through the line-by-line parser, whose errors name the file and the line;
+    where several frames are bad, the error is the first one's."""
     files = _frames(pattern)
-    positions, faces, known = None, None, None
-    for t, file in enumerate(files):
-        points, polygons, known = _read_obj(file, known)
-        if faces is None:
-            faces, first = polygons, file
-            validate.allocation(len(files) * points.size, f"{pattern}: {len(files)} frames of {len(points)} vertices")
-            positions = np.empty((len(files), *points.shape))
-        elif len(points) != positions.shape[1] or not np.array_equal(polygons, faces):
-            raise FileFormatError(
-                f"{file}: its topology differs from {first} ({len(points)} vertices and {len(polygons)} faces, against "
-                f"{positions.shape[1]} and {len(faces)}); an OBJ sequence keeps one topology"
-            )
-        positions[t] = points
+    _read_ahead(files)
+    points, faces, known = _read_first(files[0])
+    validate.allocation(len(files) * points.size, f"{pattern}: {len(files)} frames of {len(points)} vertices")
+    positions = np.empty((len(files), *points.shape))
+    positions[0] = points
+
+    def read(t):
+        _read_later(files[t], files[0], positions[t], faces, known)
+
+    import numba
+
+    later = range(1, len(files))
+    threads = min(numba.get_num_threads(), len(later))
+    if threads > 1:
+        with ThreadPoolExecutor(threads) as pool:
+            for _ in pool.map(read, later):  # in frame order: the first bad frame's error is raised
+                pass
+    else:
+        for t in later:
+            read(t)
     return positions, faces, Path(files[0]).stem
 
 
+def _read_ahead(files) -> None:
+    """Ask the system to read every frame's file into its cache now (``posix_fadvise`` with
+    WILLNEED, where the system has it), so the disk reads the later frames while the first ones
+    are parsed. Only regular files are asked for; anything else is left to the readers, which
+    refuse it."""
+    advise = getattr(os, "posix_fadvise", None)
+    if advise is None:
+        return
+    for file in files:
+        try:
+            fd = _files.open_regular(file)
+        except (OSError, FileFormatError):
+            continue
+        try:
+            advise(fd, 0, 0, os.POSIX_FADV_WILLNEED)
+        except OSError:
+            pass
+        finally:
+            os.close(fd)
+
+
 _MAX_VERTEX = 2**40  # far above any file's vertex count, far below numpy's int64
+# What the compiled pass found: the file read, or a file the line-by-line parser must read (a
+# field that is not a plain decimal number, a byte outside plain ASCII, another topology than
+# the first frame's, or anything that parser would refuse).
+_READ, _CAREFUL = 0, 1
+_NO_CORNERS = np.zeros(0, dtype=np.int64)
 
 
-def _read_obj(file, known=None) -> tuple[np.ndarray, np.ndarray, tuple | None]:
-    """The vertices (V, 3) and faces (F, 3 or 4) of one OBJ file, and what a later frame of the
-    sequence may reuse: the text of its face lines, its faces and whether that text holds a minus
-    (None until a frame is plain ASCII).
-
-    One compiled pass over the bytes (:func:`_scan`) reads the vertices and compares the face
-    lines with `known`'s (an earlier frame's); where they are the same text and use no relative
-    indices, the faces are those. Anything else (another face text, the first frame, a field that
-    is not a plain decimal number, a byte outside plain ASCII) goes through the line-by-line
-    parser, whose errors name the line."""
+def _read_first(file) -> tuple[np.ndarray, np.ndarray, tuple | None]:
+    """The vertices (V, 3) and faces of the first frame, and the corners and corner counts of
+    its faces as the compiled pass reads them (None where that pass could not read it: later
+    frames then go through the line-by-line parser too)."""
     data = _files.read_bytes(file)
     buffer = np.frombuffer(data, dtype=np.uint8)
-    reused = known is not None and not known[2]
-    status, points, hard, face_text = _scanner()(buffer, known[0] if reused else _NO_FACES, reused)
-    if status == _SAME_FACES and _read_hard(buffer, points.reshape(-1), hard):
-        return points, known[1], known
+    scan, powers = _compiled()
+    status, points, corners, counts = scan(buffer, np.empty((max(16, len(data) // 64), 3)), _NO_CORNERS,
+                                           _NO_CORNERS, False, *powers)  # fmt: skip
+    if status == _READ:
+        return points, _faces(corners, counts), (corners, counts)
+    return (*_parse_obj(file, _text(file, data)), None)
+
+
+def _read_later(file, first, out: np.ndarray, faces: np.ndarray, known) -> None:
+    """Read the frame `file` into `out` (V, 3); FileFormatError naming it if it is not an OBJ
+    file or its topology differs from `first`'s (`faces`)."""
+    data = _files.read_bytes(file)
+    if known is not None:
+        scan, powers = _compiled()
+        if scan(np.frombuffer(data, dtype=np.uint8), out, *known, True, *powers)[0] == _READ:
+            return
+    points, polygons = _parse_obj(file, _text(file, data))
+    if len(points) != len(out) or not np.array_equal(polygons, faces):
+        raise FileFormatError(
+            f"{file}: its topology differs from {first} ({len(points)} vertices and {len(polygons)} faces, against "
+            f"{len(out)} and {len(faces)}); an OBJ sequence keeps one topology"
+        )
+    out[...] = points
+
+
+def _text(file, data: bytes) -> str:
     try:
-        text = data.decode("utf-8-sig")
+        return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         raise FileFormatError(f"{Path(file)}: not UTF-8 text (byte {exc.start})") from None
-    careful, faces = _parse_obj(file, text)
-    if status == _BAIL:  # no face text to go by: an earlier frame's still holds
-        return careful, faces, known
-    return careful, faces, (face_text, faces, bool(np.any(face_text == ord("-"))))
 
 
-def _read_hard(buffer, flat, hard) -> bool:
-    """Write into `flat` the numbers _scan left (rows of flat index, first byte, end), read by
-    numpy's string-to-float cast, which rounds correctly as Python's float does (at most
-    HARD_WIDTH characters each, the rest by float itself); whether they are all finite."""
-    if not len(hard):
-        return True
-    index, first, stop = hard.T
-    short = stop - first <= HARD_WIDTH
-    width = int((stop - first)[short].max(initial=1))
-    columns = np.arange(width)
-    chars = buffer[np.minimum(first[short, None] + columns, len(buffer) - 1)]
-    chars[columns >= (stop - first)[short, None]] = 0  # a bytes string ends at its first NUL
-    flat[index[short]] = np.ascontiguousarray(chars).view(f"S{width}").ravel().astype(np.float64)
-    for k, a, b in hard[~short].tolist():
-        flat[k] = float(buffer[a:b].tobytes())
-    return bool(np.isfinite(flat[index]).all())
+def _faces(corners: np.ndarray, counts: np.ndarray) -> np.ndarray:
+    """The faces (F, 3 or 4) of polygons given as their corners, one after another, and their
+    corner counts, as :func:`_parse_obj` makes them: triangles and quads kept, larger polygons cut
+    into fans of triangles, and the quads cut in two where the mesh also has triangles."""
+    starts = np.cumsum(counts) - counts
+    quads = corners[starts[counts == 4, None] + np.arange(4)]
+    fans = np.where(counts == 4, 0, counts - 2)  # triangles of each other polygon, in file order
+    polygon = np.repeat(np.arange(len(counts)), fans)
+    step = np.arange(len(polygon)) - np.repeat(np.cumsum(fans) - fans, fans)
+    first = starts[polygon]
+    triangles = np.stack([corners[first], corners[first + step + 1], corners[first + step + 2]], axis=1)
+    if len(triangles) and len(quads):
+        return np.concatenate([triangles, quads[:, :3], quads[:, [0, 2, 3]]])
+    return quads if len(quads) else triangles
 
 
-# Characters at most of a number read by numpy's cast (longer ones, rare, by Python's float).
-HARD_WIDTH = 40
-# What _scan found: the vertices read and the face lines those of `known`; the vertices read and
-# the face lines' text; nothing to go by (the line-by-line parser must read the file).
-_SAME_FACES, _FACE_TEXT, _BAIL = 0, 1, 2
-_NO_FACES = np.zeros(0, dtype=np.uint8)
-# The largest mantissa a decimal number may have for _scan to round it on its own (Clinger's
-# fast path: it and 10**e, |e| <= 22, are exact doubles, so one product or quotient rounds once,
-# as a correctly rounded reading does); other numbers (repr's 17 digits) are left to Python.
-_EXACT_MANTISSA = 2**53
-_POWERS = 10.0 ** np.arange(23)
+def _powers_of_five() -> tuple[np.ndarray, np.ndarray]:
+    """The 128 leading bits of 5**q for q in -342..308 (for q < 0, of its reciprocal, rounded up),
+    as (high, low) 64-bit words: the table of the Eisel-Lemire conversion (Lemire, "Number parsing
+    at a gigabyte per second", Software: Practice and Experience 51(8), 2021; the rounding of the
+    negative powers as in Mushtak and Lemire, "Fast number parsing without fallback", 2023, whose
+    proof makes 19 or fewer digits always exact)."""
+    high, low = np.empty(651, dtype=np.uint64), np.empty(651, dtype=np.uint64)
+    for k, q in enumerate(range(-342, 309)):
+        if q >= 0:
+            value = 5**q
+        else:
+            power = 5**-q
+            bits = (power - 1).bit_length()  # the smallest z with 2**z >= power
+            value = 2 ** (bits + 127 if q >= -17 else 2 * bits + 64) // power + 1
+        length = value.bit_length()
+        value = value << (128 - length) if length < 128 else value >> (length - 128)
+        high[k], low[k] = value >> 64, value & (2**64 - 1)
+    return high, low
 
 
-def _scanner():
-    """:func:`_scan`, compiled by numba on first use (and cached on disk; bounds checked, as the
-    bytes are untrusted). It is compiled from this module's source, not from the function's
-    bytecode, which a coverage-guided fuzzer (atheris) rewrites with calls numba cannot compile."""
+def _compiled():
+    """(:func:`_scan` and its helpers compiled by numba on first use and cached on disk, the
+    table of powers of five). They are compiled from this module's source, not from the
+    functions' bytecode, which a coverage-guided fuzzer (atheris) rewrites with calls numba
+    cannot compile; the bounds are checked, as the bytes are untrusted."""
     global _COMPILED
     if _COMPILED is None:
         import types
 
         import numba
 
+        names = ("_multiply", "_leading_zeros", "_eisel_lemire", "_number", "_scan")
+        namespace = dict(globals())
         try:
             code = compile(Path(__file__).read_text(encoding="utf-8"), __file__, "exec")
-        except OSError:  # no source beside the module: its own bytecode
-            function = _scan
-        else:
-            scan = next(c for c in code.co_consts if isinstance(c, types.CodeType) and c.co_name == "_scan")
-            function = types.FunctionType(scan, globals(), "_scan")
-            function.__module__, function.__qualname__, function.__doc__ = __name__, "_scan", _scan.__doc__
-        _COMPILED = numba.njit(cache=True, nogil=True, boundscheck=True)(function)
+            found = {c.co_name: c for c in code.co_consts if isinstance(c, types.CodeType) and c.co_name in names}
+        except OSError:  # no source beside the module: the functions' own bytecode
+            found = {name: globals()[name].__code__ for name in names}
+        for name in names:
+            function = types.FunctionType(found[name], namespace, name)
+            function.__module__, function.__qualname__ = __name__, name
+            function.__doc__ = globals()[name].__doc__
+            inline = "always" if name == "_number" else "never"  # inlined into its loop: 10% faster
+            namespace[name] = numba.njit(cache=True, nogil=True, boundscheck=True, inline=inline)(function)
+        _COMPILED = namespace["_scan"], _powers_of_five()
     return _COMPILED
 
 
 _COMPILED = None
+# Constants of the compiled pass, as numba reads them (64-bit unsigned words where it computes
+# with them).
+_U32, _U64_MASK32 = np.uint64(32), np.uint64(0xFFFFFFFF)
+_U1, _U63 = np.uint64(1), np.uint64(63)
+_PRECISION_MASK = np.uint64(0xFFFFFFFFFFFFFFFF >> 55)  # the bits below a double's 53 and 2 more
+# Clinger's fast path: a mantissa of at most 2**53 and 10**e, |e| <= 22, are exact doubles, so
+# one product or quotient rounds once, as a correctly rounded reading does.
+_EXACT_MANTISSA = np.uint64(2**53)
+_POWERS = 10.0 ** np.arange(23)
+# Significant digits a mantissa keeps (the rest decide only whether it is exact): 19 fit a 64-bit
+# word, and Eisel and Lemire's conversion is exact for all of them.
+_KEPT_DIGITS = 19
+_U0, _U10 = np.uint64(0), np.uint64(10)
 
 
-def _scan(data, known, compare):
-    """One pass over an OBJ file's bytes: (status, vertices (V, 3), hard numbers (H, 3), face text).
+def _multiply(a, b):
+    """The 128-bit product of two 64-bit words, as (high, low) words."""
+    a0, a1, b0, b1 = a & _U64_MASK32, a >> _U32, b & _U64_MASK32, b >> _U32
+    p00, p01, p10, p11 = a0 * b0, a0 * b1, a1 * b0, a1 * b1
+    middle = (p00 >> _U32) + (p01 & _U64_MASK32) + (p10 & _U64_MASK32)
+    return p11 + (p01 >> _U32) + (p10 >> _U32) + (middle >> _U32), (middle << _U32) | (p00 & _U64_MASK32)
+
+
+def _leading_zeros(w):
+    """The leading zero bits of a nonzero 64-bit word."""
+    count = 0
+    for bits in (32, 16, 8, 4, 2, 1):
+        if w >> np.uint64(64 - bits) == 0:
+            count += bits
+            w = w << np.uint64(bits)
+    return count
+
+
+def _eisel_lemire(mantissa, q, power_high, power_low):
+    """The double nearest mantissa * 10**q (mantissa a nonzero 64-bit word of at most 19
+    digits), ties to even, as Python's float reads it: Eisel and Lemire's conversion (see
+    :func:`_powers_of_five`)."""
+    if q < -342:
+        return 0.0
+    if q > 308:
+        return np.inf
+    w = mantissa
+    shifted = _leading_zeros(w)
+    w = w << np.uint64(shifted)
+    index = q + 342
+    high, low = _multiply(w, power_high[index])
+    if high & _PRECISION_MASK == _PRECISION_MASK:  # the next 64 bits of the power may carry into these
+        more = _multiply(w, power_low[index])[0]
+        low = low + more
+        if more > low:
+            high = high + _U1
+    upper = np.int64(high >> _U63)
+    shift = np.uint64(upper + 9)
+    bits = high >> shift
+    exponent = (((152170 + 65536) * q) >> 16) + 63 + upper - shifted + 1023
+    if exponent <= 0:  # a subnormal, or zero
+        if 1 - exponent >= 64:
+            return 0.0
+        bits = bits >> np.uint64(1 - exponent)
+        bits = (bits + (bits & _U1)) >> _U1
+        return math.ldexp(float(bits), -1074)
+    if low <= _U1 and -4 <= q <= 23 and bits & np.uint64(3) == _U1 and bits << shift == high:
+        bits = bits & ~_U1  # exactly halfway: to even
+    bits = (bits + (bits & _U1)) >> _U1
+    if bits >= np.uint64(2**53):
+        bits = np.uint64(2**52)
+        exponent += 1
+    if exponent >= 2047:
+        return np.inf
+    return math.ldexp(float(bits), exponent - 1075)
+
+
+def _number(data, i, n, power_high, power_low):
+    """The number whose field starts at data[i]: (the index after it, its value, whether it is a
+    plain decimal number ``[+-] digits [. digits] [(e|E) [+-] digits]`` with a digit in the
+    mantissa, ending at a blank or a line's end, whose value Python's float gives finite and
+    this reads exactly). Digits are read as integers; Clinger's fast path rounds the easy ones,
+    Eisel and Lemire's conversion the others (17 digits, large exponents); a mantissa of more
+    than 19 digits is read as its first 19 and, where it has more nonzero ones, as the next
+    mantissa too, and accepted where both give the same double."""
+    negative = False
+    if i < n and (data[i] == 43 or data[i] == 45):
+        negative = data[i] == 45
+        i += 1
+    mantissa, kept, scale, digits, inexact = _U0, 0, 0, 0, False
+    while i < n and data[i] == 48:  # leading zeros
+        digits += 1
+        i += 1
+    while i < n:
+        digit = np.int64(data[i]) - 48
+        if digit < 0 or digit > 9:
+            break
+        if kept < _KEPT_DIGITS:
+            mantissa = mantissa * _U10 + np.uint64(digit)
+            kept += 1
+        else:
+            scale += 1
+            inexact = inexact or digit != 0
+        digits += 1
+        i += 1
+    if i < n and data[i] == 46:
+        i += 1
+        if kept == 0:  # zeros after the point, before the first significant digit
+            while i < n and data[i] == 48:
+                scale -= 1
+                digits += 1
+                i += 1
+        while i < n:
+            digit = np.int64(data[i]) - 48
+            if digit < 0 or digit > 9:
+                break
+            if kept < _KEPT_DIGITS:
+                mantissa = mantissa * _U10 + np.uint64(digit)
+                kept += 1
+                scale -= 1
+            else:
+                inexact = inexact or digit != 0
+            digits += 1
+            i += 1
+    if digits == 0:
+        return i, 0.0, False
+    if i < n and (data[i] == 101 or data[i] == 69):
+        i += 1
+        sign = 1
+        if i < n and (data[i] == 43 or data[i] == 45):
+            sign = -1 if data[i] == 45 else 1
+            i += 1
+        exponent, exponent_digits = 0, 0
+        while i < n and 48 <= data[i] <= 57:
+            if exponent < 100_000:
+                exponent = exponent * 10 + (data[i] - 48)
+            exponent_digits += 1
+            i += 1
+        if exponent_digits == 0:
+            return i, 0.0, False
+        scale += sign * exponent
+    if i < n and not (data[i] == 32 or data[i] == 9 or data[i] == 10 or data[i] == 13):
+        return i, 0.0, False  # more in the field: the careful parser judges it
+    if mantissa == 0:
+        value = 0.0
+    elif not inexact and mantissa <= _EXACT_MANTISSA and -22 <= scale <= 22:
+        value = float(mantissa) * _POWERS[scale] if scale >= 0 else float(mantissa) / _POWERS[-scale]
+    else:
+        value = _eisel_lemire(mantissa, scale, power_high, power_low)
+        if inexact and _eisel_lemire(mantissa + _U1, scale, power_high, power_low) != value:
+            return i, 0.0, False
+        if value == np.inf:
+            return i, 0.0, False
+    return i, -value if negative else value, True
+
+
+def _scan(data, out, known_corners, known_counts, compare, power_high, power_low):
+    """One pass over an OBJ file's bytes: (status, vertices (V, 3), corners, corner counts).
 
     Lines are split at \\n and \\r and fields at spaces and tabs, as the line-by-line parser
-    splits plain ASCII; any other control character or a byte above 126 gives up (_BAIL). A line
-    whose first field is ``v`` must hold three plain decimal numbers (``[+-] digits [. digits]
-    [e [+-] digits]``, a digit in the mantissa), else it gives up; the rest of the line is
-    ignored, as that parser ignores it. A number is read here where Clinger's fast path rounds it
-    exactly (mantissa <= 2**53, |exponent| <= 22: ``%.6f`` and the like); each other one is left
-    as a row (flat index into the vertices, first byte, end) of the hard numbers for Python's
-    float. The text of the ``f`` lines (each from its first index to its end, joined by \\n) is
-    compared with `known` when `compare` (_SAME_FACES if equal, else _FACE_TEXT), else returned."""
+    splits plain ASCII (a leading UTF-8 byte order mark skipped, as it drops it); any other
+    control character or a byte above 126 gives up (_CAREFUL). A line whose first field is ``v``
+    must hold three numbers :func:`_number` reads (the rest of the line is ignored, as that parser
+    ignores it), and one whose first field is ``f`` three or more corners (``[+-] digits``,
+    optionally followed by ``/`` and anything; negative ones count back from the vertices so
+    far), else it gives up. Vertices are written into `out` (grown where it is full, unless
+    `compare`). Without `compare` the faces' corners and counts are returned; with it, the
+    vertices must fill `out` exactly and the faces be `known_corners` and `known_counts`, else it
+    gives up."""
     n = len(data)
-    points = np.empty((max(16, n // 64), 3))
+    points = out
     count = 0
-    hard = np.empty((16, 3), dtype=np.int64)
-    n_hard = 0
-    text = np.empty(0 if compare else n, dtype=np.uint8)
-    length = 0  # of the face text, made or compared so far
-    same = True
-    faces = 0
-    i = 0
+    corners = np.empty(0 if compare else max(16, n // 8), dtype=np.int64)
+    counts = np.empty(0 if compare else max(16, n // 32), dtype=np.int64)
+    n_corners, n_faces, largest = 0, 0, -1
+    i = 3 if n >= 3 and data[0] == 0xEF and data[1] == 0xBB and data[2] == 0xBF else 0
     while i < n:
-        c = data[i]
-        if c == 10 or c == 13:
-            i += 1
-            continue
         while i < n and (data[i] == 32 or data[i] == 9):
             i += 1
         if i >= n:
             break
         c = data[i]
         if c == 10 or c == 13:
+            i += 1
             continue
         kind = 0  # the line's first field: 1 "v", 2 "f", 0 another
         if (c == 118 or c == 102) and (
-            i + 1 >= n or (data[i + 1] == 32 or data[i + 1] == 9) or data[i + 1] == 10 or data[i + 1] == 13
+            i + 1 >= n or data[i + 1] == 32 or data[i + 1] == 9 or data[i + 1] == 10 or data[i + 1] == 13
         ):
             kind = 1 if c == 118 else 2
             i += 1
         if kind == 1:
             if count == len(points):
+                if compare:
+                    return _CAREFUL, points[:0], corners[:0], counts[:0]
                 grown = np.empty((2 * count, 3))
                 grown[:count] = points
                 points = grown
             for axis in range(3):
                 while i < n and (data[i] == 32 or data[i] == 9):
                     i += 1
-                first = i
-                negative = False
-                if i < n and (data[i] == 43 or data[i] == 45):
-                    negative = data[i] == 45
-                    i += 1
-                mantissa, digits, significant, scale = 0, 0, 0, 0
-                while i < n and 48 <= data[i] <= 57:
-                    if mantissa or data[i] != 48:
-                        significant += 1
-                        if significant <= 18:
-                            mantissa = mantissa * 10 + (data[i] - 48)
-                        else:
-                            scale += 1
-                    digits += 1
-                    i += 1
-                if i < n and data[i] == 46:
-                    i += 1
-                    while i < n and 48 <= data[i] <= 57:
-                        if mantissa or data[i] != 48:
-                            significant += 1
-                            if significant <= 18:
-                                mantissa = mantissa * 10 + (data[i] - 48)
-                                scale -= 1
-                        else:
-                            scale -= 1
-                        digits += 1
-                        i += 1
-                if digits == 0:
-                    return _BAIL, points[:0], hard[:0], text[:0]
-                if i < n and (data[i] == 101 or data[i] == 69):
-                    i += 1
-                    sign = 1
-                    if i < n and (data[i] == 43 or data[i] == 45):
-                        sign = -1 if data[i] == 45 else 1
-                        i += 1
-                    exponent, exponent_digits = 0, 0
-                    while i < n and 48 <= data[i] <= 57:
-                        if exponent < 100_000:
-                            exponent = exponent * 10 + (data[i] - 48)
-                        exponent_digits += 1
-                        i += 1
-                    if exponent_digits == 0:
-                        return _BAIL, points[:0], hard[:0], text[:0]
-                    scale += sign * exponent
-                if i < n and not ((data[i] == 32 or data[i] == 9) or data[i] == 10 or data[i] == 13):
-                    return _BAIL, points[:0], hard[:0], text[:0]  # more in the field: the careful parser judges it
-                if mantissa == 0:
-                    value = 0.0
-                elif significant > 18 or mantissa > _EXACT_MANTISSA or scale > 22 or scale < -22:
-                    if n_hard == len(hard):
-                        more = np.empty((2 * n_hard, 3), dtype=np.int64)
-                        more[:n_hard] = hard
-                        hard = more
-                    hard[n_hard, 0], hard[n_hard, 1], hard[n_hard, 2] = 3 * count + axis, first, i
-                    n_hard += 1
-                    value = 0.0
-                elif scale >= 0:
-                    value = mantissa * _POWERS[scale]
-                else:
-                    value = mantissa / _POWERS[-scale]
-                points[count, axis] = -value if negative else value
+                i, value, good = _number(data, i, n, power_high, power_low)
+                if not good:
+                    return _CAREFUL, points[:0], corners[:0], counts[:0]
+                points[count, axis] = value
             count += 1
         elif kind == 2:
-            while i < n and (data[i] == 32 or data[i] == 9):
-                i += 1
-            if faces:
+            own = 0
+            while True:
+                while i < n and (data[i] == 32 or data[i] == 9):
+                    i += 1
+                if i >= n or data[i] == 10 or data[i] == 13:
+                    break
+                negative = False
+                if data[i] == 43 or data[i] == 45:
+                    negative = data[i] == 45
+                    i += 1
+                index, digits = 0, 0
+                while i < n and 48 <= data[i] <= 57:
+                    if index <= _MAX_VERTEX:
+                        index = index * 10 + (data[i] - 48)
+                    digits += 1
+                    i += 1
+                if i < n and data[i] == 47:  # "/" and texture or normal numbers, which are ignored
+                    while i < n and 32 < data[i] <= 126:
+                        i += 1
+                if digits == 0 or index == 0 or index > _MAX_VERTEX:
+                    return _CAREFUL, points[:0], corners[:0], counts[:0]
+                if i < n and not (data[i] == 32 or data[i] == 9 or data[i] == 10 or data[i] == 13):
+                    return _CAREFUL, points[:0], corners[:0], counts[:0]
+                corner = count - index if negative else index - 1
+                if corner < 0:
+                    return _CAREFUL, points[:0], corners[:0], counts[:0]
+                largest = max(largest, corner)
                 if compare:
-                    same = same and length < len(known) and known[length] == 10
+                    if n_corners >= len(known_corners) or known_corners[n_corners] != corner:
+                        return _CAREFUL, points[:0], corners[:0], counts[:0]
                 else:
-                    text[length] = 10
-                length += 1
-            faces += 1
-            while i < n and data[i] != 10 and data[i] != 13:
-                c = data[i]
-                if c > 126 or (c < 32 and c != 9):
-                    return _BAIL, points[:0], hard[:0], text[:0]
-                if compare:
-                    same = same and length < len(known) and known[length] == c
-                else:
-                    text[length] = c
-                length += 1
-                i += 1
+                    if n_corners == len(corners):
+                        more = np.empty(2 * n_corners, dtype=np.int64)
+                        more[:n_corners] = corners
+                        corners = more
+                    corners[n_corners] = corner
+                n_corners += 1
+                own += 1
+            if own < 3:
+                return _CAREFUL, points[:0], corners[:0], counts[:0]
+            if compare:
+                if n_faces >= len(known_counts) or known_counts[n_faces] != own:
+                    return _CAREFUL, points[:0], corners[:0], counts[:0]
+            else:
+                if n_faces == len(counts):
+                    more = np.empty(2 * n_faces, dtype=np.int64)
+                    more[:n_faces] = counts
+                    counts = more
+                counts[n_faces] = own
+            n_faces += 1
         while i < n and data[i] != 10 and data[i] != 13:  # the rest of the line: plain ASCII or tabs
             c = data[i]
             if c > 126 or (c < 32 and c != 9):
-                return _BAIL, points[:0], hard[:0], text[:0]
+                return _CAREFUL, points[:0], corners[:0], counts[:0]
             i += 1
-    if count == 0:
-        return _BAIL, points[:0], hard[:0], text[:0]
-    if compare:
-        status = _SAME_FACES if same and length == len(known) else _FACE_TEXT
-        return status, points[:count], hard[:n_hard], text[:0]
-    return _FACE_TEXT, points[:count], hard[:n_hard], text[:length]
+    if count == 0 or largest >= count:
+        return _CAREFUL, points[:0], corners[:0], counts[:0]
+    if compare and (count != len(points) or n_faces != len(known_counts) or n_corners != len(known_corners)):
+        return _CAREFUL, points[:0], corners[:0], counts[:0]
+    return _READ, points[:count], corners[:n_corners], counts[:n_faces]
 
 
 def _parse_obj(file, text: str) -> tuple[np.ndarray, np.ndarray]:

@@ -6,9 +6,12 @@ the line."""
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from flockkit.errors import FileFormatError
 from flockkit.io import obj
+from flockkit.testing import strategies
 
 
 def careful(path):
@@ -74,16 +77,68 @@ def test_numbers_written_every_way_read_as_pythons_float_reads_them(tmp_path, se
     paths = frames(tmp_path, 4, make)
     assert_reads_as_the_careful_parser(tmp_path, paths)
     # plain repr coordinates are read by the compiled pass, faces and all
-    scan = obj._scanner()
-    plain = [tmp_path / "plain0.obj", tmp_path / "plain1.obj"]
-    for t, path in enumerate(plain):
-        write(path, [f"v {x!r} {y!r} {z!r}\n" for x, y, z in values[t].tolist()] + face_lines)
-    status, _, _, text = scan(np.frombuffer(plain[0].read_bytes(), np.uint8), obj._NO_FACES, False)
-    assert status == obj._FACE_TEXT and bytes(text) == "".join(face_lines)[2:-1].replace("\nf ", "\n").encode()
-    status, points, hard, _ = scan(np.frombuffer(plain[1].read_bytes(), np.uint8), text, True)
-    assert status == obj._SAME_FACES and len(hard)  # repr's 17 digits: some left to Python's float
-    easy = np.setdiff1d(np.arange(points.size), hard[:, 0])
-    np.testing.assert_array_equal(points.ravel()[easy], values[1].ravel()[easy])
+    plain = tmp_path / "plain.obj"
+    write(plain, [f"v {x!r} {y!r} {z!r}\n" for x, y, z in values[1].tolist()] + face_lines)
+    status, points, corners, counts = compiled(plain)
+    assert status == obj._READ
+    assert_same_bits(points, values[1])
+    np.testing.assert_array_equal(obj._faces(corners, counts), faces)
+
+
+def compiled(path, known=None):
+    """What the compiled pass reads of `path`: alone, or as a later frame of one read as `known`
+    (its vertex count, corners and counts)."""
+    scan, powers = obj._compiled()
+    data = np.frombuffer(path.read_bytes(), np.uint8)
+    if known is None:
+        return scan(data, np.empty((4, 3)), obj._NO_CORNERS, obj._NO_CORNERS, False, *powers)
+    count, corners, counts = known
+    return scan(data, np.empty((count, 3)), corners, counts, True, *powers)
+
+
+def assert_same_bits(found, expected):
+    """Equal as doubles, -0.0 told from 0.0."""
+    found, expected = np.asarray(found, dtype=np.float64), np.asarray(expected, dtype=np.float64)
+    np.testing.assert_array_equal(found.view(np.uint64), expected.view(np.uint64))
+
+
+# Ways a tool writes a number, as (name, format): the compiled pass reads the first ones whole.
+PLAIN = [("repr", repr), ("%.17g", lambda v: f"{v:.17g}"), ("%.6f", lambda v: f"{v:.6f}"),
+         ("%e", lambda v: f"{v:e}"), ("%.25e", lambda v: f"{v:.25e}"), ("%.20g", lambda v: f"{v:.20g}"),
+         ("%g", lambda v: f"{v:g}"), ("+", lambda v: f"+{v!r}" if v >= 0 else repr(v)),
+         ("%E", lambda v: f"{v:.12E}"), (".5", lambda v: repr(v).replace("0.", ".", 1) if abs(v) < 1 else repr(v)),
+         ("5.", lambda v: f"{v:.0f}." if abs(v) < 1e300 else repr(v)),
+         ("zeros", lambda v: f"{'-' if np.signbit(v) else ''}000{abs(v)!r}")]  # fmt: skip
+AWKWARD = [("%.60f", lambda v: f"{v:.60f}"), ("30 digits", lambda v: f"{v:.29e}")]
+
+
+@pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")  # Motion's check sums the largest doubles
+@settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(mesh=strategies.animated_meshes(max_frames=3, max_vertices=10, max_coordinate=1.7976931348623157e308),
+       ways=st.lists(st.sampled_from(PLAIN + AWKWARD), min_size=1, max_size=4), data=st.data())  # fmt: skip
+def test_every_number_reads_as_pythons_float(tmp_path_factory, mesh, ways, data):
+    """Coordinates drawn anywhere in the doubles (subnormals, -0.0, the largest, 17 digits)
+    and written in ways drawn per number read as Python's float reads their text, bit for bit,
+    by the sequence reader and, for every way but the awkward ones, by the compiled pass alone."""
+    folder = tmp_path_factory.mktemp("numbers")
+    positions = mesh.motion.positions
+    chosen = data.draw(st.lists(st.sampled_from(ways), min_size=positions[0].size, max_size=positions[0].size))
+    face_lines = ["f " + " ".join(str(i + 1) for i in face) + "\n" for face in mesh.faces.tolist()]
+    texts = []
+    for t, frame in enumerate(positions):
+        tokens = [way(v) for (_, way), v in zip(chosen, frame.ravel().tolist())]
+        texts.append(tokens)
+        write(folder / f"frame{t}.obj", [f"v {x} {y} {z}\n" for x, y, z in np.reshape(tokens, (-1, 3))] + face_lines)
+    read, faces, _ = obj.read_sequence(str(folder))
+    assert_same_bits(read.reshape(len(texts), -1), [[float(token) for token in tokens] for tokens in texts])
+    np.testing.assert_array_equal(faces, mesh.faces)
+    if all((name, way) in PLAIN for name, way in chosen):
+        status, points, corners, counts = compiled(folder / "frame0.obj")
+        assert status == obj._READ
+        assert_same_bits(points.ravel(), [float(token) for token in texts[0]])
+        known = (len(points), corners, counts)
+        for t in range(1, len(positions)):
+            assert compiled(folder / f"frame{t}.obj", known)[0] == obj._READ
 
 
 @pytest.mark.parametrize(
@@ -169,3 +224,71 @@ def test_later_frames_that_break_the_rules_are_named_by_the_careful_parser(tmp_p
     paths[2].write_text(good.replace("f 1 2 3 4", "f 1 2 3 9"))
     with pytest.raises(FileFormatError, match="frame2.obj: a face refers to vertex 9"):
         obj.read_sequence(str(tmp_path))
+
+
+def test_a_bad_first_frame_and_the_first_of_several_bad_frames_are_named(tmp_path):
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
+
+    def make(t):
+        return [f"v {x!r} {y!r} {z!r}\n" for x, y, z in (quad + t).tolist()] + ["f 1 2 3 4\n"]
+
+    paths = frames(tmp_path, 8, make)
+    good = paths[0].read_text()
+    for bad, message in [
+        ("v 0.0 0.0 0.0x", r"frame0.obj, line 1: not an OBJ vertex"),
+        ("v 0.0 0.0 inf", r"frame0.obj: vertices must have finite coordinates"),
+        ("v 0.0 0.0 1e309", r"frame0.obj: vertices must have finite coordinates"),
+    ]:
+        paths[0].write_text(good.replace("v 0.0 0.0 0.0", bad))
+        with pytest.raises(FileFormatError, match=message):
+            obj.read_sequence(str(tmp_path))
+    paths[0].write_text(good.replace("f 1 2 3 4", "f 1 2 3 0"))
+    with pytest.raises(FileFormatError, match=r"frame0.obj, line 5: not an OBJ vertex .* or face"):
+        obj.read_sequence(str(tmp_path))
+    paths[0].write_text(good.replace("f 1 2 3 4", "f 1 2 3 -9"))
+    with pytest.raises(FileFormatError, match=r"frame0.obj, line 5: a face refers to a vertex that no OBJ file"):
+        obj.read_sequence(str(tmp_path))
+    paths[0].write_text(good)
+    # frames read by several threads: the error is the first bad frame's, whichever thread is first
+    paths[6].write_text(paths[6].read_text().replace("v 6.0", "v x"))
+    paths[3].write_text(paths[3].read_text().replace("f 1 2 3 4", "f 1 2 4 3"))
+    with pytest.raises(FileFormatError, match="frame3.obj: its topology differs from .*frame0.obj"):
+        obj.read_sequence(str(tmp_path))
+
+
+def test_a_link_that_leaves_the_folder_is_refused(tmp_path):
+    outside = tmp_path / "secret.obj"
+    outside.write_text("v 1 2 3\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    sequence = tmp_path / "sequence"
+    sequence.mkdir()
+    (sequence / "frame0.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    (sequence / "frame1.obj").symlink_to(outside)
+    with pytest.raises(FileFormatError, match="frame1.obj: a link that leads outside"):
+        obj.read_sequence(str(sequence))
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_polygons_and_relative_corners_read_as_the_careful_parser(tmp_path, threads):
+    """Fans of pentagons and hexagons, triangles beside quads (which are cut in two), corners
+    with texture and normal numbers, and corners counted back from the last vertex, read by
+    one thread or two."""
+    import numba
+
+    rng = np.random.default_rng(4)
+    points = rng.normal(size=(5, 12, 3))
+    polygons = ["f 1 2 3 4 5", "f 6/1/1 7/2/2 8/3/3", "f -1 -2 -3 -4", "f 9//1 10//2 11//3 12//4 1//5 2//6",
+                "f 3 4 5", "f +4 5 6 7"]  # fmt: skip
+
+    def make(t):
+        return [f"v {x!r} {y!r} {z!r}\n" for x, y, z in points[t].tolist()] + [line + "\n" for line in polygons]
+
+    paths = frames(tmp_path, 5, make)
+    before = numba.get_num_threads()
+    numba.set_num_threads(threads)
+    try:
+        assert_reads_as_the_careful_parser(tmp_path, paths)
+    finally:
+        numba.set_num_threads(before)
+    status, _, corners, counts = compiled(paths[0])
+    assert status == obj._READ and counts.tolist() == [5, 3, 4, 6, 3, 4]
+    np.testing.assert_array_equal(obj._faces(corners, counts), careful(paths[0])[1])
