@@ -33,9 +33,9 @@ def formats(rng, values):
         lambda v: f"{v:.3f}".replace("0.", ".") if abs(v) < 1 else f"{v:.0f}.",
         lambda v: f"{'-' if v < 0 else ''}000{abs(v):.5f}",
         lambda v: f"{v:.5E}",
-        lambda v: f"{v:.17f}",  # 18+ significant digits: read by the line-by-line parser
+        lambda v: f"{v:.17f}",  # 18+ significant digits: Eisel and Lemire's conversion
         lambda v: f"{v * 1e-30:.3e}",  # exponents past 22: the same
-        lambda v: f"{v:.45f}",  # longer than HARD_WIDTH: Python's float itself
+        lambda v: f"{v:.45f}",  # more than 19 digits: checked against the next mantissa
     ]
     return [ways[k](v) for k, v in zip(rng.integers(0, len(ways), len(values)).tolist(), values.tolist())]
 
