@@ -1,6 +1,7 @@
 """Scenes of many duplicates (paper 002, sections 5-6): seconds to place, walk and de-synchronise
-N objects of a 1 000-point template in 2 parts for 2 minutes at 30 fps, per object, and peak
-memory; with --backend dask, the same on a local Dask cluster through joblib.
+N objects of a 1 000-point template in 2 parts for 2 minutes at 30 fps, per object (wall, and
+CPU of this process and its workers), and peak memory; with --backend dask, the same on a local
+Dask cluster through joblib.
 
     python bench/scene.py --objects 100 200 --jobs 2
     python bench/scene.py --objects 100 --jobs 2 --backend dask
@@ -10,10 +11,12 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import os
 import resource
 
 import joblib
 import numpy as np
+from scene_assets import cpu_seconds
 from timing import timed
 
 import flockkit
@@ -51,8 +54,9 @@ def main() -> None:
     layers, build = timed(template)
     print(f"template: {layers.source.n_agents} points in {layers.n_parts} parts, built in {build:.1f} s")
     flow = FlowField(arrows=[Arrow(position=[0, 0], keyframes=[(0, [0.8, 0]), (60, [0.8, 0]), (62, [0, 0.8])])])
-    print("| objects | seconds | per object (ms) | frames within 0.2 | in step before / after | peak RSS (MiB) |")
-    print("|---|---|---|---|---|---|")
+    print("| objects | seconds | per object (ms) | CPU per object (ms) | frames within 0.2 | in step before / after "
+          "| walked again | peak RSS (MiB) | load average |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|")
     for count in args.objects:
         side = 6.0 * np.sqrt(count)
         region = flockkit.Polygon(vertices=[[-side, -side], [side, -side], [side, side], [-side, side]])
@@ -67,11 +71,15 @@ def main() -> None:
         else:
             backend = contextlib.nullcontext()
         with backend:
+            cpu = cpu_seconds()
             animation, seconds = timed(scene.synthesize)
+            cpu = cpu_seconds() - cpu
         peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
         report = animation.report
-        print(f"| {count} | {seconds:.1f} | {1000 * seconds / count:.0f} | {following(scene, animation, layers):.1%} | "
-              f"{report['in_step_before']:.1%} / {report['in_step_after']:.1%} | {peak:.0f} |")  # fmt: skip
+        load = " ".join(f"{x:.2f}" for x in os.getloadavg())
+        print(f"| {count} | {seconds:.1f} | {1000 * seconds / count:.0f} | {1000 * cpu / count:.0f} | "
+              f"{following(scene, animation, layers):.1%} | {report['in_step_before']:.1%} / "
+              f"{report['in_step_after']:.1%} | {report['walked_again']} | {peak:.0f} | {load} |")  # fmt: skip
 
 
 if __name__ == "__main__":
