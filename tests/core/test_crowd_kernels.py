@@ -72,6 +72,43 @@ def test_one_pass_equals_interpolating_then_blending(frames, flips, shares, alph
     np.testing.assert_array_equal(out[(alphas >= 1) & (shares[:, 1] == 0)], b[(alphas >= 1) & (shares[:, 1] == 0)])
 
 
+def test_reading_between_frames_is_the_slerp_within_float32():
+    """The compiled slerp (polynomial angle and sinc, weights scaled to a unit result) against the
+    slerp in float64, for frames 0 to a half turn apart (quaternions up to 90 degrees) and every
+    share: within float32 rounding (measured 2.4e-7), with no special case at equal frames."""
+    rng = np.random.default_rng(7)
+    joints = 64
+    axis = rng.normal(size=(joints, 3))
+    axis /= np.linalg.norm(axis, axis=1, keepdims=True)
+    start = rng.normal(size=(joints, 4))
+    start /= np.linalg.norm(start, axis=1, keepdims=True)
+    half = np.linspace(0, np.pi / 2, joints)  # half the angle between the frames' rotations
+    half[1] = 1e-7
+    turn = np.concatenate([axis * np.sin(half)[:, None], np.cos(half)[:, None]], axis=1)
+    x, y, z, w = turn.T
+    a, b, c, d = start.T
+    end = np.stack([w * a + x * d + y * c - z * b, w * b - x * c + y * d + z * a,
+                    w * c + x * b - y * a + z * d, w * d - x * a - y * b - z * c], axis=1)  # fmt: skip
+    end[::2] *= -1  # the other hemisphere: read the shorter way round all the same
+    store = np.zeros((2, joints, 12), np.float32)
+    store[0, :, 0:4], store[1, :, 0:4] = start, end
+    shares = np.linspace(0, 1, 9, dtype=np.float32)[1:]
+    rows = np.tile(np.array([0, joints * 12, 0, 0], np.int64), (len(shares), 1))
+    out = np.empty((len(shares), joints, 12), np.float32)
+    read_entries(store.reshape(-1), np.zeros(0, np.float32), rows, np.zeros((len(shares), 2), bool),
+                 np.stack([shares, np.zeros_like(shares)], axis=1), np.full(len(shares), -1, np.float32),
+                 np.arange(len(shares)), out)  # fmt: skip
+    q0, q1 = store[0, :, 0:4].astype(np.float64), store[1, :, 0:4].astype(np.float64)
+    q1 = np.where(np.sum(q0 * q1, axis=1, keepdims=True) < 0, -q1, q1)
+    theta = np.arccos(np.clip(np.sum(q0 * q1, axis=1), -1, 1))[None, :, None]
+    t = shares.astype(np.float64)[:, None, None]
+    safe = np.where(theta > 0, np.sin(theta), 1)
+    expected = np.where(theta > 1e-9, (np.sin((1 - t) * theta) * q0 + np.sin(t * theta) * q1) / safe,
+                        (1 - t) * q0 + t * q1)  # fmt: skip
+    np.testing.assert_allclose(out[..., 0:4], expected, atol=1e-6)
+    assert np.all(np.isfinite(out))
+
+
 def seam_clip():
     """A looping clip whose last frame is far from its first: parts reading between frames across
     the loop slerp over the jump."""
