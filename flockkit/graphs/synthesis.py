@@ -64,6 +64,8 @@ def _plan(graph: MotionGraph, walk: Walk, *, placed: bool = True):
     rotations = translations = mappings = None
     if placed:
         rotations, translations, mappings = _compose(walk, tables, taken, graph.motion.n_agents, graph.motion.dims)
+    else:
+        walk.pose(graph.motion.dims)  # refused as synthesize refuses it
     # A segment (the stretch between two transitions) starts at a node and plays consecutive
     # clips, so it is one slice of the source from that node's frame.
     output_start = np.append(0, before[at])
