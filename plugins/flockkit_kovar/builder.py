@@ -179,7 +179,7 @@ class Kovar:
         if not self.bridges:
             return graph
         plan = flockkit.graphs.bridge_plan(graph, seconds=self.bridge_seconds, degrees=self.bridge_turn)
-        return flockkit.graphs.bridge(
+        bridged = flockkit.graphs.bridge(
             graph,
             plan,
             behavior=self.bridge_behavior,
@@ -187,6 +187,19 @@ class Kovar:
             min_plausibility=self.bridge_plausibility,
             transitions=transitions,
             seed=int(rng.integers(2**32)),
+        )
+        if self.turn_angle == 0 or "bridge_frames" not in bridged.params:
+            return bridged
+        # the frames the bridges joined (the recording's dead ends, the solved chain) turn like the rest:
+        # without, a walk that enters them goes straight on for as long as they last
+        every, origin, low = max(1, round(self.turn_interval / motion.dt)), int(nodes[0]), int(bridged.nodes[0])
+        have = {t.start for t in bridged.transitions if t.is_turn}
+        first = origin - (origin - low) // every * every  # on the grid of the turns made above
+        frames = [f for f in range(first, int(bridged.nodes[-1]) - blend + 1, every) if f not in have]
+        kept = [(t.start, t.end, t.alignment, t.blend) for t in bridged.transitions]
+        more = flockkit.graphs.turns(bridged.motion, frames, angle=self.turn_angle, blend=blend)
+        return flockkit.MotionGraph.assemble(
+            bridged.motion, kept + more, params=bridged.params, provenance=bridged.provenance
         )
 
     def _choose(self, motion, frames, far, matrix, blend, spread, prune):

@@ -17,6 +17,17 @@ import flockkit
 from flockkit import rigid, validate
 from flockkit.errors import ValidationError
 
+# The room a region walk keeps on the group's way out (_Steer), as a fraction of the region's inner
+# radius; edges that leave less are tried after those that leave more.
+CUSHION = 0.1
+# Starts a region walk tries (each a random node and heading) when every way from one leaves the
+# region, unless it is given its start: a start inside a stretch of the graph that cannot turn
+# (a solved bridge, a recording's straight run) may have none.
+STARTS = 8
+# The longest way out a region walk plays (_Escape), in seconds: a default boids flock with the
+# default turns (15 degrees per 2 s blend) turns full circle in about 50 s.
+ESCAPE_SECONDS = 60.0
+
 
 def _check_graph(graph) -> None:
     if not isinstance(graph, flockkit.MotionGraph):
@@ -92,10 +103,11 @@ def _region(value):
 class RegionWalk:
     """Keep the group's center of mass inside `region` (paper 000 section 5.2).
 
-    At each node the allowed edges are tried in an order that steers: each is scored by where
-    the group would be a little after it (its position and heading at the edge's end, carried on
-    for a third of the region's inner radius), edges that keep that point deep inside come first,
-    turns after other edges unless they help, with random ties so that walks differ. An edge is
+    At each node the allowed edges are tried in an order that steers: each is judged by its way
+    out, the graph played on from the edge's end turning one way at every chance for as long as a
+    full circle takes; edges whose best way out keeps clear of the boundary come first, turns
+    after other edges, with random ties so that walks differ; then the others, the most room
+    first (so the group turns before a wall, and away from a corner, not into it). An edge is
     taken if a depth-first search finds a path starting with it whose center of mass stays
     inside the region over the whole edge and `horizon` seconds from its start (across a
     transition both the old motion's continuation, which its blend mixes in, and the new one are
@@ -135,41 +147,46 @@ class RegionWalk:
         if self.region.dims != graph.motion.dims:
             raise ValidationError(f"region is {self.region.dims}D but the graph's motion is {graph.motion.dims}D")
         com = graph.motion.center_of_mass()
-        node = _start_node(graph, self.start, rng)
-        frame = graph.nodes[node]
-        rotation = _start_heading(self.region, com, frame, math.ceil(self.horizon / graph.motion.dt), rng)
-        translation = self.region.interior_point() - rotation @ com[frame]
-        if not self.region.contains(rotation @ com[frame] + translation):
-            raise ValidationError("the region cannot hold the group's center of mass even at the start")
-        search = _Search(graph, self.region, com, math.ceil(self.horizon / graph.motion.dt), self.budget)
+        horizon = math.ceil(self.horizon / graph.motion.dt)
+        search = _Search(graph, self.region, com, horizon, self.budget)
         steer = _Steer(graph, self.region, com)
-        # Depth-first over decisions: each entry holds a state and the edges still to try there;
-        # when none is left, step back and try the previous decision's next edge.
-        stack = [(node, math.inf, rotation, translation, 0, steer.order(node, math.inf, rotation, translation, rng))]
-        edges, tries, reached = [], 0, 0
-        while stack[-1][4] < needed:
-            node, since, rotation, translation, played, options = stack[-1]
-            while options:
-                edge = options.pop()
-                tries += 1
-                if search.keeps_inside(edge, since, rotation, translation, rng):
-                    break
-            else:
-                stack.pop()
-                if not stack or tries > 20 * self.budget:
-                    seconds = reached * graph.motion.dt
-                    raise ValidationError(_impossible(graph, self.region, com, duration, self.horizon, tries, seconds))
-                edges.pop()
-                continue
-            edges.append(edge)
-            rotation, translation = _advance(graph, edge, rotation, translation)
-            frames = _frames_of(graph, edge)
-            since = since + frames if edge[0] == "clip" else 0
-            target = graph.edge_target(edge)
-            order = steer.order(target, since, rotation, translation, rng)
-            stack.append((target, since, rotation, translation, played + frames, order))
-            reached = max(reached, played + frames)
-        return flockkit.Walk(start=stack[0][0], edges=edges, rotation=stack[0][2], translation=stack[0][3])
+        tries, reached, starts = 0, 0, 0
+        while starts < (1 if self.start is not None else STARTS) and tries <= 20 * self.budget:
+            starts += 1
+            node = _start_node(graph, self.start, rng)
+            frame = graph.nodes[node]
+            rotation = _start_heading(self.region, com, frame, horizon, rng)
+            translation = self.region.interior_point() - rotation @ com[frame]
+            if not self.region.contains(rotation @ com[frame] + translation):
+                raise ValidationError("the region cannot hold the group's center of mass even at the start")
+            # Depth-first over decisions: each entry holds a state and the edges still to try there;
+            # when none is left, step back and try the previous decision's next edge.
+            order = steer.order(node, math.inf, rotation, translation, rng)
+            stack, edges = [(node, math.inf, rotation, translation, 0, order)], []
+            while stack and stack[-1][4] < needed and tries <= 20 * self.budget:
+                node, since, rotation, translation, played, options = stack[-1]
+                while options:
+                    edge = options.pop()
+                    tries += 1
+                    if search.keeps_inside(edge, since, rotation, translation, rng):
+                        break
+                else:
+                    stack.pop()
+                    if edges:
+                        edges.pop()
+                    continue
+                edges.append(edge)
+                rotation, translation = _advance(graph, edge, rotation, translation)
+                frames = _frames_of(graph, edge)
+                since = since + frames if edge[0] == "clip" else 0
+                target = graph.edge_target(edge)
+                order = steer.order(target, since, rotation, translation, rng)
+                stack.append((target, since, rotation, translation, played + frames, order))
+                reached = max(reached, played + frames)
+            if stack and stack[-1][4] >= needed:
+                return flockkit.Walk(start=stack[0][0], edges=edges, rotation=stack[0][2], translation=stack[0][3])
+        seconds = reached * graph.motion.dt
+        raise ValidationError(_impossible(graph, self.region, com, duration, self.horizon, tries, seconds, starts))
 
 
 def _start_heading(region, com, frame, horizon, rng) -> np.ndarray:
@@ -185,31 +202,125 @@ def _start_heading(region, com, frame, horizon, rng) -> np.ndarray:
 
 
 class _Steer:
-    """Orders a node's edges so that the walk turns before the region's boundary, not at it."""
+    """Orders a node's edges so that the walk turns before the region's boundary, not at it.
+
+    Each edge is judged by whether the group could still escape the boundary after it: from its
+    end, the graph is played turning one way at every chance (left, right; in 3D also up, down),
+    as long as it takes the group to turn full circle (:class:`_Escape`), and the edge's *room* is
+    the depth inside the region of the deepest such way out at its shallowest point. Edges that
+    keep at least CUSHION of the region's inner radius come first, in random order with a
+    preference for the recording's own motion, then the others, the most room first. Judged
+    only by where the group will be a little later, a walk is led along one wall into the next:
+    a corner that no turn gets it out of (a 20-boid flock in a box three turning circles wide did
+    so for 4 seeds in 21).
+    """
 
     def __init__(self, graph, region, com):
         self.graph, self.region, self.com = graph, region, com
         self.velocity = np.gradient(com, graph.motion.dt, axis=0)
         self.depth = max(-float(region.signed_distance(region.interior_point())), 1e-12)  # the inner radius
-        speed = float(np.median(np.linalg.norm(self.velocity, axis=1)))
-        self.ahead = self.depth / 3 / max(speed, 1e-12)  # seconds
+        speed = max(float(np.median(np.linalg.norm(self.velocity, axis=1))), 1e-12)
+        # a full circle at the turns' tightest, but no longer than crossing the region twice or ESCAPE_SECONDS
+        seconds = min(2 * math.pi * _turning_radius(graph, com), 4 * self.depth) / speed
+        seconds = min(seconds, ESCAPE_SECONDS)
+        self.escape = _Escape(graph, com, self.velocity, seconds)
 
     def order(self, node, since, rotation, translation, rng) -> list:
         """The edges allowed at `node`, the one to try first last (it is popped)."""
         options = self.graph.allowed_edges(node, since)
-        points = []
-        for edge in options:
-            r, t = _advance(self.graph, edge, rotation, translation)
-            if edge[0] == "clip":
-                frame = _source(self.graph, self.graph.clips[edge[1]].stop)
-            else:
-                frame = self.graph.transitions[edge[1]].end
-            points.append(r @ (self.com[frame] + self.ahead * self.velocity[frame]) + t)
-        inside = -self.region.signed_distance(np.array(points)) / self.depth  # 1 deep inside, < 0 outside
+        room = np.array([self._room(edge, since, rotation, translation) for edge in options]) / self.depth
         turn = np.array([_is_turn(self.graph, edge) for edge in options])
-        # near the boundary the score dominates; deep inside, chance and a preference for the recording's own motion
-        score = 4 * np.maximum(0.5 - inside, 0) + 0.3 * turn + 0.5 * rng.random(len(options))
+        score = (room < CUSHION) * (10 - room) + 0.3 * turn + 0.5 * rng.random(len(options))
         return [options[i] for i in np.argsort(-score, kind="stable")]
+
+    def _room(self, edge, since, rotation, translation) -> float:
+        """How deep inside the group stays after `edge`, on its best way out."""
+        r, t = _advance(self.graph, edge, rotation, translation)
+        since = since + _frames_of(self.graph, edge) if edge[0] == "clip" else 0
+        node = self.graph.edge_target(edge)
+        ways = [self.escape.path(node, since, way) for way in self.escape.ways]
+        return max(-float(self.region.signed_distance(path @ r.T + t).max()) for path in ways)
+
+
+class _Escape:
+    """Ways out: the center of mass of the group played on from a node, taking at every chance the
+    transition that turns it most one way (a turn the graph made, or any transition that turns it
+    so), else the clip; for `seconds`. Cached per node, whether a transition may be taken yet, and
+    way; in the coordinates the walk reaches the node in, so one path serves every placement."""
+
+    def __init__(self, graph, com, velocity, seconds):
+        self.graph, self.com, self.velocity = graph, com, velocity
+        self.blend = int(graph.tables.transition_blend.max())
+        self.frames = max(math.ceil(seconds / graph.motion.dt), 1)
+        self.ways = [1.0, -1.0] if com.shape[1] == 2 else ["left", "right", "down", "up"]
+        self.cache = {}
+
+    def path(self, node, since, way) -> np.ndarray:
+        key = (node, since >= self.blend, way)
+        if key not in self.cache:
+            self.cache[key] = self._play(node, since, way)
+        return self.cache[key]
+
+    def _play(self, node, since, way) -> np.ndarray:
+        graph, d = self.graph, self.com.shape[1]
+        rotation, translation = np.eye(d), np.zeros(d)
+        points, played = [self.com[graph.nodes[node]][None]], 0
+        while played < self.frames:
+            options = graph.allowed_edges(node, since)
+            if not options:
+                break
+            edge = self._pick(options, rotation, way)
+            if edge[0] == "clip":
+                clip = graph.clips[edge[1]]
+                frames = _source(graph, np.arange(clip.start + 1, clip.stop + 1))
+                points.append(self.com[frames] @ rotation.T + translation)
+                played += len(frames)
+                since += len(frames)
+            else:
+                rotation, translation = _advance(graph, edge, rotation, translation)
+                since = 0
+            node = graph.edge_target(edge)
+        return np.concatenate(points)
+
+    def _pick(self, options, rotation, way):
+        """The transition that turns the heading most `way`, if any turns it that way (by over a
+        degree), else the clip, else the transition that turns it least the other way."""
+        best, most = None, -math.inf
+        for edge in options:
+            if edge[0] != "transition":
+                continue
+            transition = self.graph.transitions[edge[1]]
+            before = rotation @ self.velocity[transition.start]
+            after = rotation @ transition.alignment.rotation @ self.velocity[transition.end]
+            sense = self._sense(before, after, way)
+            if sense > most:
+                best, most = edge, sense
+        if most > math.sin(math.radians(1)) or options[0][0] != "clip":
+            return best
+        return options[0]
+
+    @staticmethod
+    def _sense(before, after, way) -> float:
+        """The sine of the turn from `before` to `after` about the axis of `way`."""
+        scale = max(np.linalg.norm(before) * np.linalg.norm(after), 1e-300)
+        if len(before) == 2:
+            return way * (before[0] * after[1] - before[1] * after[0]) / scale
+        up = np.asarray(flockkit.DEFAULT_UP)
+        axis = up if way in ("left", "right") else np.cross(up, before)
+        axis = axis / max(np.linalg.norm(axis), 1e-300)
+        sign = 1.0 if way in ("left", "down") else -1.0
+        return sign * float(np.cross(before, after) @ axis) / scale
+
+
+def _turning_radius(graph, com) -> float:
+    """The radius of the tightest circle the turns alone keep the group on: the distance it
+    travels in a blend (the median) over the largest turn of a transition; infinite without turns."""
+    blend = max(int(graph.tables.transition_blend.max()), 1)
+    angles = [_turn_degrees(t.alignment.rotation) for t in graph.transitions if t.is_turn]
+    if not angles or len(com) <= blend:
+        return math.inf
+    travel = float(np.median(np.linalg.norm(com[blend:] - com[:-blend], axis=1)))
+    return travel / math.radians(max(angles))
 
 
 def _turn_degrees(rotation) -> float:
@@ -217,7 +328,7 @@ def _turn_degrees(rotation) -> float:
     return float(np.degrees(np.arccos(np.clip(cosine, -1, 1))))
 
 
-def _impossible(graph, region, com, duration, horizon, tries, reached) -> str:
+def _impossible(graph, region, com, duration, horizon, tries, reached, starts=1) -> str:
     """Why a region walk failed, in numbers, and what to change: a region narrower than the
     group's tightest circle cannot hold it; in a wider one the search ran out (its look-ahead
     finds no way to turn in time on this graph), which the graph's edges or a longer look-ahead
@@ -246,7 +357,8 @@ def _impossible(graph, region, com, duration, horizon, tries, reached) -> str:
     )
     if circle < width:
         return (
-            f"cannot keep the group inside the region for {duration:g} s: the search gave up after {tries} edges, "
+            f"cannot keep the group inside the region for {duration:g} s: the search gave up after {tries} edges "
+            f"from {starts} start{'s' if starts > 1 else ''}, "
             f"{reached:g} s in at best. The region, {width:.3g} units across at its narrowest, is wide enough for "
             f"the group's turns ({numbers}), but looking {horizon:g} s ahead the walk finds no way through this "
             f"graph's {len(graph.nodes)} nodes and {len(graph.transitions)} transitions that turns in time. Use a "
