@@ -110,3 +110,24 @@ def test_bad_bridges_are_refused_naming_what(small):
         flockkit.graphs.bridge(graph, [], behavior="boids", seconds=3.0)
     with pytest.raises(ValidationError, match="MotionGraph"):
         flockkit.graphs.bridge(recording, [(0, 50)], behavior="boids")
+
+
+def test_a_dead_end_joins_the_graph_and_walks_pass_through_it(small):
+    """The recording's tail, which the plain graph trims as a dead end, is in the bridged graph
+    (the chain carries on from it), and random walks play it and the chain with no step beyond the
+    bar there (the graph's own transitions are another matter: 1.64x on this 6-boid graph)."""
+    recording, graph, _, bridged = small
+    first = bridged.params["bridge_frames"]
+    dead = np.arange(graph.nodes[-1] + 1, recording.n_frames)
+    assert len(dead) > graph.transitions[0].blend  # the plain graph has a dead end, more than a blend long
+    kept = np.concatenate([np.arange(c.start, c.stop + 1) for c in bridged.clips])
+    assert np.isin(dead, kept).all()
+    passed = 0
+    for seed in range(8):
+        walk = flockkit.walk(bridged, duration=60, seed=seed)
+        into, out_of, _ = flockkit.graphs.blended_frames(bridged, walk)
+        passed += bool(np.isin(into, dead).any() and (into >= first).any())
+        new = (into > graph.nodes[-1]) | (out_of > graph.nodes[-1])  # the dead end, the chain, blends into them
+        steps = np.linalg.norm(np.diff(flockkit.synthesize(bridged, walk).positions, axis=0), axis=-1).max(axis=1)
+        assert np.all(steps[new[1:] | new[:-1]] <= 1.5 * largest_step(recording.positions))
+    assert passed

@@ -261,3 +261,16 @@ def test_bad_walks_are_refused(graph):
 def test_build_graph_records_provenance(graph):
     assert graph.provenance["metric"] == "icp-hungarian" and graph.provenance["builder"] == "kovar"
     assert graph.provenance["seed"] == 1 and graph.provenance["flockkit"] == flockkit.__version__
+
+
+def test_a_short_recording_is_kept_in_a_box_without_being_led_into_a_corner():
+    """A minute of a default 20-boid flock, in a box 40 units across (about three of its
+    tightest circles) for five minutes: the walk turns before the walls, away from corners
+    (steered by where a point a little ahead lies, this walk ran into a corner 28 s in)."""
+    recording = flockkit.simulate(n_agents=20, steps=600, seed=14)
+    graph = flockkit.build_graph(recording, seed=14, n_jobs=1)
+    start = recording.center_of_mass()[0]
+    box = flockkit.Box(lower=start - 20, upper=start + 20)
+    motion = flockkit.synthesize(graph, flockkit.walk(graph, strategy="region", region=box, duration=300, seed=14))
+    assert motion.duration >= 300 and box.contains(motion.center_of_mass()).all()
+    assert_quality(motion, recording)
