@@ -63,7 +63,7 @@ def come_from_behind() -> tuple[Problem, dict]:
             ComConstraint(agents=rest, time=15.0, position=[14.0, 0.0], velocity=[1.0, 0.0]),
         ],
     )
-    return problem, {"iterations": 1000, "seed": 2}
+    return problem, {"iterations": 1000, "refine": 0, "seed": 2}
 
 
 def difference_matrix(motion, *, interval: float, metric="icp-hungarian"):

@@ -1,27 +1,30 @@
 """Initial trajectories that meet every constraint exactly (paper 004, section 3.3).
 
 The frames before the first constrained frame are simulated backward from the configuration
-there. When only point and COM constraints sit there, and the model declares ``guide`` (for
-points) and ``group_guide`` (for COMs), they are simulated again forward from the backward
-simulation's first frame: the point-constrained agents kept on their backward paths, each COM
-group steered along its backward path and then translated onto its center (one translation for
-the whole lead-in, which leaves the group's own motion as simulated). A backward simulation is
-not forward-plausible (its residuals are tens of times a free flock's; a forward lead-in's are a
-free flock's, bench/README.md). Then, window by window (see ``windows``):
+there. When only point and COM constraints sit there (points for a model declaring ``guide``),
+they are simulated again forward from the backward simulation's first frame: the
+point-constrained agents kept on their backward paths, the simulation kept of several whose COM
+groups head best for their paths' next constraints, each group then translated onto its center
+(one translation for the whole lead-in, which leaves the group's own motion as simulated). A
+backward simulation is not forward-plausible (its residuals are tens of times a free flock's; a
+forward lead-in's are a free flock's, bench/README.md). Then, window by window (see ``windows``):
 
 1. simulate forward from the window's start state (Operation 1). A model that declares
-   ``Capabilities(guide=True)`` simulates with the agents of spanning point sequences already on their B-spline paths,
-   so the others react to where they really are; one that declares ``group_guide`` steers the
-   groups of spanning COM sequences along their paths by its own random choices. The simulation
-   starts one frame early, so that windows join without a step that has no impulse;
+   ``Capabilities(guide=True)`` simulates with the agents of spanning point sequences already on
+   their B-spline paths, so the others react to where they really are. The groups of spanning COM
+   sequences reach their constraint frames by the model's own draws: every few frames the
+   simulation is drawn several times and the draw heading best for the next constraint kept
+   (``_Initial._reach``); nothing is added to any agent's impulses. The simulation starts one
+   frame early, so that windows join without a step that has no impulse;
 2. move the agents of point and COM sequences that span the window onto their B-spline paths,
    and every other agent by the translation of the nearest such agent at the window start, or of
    the COM path (Operation 2; a guided agent needs no move, and neither do those following it).
-   A steered group is moved onto its path only at the window's ends and at its constraints'
-   frames, the moves joined by a clamped cubic: moved at every frame, it would lose the wander of
-   its own agents, which each agent then pays for as an impulse at every frame (on a 14 s race
-   the free agents' median impulse was 0.21 moved at every frame, 0.10 steered, against 0.084
-   for a free flock);
+   A group is moved onto its path only at the window's ends and at its constraints' frames, the
+   moves joined by a clamped cubic: moved at every frame, it would lose the wander of its own
+   agents, which each agent then pays for as an impulse at every frame (on a 14 s race the free
+   agents' median impulse was 0.21 moved at every frame, against 0.084 for a free flock). The
+   draws leave these moves a few centimetres at most: a move along the path changes the group's
+   speed, which the model's speed rule pushes back against at every frame of the move;
 3. if constraints at the window end are still unmet, build a constrained end configuration from
    the forward result (section 3.3.1), simulate backward from it, path-transform that as well, and
    blend the two with u = 3t^2 - 2t^3; without a spanning sequence, the COM is moved along a
@@ -62,6 +65,19 @@ _RELAXATION_STEPS = 5
 # than none; bench/README.md).
 _SPREAD = 0.5
 _PUSHES = 4
+# Reaching COM constraints by the model's own draws (_Initial._reach; our choices, on
+# come-from-behind, seeds 1-12, bench/README.md): _ROLLOUTS simulations from every checkpoint,
+# _CHECKPOINT frames apart, judged with _PILOTS simulations to the constraint frame; a stretch
+# drawn again up to _ATTEMPTS times while it ends farther than _TOLERANCE sigma_com away. A
+# proposal's draw (regenerate, accepted 1-2% of the time) takes _LIGHT simulations every
+# _LIGHT_CHECKPOINT frames, unjudged and once: the thorough draw made solves ten times as long.
+_ROLLOUTS = 16
+_CHECKPOINT = 5
+_PILOTS = 2
+_ATTEMPTS = 4
+_TOLERANCE = 0.1
+_LIGHT = 4
+_LIGHT_CHECKPOINT = 30
 
 
 def initial_trajectories(problem: Problem, behavior, rng: np.random.Generator) -> Motion:
@@ -74,7 +90,7 @@ def regenerate(problem: Problem, behavior, current: Motion, start: int, stop: in
     ``initial_trajectories``: from `current`'s state at `start` (arriving velocity; at frame 0 the
     starting state, frames 0 and 1, kept exactly) to exactly its positions and velocities at
     `stop` (temporary continuity constraints, 3.4.1)."""
-    builder = _Initial(problem, behavior, rng)
+    builder = _Initial(problem, behavior, rng, thorough=False)
     last = current.n_frames - 1
     state = _arriving(current, start)
     prior = current.state(start - 1) if start > 0 else None
@@ -117,12 +133,14 @@ class _Path:
 
 
 class _Initial:
-    def __init__(self, problem, behavior, rng):
+    def __init__(self, problem, behavior, rng, thorough=True):
         self.problem, self.behavior, self.rng = problem, behavior, rng
+        # a proposal's draw (regenerate) reaches COMs by fewer draws than a chain's start
+        self.rollouts, self.pilots, self.attempts = (_ROLLOUTS, _PILOTS, _ATTEMPTS) if thorough else (_LIGHT, 0, 1)
+        self.checkpoint = _CHECKPOINT if thorough else _LIGHT_CHECKPOINT
         self.dt = problem.dt
         self.paths = [_Path(track, problem) for track in problem.tracks if len(track) >= 2]
         self.guided = capabilities(behavior).guide
-        self.group_guided = capabilities(behavior).group_guide
         self.by_frame: dict[int, list] = {}
         for constraint in problem.constraints:
             self.by_frame.setdefault(problem.frame(constraint.time), []).append(constraint)
@@ -161,32 +179,42 @@ class _Initial:
 
     def _leads_forward(self, pinned) -> bool:
         """Whether the lead-in to the first constrained frame can be simulated forward: its
-        constraints are points (for a model declaring ``guide``) and COMs (``group_guide``)."""
+        constraints are COMs and points (for a model declaring ``guide``)."""
         points = [c for c in pinned if isinstance(c, PointConstraint)]
         coms = [c for c in pinned if isinstance(c, ComConstraint)]
-        return (
-            len(points) + len(coms) == len(pinned) and (self.guided or not points) and (self.group_guided or not coms)
-        )
+        return len(points) + len(coms) == len(pinned) and (self.guided or not points)
 
     def _lead_forward(self, lead: Motion, pinned) -> Motion:
         """The lead-in simulated forward from the backward one's first frame (backward simulation
-        is not forward-plausible): point-constrained agents kept on their backward paths, COM
-        groups steered along theirs, then each group's other agents moved by one translation
-        over the whole lead-in, so its center is exactly met (the group's own motion unchanged)."""
+        is not forward-plausible), point-constrained agents kept on their backward paths: of
+        _ROLLOUTS simulations, the one whose groups head best for their paths' next constraints
+        (``_reach``'s landing), each group then moved by one translation over the whole lead-in,
+        so its center is exactly met (the group's own motion unchanged)."""
         steps = lead.n_frames - 1
         points = {c.agent: lead.positions[:, c.agent] for c in pinned if isinstance(c, PointConstraint)}
         coms = [c for c in pinned if isinstance(c, ComConstraint)]
-        groups = []
+        heading = []  # (constraint, seconds to its path's next knot, the position there)
         for c in coms:
-            agents = list(self.problem.agents_of(c))
-            groups.append((agents, lead.positions[:, agents].mean(axis=1)))
-        forward = self.behavior.forward(lead.state(0), steps, self.rng, **_guide_arguments(points, groups))
-        positions = np.array(forward.positions)
+            path = next((p for p in self.paths if id(c) in p.members and p.frames[-1] > steps), None)
+            if path is not None:
+                knot = min(f for f in path.frames if f > steps)
+                heading.append((c, (knot - steps) * self.dt, path.spline(knot * self.dt)))
+        best, best_miss = None, np.inf
+        for _ in range(self.rollouts if heading else 1):
+            trial = self.behavior.forward(lead.state(0), steps, self.rng, **_guide_arguments(points))
+            miss = 0.0
+            for c, ahead, target in heading:
+                centre = trial.positions[-2:, list(self.problem.agents_of(c))].mean(axis=1)
+                landing = c.position + ahead * (centre[-1] - centre[0]) / self.dt
+                miss += float(np.sum((landing - target) ** 2))
+            if miss < best_miss:
+                best, best_miss = trial, miss
+        positions = np.array(best.positions)
         free = np.ones((steps + 1, self.problem.n_agents), dtype=bool)
         free[:, list(points)] = False
         for c in coms:
             self._recentre(positions, free, steps, c, np.ones(steps + 1))
-        return Motion(positions=positions, dt=self.dt, channels=_channels(forward))
+        return Motion(positions=positions, dt=self.dt, channels=_channels(best))
 
     # -- one window --------------------------------------------------------------------------
 
@@ -201,10 +229,9 @@ class _Initial:
         steps = stop - start
         spanning = [p for p in self.paths if p.spans(start, stop)]
         if prior is None:
-            forward = self.behavior.forward(state, steps, self.rng, **self._guide(spanning, start, steps, steer=True))
+            forward = self._forward(state, start, stop, spanning)
         else:
-            early = self._guide(spanning, start - 1, steps + 1, steer=True)
-            forward = self.behavior.forward(prior, steps + 1, self.rng, **early)[1:]
+            forward = self._forward(prior, start - 1, stop, spanning)[1:]
         positions = self._onto_paths(forward.positions, spanning, start, anchor=forward.positions[0])
         ending = [c for c in self.by_frame.get(stop, []) if not any(id(c) in p.members for p in spanning)]
         if not ending and end is None:
@@ -234,16 +261,73 @@ class _Initial:
         blended[0], blended[-1] = positions[0], end_positions  # exactly, whatever the rounding
         return Motion(positions=blended, dt=self.dt, channels=_channels(forward))
 
-    def _guide(self, spanning, start, steps, steer=False) -> dict:
+    def _forward(self, state: State, first: int, stop: int, spanning) -> Motion:
+        """Operation 1 from `state` at frame `first` to `stop`. Where COM paths span the window,
+        each group reaches its constraint frames by the model's own draws (``_reach``), the
+        stretch to each such frame drawn again, up to _ATTEMPTS times, while its centers end
+        farther than _TOLERANCE sigma_com from their paths (the nearest attempt kept). Steering
+        the group along its path instead added a common impulse to every agent at every frame,
+        which a free flock never draws, and moving it onto its path afterwards costs an impulse at
+        every frame of the move (bench/README.md)."""
+        coms = [p for p in spanning if not p.is_point]
+        knots = sorted({f for p in coms for f in p.frames if first + 1 < f <= stop})
+        if not knots:
+            return self.behavior.forward(state, stop - first, self.rng, **self._guide(spanning, first, stop - first))
+        pieces, at, back = [], first, 0
+        for knot in knots + ([stop] if knots[-1] < stop else []):
+            aimed = [p for p in coms if knot in p.frames]
+            best = None
+            for _ in range(self.attempts if aimed else 1):
+                attempt = self._reach(state, at, back, knot, aimed, spanning)
+                if best is None or attempt[2] < best[2]:
+                    best = attempt
+                if best[2] <= (_TOLERANCE * self.problem.sigma_com) ** 2 * len(aimed):
+                    break
+            pieces += best[0]
+            state, at, back = best[1], knot, 1
+        return _join(pieces, self.dt)
+
+    def _reach(self, state: State, at: int, back: int, knot: int, aimed, spanning) -> tuple[list, State, float]:
+        """Pieces of motion from frame `at` (`state` at frame at - `back`) to `knot`, the state one
+        frame before `knot`, and the summed squared miss of the `aimed` paths' centers there. From
+        every checkpoint (each _CHECKPOINT frames) _ROLLOUTS forward simulations run to the next
+        checkpoint, and the one kept is the one whose centers, carried on at their velocity to the
+        knot, land nearest their paths there (in the last stretch, the one that ends nearest)."""
+        pieces, miss = [], 0.0
+        while at < knot:
+            steps = min(knot - at, self.checkpoint) if aimed else knot - at
+            # after the first stretch, each starts one frame back (as windows do, see _window)
+            guide = self._guide(spanning, at - back, steps + back)
+            ahead = (knot - at - steps) * self.dt  # seconds from the trial's end to the knot
+            bias = [np.zeros(self.problem.dims) for _ in aimed]
+            if aimed and ahead > 0 and self.pilots:
+                whole = self._guide(spanning, at - back, knot - at + back)
+                for _ in range(self.pilots):
+                    pilot = self.behavior.forward(state, knot - at + back, self.rng, **whole)[back:]
+                    for k, p in enumerate(aimed):
+                        centre = pilot.positions[[steps - 1, steps, -1]][:, list(p.agents)].mean(axis=1)
+                        bias[k] += (centre[2] - centre[1] - ahead * (centre[1] - centre[0]) / self.dt) / self.pilots
+            best, miss = None, np.inf
+            for _ in range(self.rollouts if aimed else 1):
+                trial = self.behavior.forward(state, steps + back, self.rng, **guide)[back:]
+                squared = 0.0
+                for k, p in enumerate(aimed):
+                    centre = trial.positions[-2:, list(p.agents)].mean(axis=1)
+                    landing = centre[-1] + ahead * (centre[-1] - centre[0]) / self.dt + bias[k]
+                    squared += float(np.sum((landing - p.spline(knot * self.dt)) ** 2))
+                if squared < miss:
+                    best, miss = trial, squared
+            pieces.append(best)
+            state, at, back = best.state(-2), at + steps, 1
+        return pieces, state, (miss if aimed else 0.0)
+
+    def _guide(self, spanning, start, steps) -> dict:
         """Keyword arguments keeping point-path agents on their paths during simulation, so the
-        others react to where they really are (for models declaring `guide`); with `steer`, also
-        steering COM-path groups along theirs by the model's own random choices (for models
-        declaring `group_guide`; `forward` only)."""
-        points = [p for p in spanning if p.is_point] if self.guided else []
-        coms = [p for p in spanning if not p.is_point] if steer and self.group_guided else []
+        others react to where they really are (for models declaring `guide`)."""
+        if not self.guided:
+            return {}
         times = (start + np.arange(steps + 1)) * self.dt
-        return _guide_arguments({p.agents[0]: p.spline(times) for p in points},
-                                [(list(p.agents), p.spline(times)) for p in coms])  # fmt: skip
+        return _guide_arguments({p.agents[0]: p.spline(times) for p in spanning if p.is_point})
 
     def _onto_paths(self, positions, spanning, start, anchor) -> np.ndarray:
         """Operation 2: translate constrained agents onto their paths, the others with them."""
@@ -267,8 +351,7 @@ class _Initial:
                     continue
                 current = (positions[:, list(path.agents)] + shift[:, list(path.agents)]).sum(axis=1)
                 delta = (len(path.agents) * path.spline(times) - current) / len(free)
-                if self.group_guided:  # steered near the path: held on it only at the knots
-                    delta = self._at_knots(delta, path, start)
+                delta = self._at_knots(delta, path, start)  # near the path: held on it only at the knots
                 shift[:, free] += delta[:, None, :]
                 owner[free] = index
         carriers = np.flatnonzero(owner >= 0)
@@ -492,13 +575,9 @@ def _matching(slots: np.ndarray, origins: np.ndarray, rng) -> np.ndarray:
     return order
 
 
-def _guide_arguments(points: dict, groups: list) -> dict:
-    """A model's ``guide`` (agent -> path) and ``group_guide`` ((agents, path) pairs) keyword
-    arguments, each left out where empty."""
-    found = {"guide": points} if points else {}
-    if groups:
-        found["group_guide"] = groups
-    return found
+def _guide_arguments(points: dict) -> dict:
+    """A model's ``guide`` keyword argument (agent -> path), left out where empty."""
+    return {"guide": points} if points else {}
 
 
 def _state_at_end(motion: Motion, velocities) -> State:

@@ -94,21 +94,16 @@ def test_initial_and_regenerated_trajectories_keep_clear_of_obstacles(seed):
     assert depth(bare).min() < 0.5 * problem.clearance
 
 
-class Unsteered:
-    """The boids model without ``group_guide``: COM groups are moved onto their paths at every frame."""
-
-    def __init__(self):
-        self.model = flockkit.get("behavior", "boids")
-        self.capabilities = attrs.evolve(flockkit.capabilities(self.model), group_guide=False)
-
-    def __getattr__(self, name):
-        return getattr(self.model, name)
-
-
 @pytest.mark.parametrize("seed", [1, 2])
-def test_a_steered_com_group_keeps_the_model_s_impulses(seed):
-    """A group held to a 10 s COM path: steered by the model (group_guide), its agents' inferred
-    impulses stay near a free flock's; moved onto the path at every frame, they are far larger."""
+def test_a_com_group_reaches_its_path_by_the_model_s_own_draws(seed):
+    """A group held to a 10 s COM path reaches its end by the model's own draws, chosen among
+    several: its agents' inferred impulses pass a KS test against a free flock's (p 0.5-0.9 at
+    seeds 1-3; steering the group along its path gave medians of 0.099-0.135 against 0.082-0.087),
+    and both COM constraints are met exactly."""
+    from scipy.stats import ks_2samp
+
+    from flockkit.constrained.sampler import residuals
+
     rest = list(range(1, 12))
     problem = Problem(
         n_agents=12,
@@ -119,15 +114,12 @@ def test_a_steered_com_group_keeps_the_model_s_impulses(seed):
         ],
     )
     boids = flockkit.get("behavior", "boids")
-
-    def median_impulse(behavior):
-        motion = flockkit.solve(problem, behavior=behavior, iterations=0, refine=0, starts=1, seed=seed).motion
-        return float(np.median(np.linalg.norm(boids.wander_impulses(motion)[20:100, rest], axis=-1)))
-
-    free = float(np.median(free_impulse_lengths(boids, 12, 120, seed)))
-    steered = median_impulse(boids)
-    assert steered < 1.7 * free  # a free flock's: 0.082-0.087 (seeds 1-4); steered 0.099-0.135
-    assert 1.5 * steered < median_impulse(Unsteered())  # moved onto the path at every frame: 0.17-0.35
+    motion = flockkit.solve(problem, behavior=boids, iterations=0, refine=0, starts=1, seed=seed).motion
+    assert max(residuals(problem, motion)) <= 1e-9
+    drawn = np.linalg.norm(boids.wander_impulses(motion)[1:-1, rest], axis=-1).ravel()
+    free = free_impulse_lengths(boids, 12, 120, seed).ravel()
+    assert ks_2samp(drawn, free).pvalue > 0.01
+    assert np.median(drawn) < 1.15 * np.median(free)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
