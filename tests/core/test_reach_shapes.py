@@ -54,3 +54,23 @@ def test_a_shape_track_is_judged_per_group_of_agents():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         flockkit.solve(pair, iterations=0, refine=0, seed=1)
+
+
+def test_paper_arrows_turning_with_the_flock_warn_and_the_shipped_ones_do_not():
+    """Paper 004's arrows as first shipped (12.5 m long, pointing right, up and left 4 s apart,
+    each where the last pointed) overlap, so their boxes ask for no speed, but they turn their 50
+    agents' center at 0.19 per second squared: the middle one warns. The shipped arrows ride on
+    the flock's straight path and say nothing (tests/plugins/proposals/test_examples.py)."""
+    arrows = [
+        [[0.0, -1.25], [7.5, -1.25], [7.5, -3.75], [12.5, 0.0], [7.5, 3.75], [7.5, 1.25], [0.0, 1.25]],
+        [[11.25, -2.0], [11.25, 5.5], [13.75, 5.5], [10.0, 10.5], [6.25, 5.5], [8.75, 5.5], [8.75, -2.0]],
+        [[14.0, 11.25], [6.5, 11.25], [6.5, 13.75], [1.5, 10.0], [6.5, 6.25], [6.5, 8.75], [14.0, 8.75]],
+    ]
+    headings = [[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0]]
+    shapes = [ShapeConstraint(time=4.0 * (k + 1), shape=flockkit.Polygon(vertices=arrow), velocity=heading)
+              for k, (arrow, heading) in enumerate(zip(arrows, headings))]  # fmt: skip
+    problem = Problem(n_agents=50, duration=12.0, constraints=shapes)
+    assert all(gap == 0 for *_, gap in _shape_legs(problem))
+    pattern = r"constraint 1 \(ShapeConstraint at t=8\) turns its 50 agents' center at 0.19\d* length units"
+    with pytest.warns(FlockkitWarning, match=pattern):
+        flockkit.solve(problem, iterations=0, refine=0, starts=1, seed=1)
