@@ -5,7 +5,8 @@ weight's trade-off, and the speed of a default solve end to end.
 
 1. Every scenario in examples/scenarios, a default solve (its own [solve] and [behavior]
    settings) per seed: whether every constraint is met (points to 1e-9, COMs within 3 sigma_com,
-   shapes inside), whether the reach check warned, log g_w per agent-step (the scenario's own
+   shapes inside), the largest point constraint's error and COM constraint's miss in sigma_com,
+   whether the reach check warned, log g_w per agent-step (the scenario's own
    behavior's log_plausibility summed over agents x interior frames, unweighted), the KS test of
    the free agents' impulse lengths (agents with no point constraint) against five forward
    simulations of the same model, flock size and length (a forward simulation's impulses are the
@@ -35,7 +36,7 @@ from scipy.stats import ks_2samp
 
 import flockkit
 from flockkit.constrained import load_scenario, solve
-from flockkit.constrained.sampler import unmet
+from flockkit.constrained.sampler import residuals, unmet
 from flockkit.errors import FlockkitWarning
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "examples" / "scenarios"
@@ -79,8 +80,13 @@ def run(path, seed, weight=None) -> dict:
     free = [a for a in range(problem.n_agents) if a not in pinned]
     log_norm = math.log(model.wander_sigma) + 0.5 * math.log(2 * math.pi)
     own = -(impulses[:, pinned] ** 2) / (2 * model.wander_sigma**2) - log_norm
+    found = residuals(problem, motion)
+    points = [r for c, r in zip(problem.constraints, found) if isinstance(c, flockkit.PointConstraint)]
+    coms = [r for c, r in zip(problem.constraints, found) if isinstance(c, flockkit.ComConstraint)]
     return {
         "met": not unmet(problem, motion),
+        "point_error": max(points, default=float("nan")),
+        "com_sigmas": max(coms, default=float("nan")) / problem.sigma_com,
         "warned": [str(w.message) for w in caught if issubclass(w.category, FlockkitWarning)],
         "log_g": float(np.sum(model.log_plausibility(motion)) / (problem.n_agents * (problem.n_frames - 2))),
         "keyframed": float(own.mean()) if pinned else float("nan"),
@@ -93,7 +99,8 @@ def run(path, seed, weight=None) -> dict:
 
 
 def scenarios(seeds, only) -> None:
-    print(f"{'scenario':<18} {'seed':>4} {'met':>4} {'warns':>5} {'log g_w':>8} {'KS p':>9} {'seconds':>8} {'it/s':>6}")
+    print(f"{'scenario':<18} {'seed':>4} {'met':>4} {'point err':>9} {'COM/sigma':>9} {'warns':>5} {'log g_w':>8} "
+          f"{'KS p':>9} {'seconds':>8} {'it/s':>6}")  # fmt: skip
     for path in sorted(SCENARIOS.glob("*.toml")):
         if only and path.stem not in only:
             continue
@@ -101,7 +108,8 @@ def scenarios(seeds, only) -> None:
         simulated = reference(rows[0]["model"], rows[0]["problem"])
         ps = [ks_2samp(r["free"], simulated).pvalue if r["free"] is not None else float("nan") for r in rows]
         for seed, row, p in zip(seeds, rows, ps):
-            print(f"{path.stem:<18} {seed:>4} {'yes' if row['met'] else 'NO':>4} {len(row['warned']):>5} "
+            print(f"{path.stem:<18} {seed:>4} {'yes' if row['met'] else 'NO':>4} {row['point_error']:>9.1e} "
+                  f"{row['com_sigmas']:>9.2f} {len(row['warned']):>5} "
                   f"{row['log_g']:>8.2f} {p:>9.2g} {row['seconds']:>8.1f} {row['rate']:>6.0f}")  # fmt: skip
         passed = sum(p > 0.01 for p in ps)
         print(f"{path.stem:<18} median log g_w {np.median([r['log_g'] for r in rows]):.2f}, KS passes {passed} of "
