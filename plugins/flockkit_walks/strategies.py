@@ -20,6 +20,9 @@ from flockkit.errors import ValidationError
 # The room a region walk keeps on the group's way out (_Steer), as a fraction of the region's inner
 # radius; edges that leave less are tried after those that leave more.
 CUSHION = 0.1
+# Frames apart of the points a way out is judged at (_Escape): a group moves a few hundredths of
+# its region's width in them, and the walk's search checks every frame of what it takes anyway.
+PATH_STRIDE = 4
 # Starts a region walk tries (each a random node and heading) when every way from one leaves the
 # region, unless it is given its start: a start inside a stretch of the graph that cannot turn
 # (a solved bridge, a recording's straight run) may have none.
@@ -258,7 +261,8 @@ class _Escape:
     def path(self, node, since, way) -> np.ndarray:
         key = (node, since >= self.blend, way)
         if key not in self.cache:
-            self.cache[key] = self._play(node, since, way)
+            path = self._play(node, since, way)
+            self.cache[key] = np.concatenate([path[::PATH_STRIDE], path[-1:]])
         return self.cache[key]
 
     def _play(self, node, since, way) -> np.ndarray:
