@@ -80,9 +80,14 @@ _LIGHT = 4
 _LIGHT_CHECKPOINT = 30
 
 
-def initial_trajectories(problem: Problem, behavior, rng: np.random.Generator) -> Motion:
-    """A Motion of ``problem.n_frames`` frames meeting every constraint of `problem` exactly."""
-    return _Initial(problem, behavior, rng).run()
+def initial_trajectories(problem: Problem, behavior, rng: np.random.Generator, *, thorough: bool = True) -> Motion:
+    """A Motion of ``problem.n_frames`` frames meeting every constraint of `problem` exactly.
+
+    COM groups reach their constraints by choosing among the model's own forward simulations;
+    with `thorough` False they are simulated once, steered along their paths by the model where it
+    declares ``group_guide`` (cheaper, with a common impulse on the group's agents), for callers
+    that draw many initial trajectories and choose among those instead."""
+    return _Initial(problem, behavior, rng, reach="thorough" if thorough else "steered").run()
 
 
 def regenerate(problem: Problem, behavior, current: Motion, start: int, stop: int, rng: np.random.Generator) -> Motion:
@@ -90,7 +95,7 @@ def regenerate(problem: Problem, behavior, current: Motion, start: int, stop: in
     ``initial_trajectories``: from `current`'s state at `start` (arriving velocity; at frame 0 the
     starting state, frames 0 and 1, kept exactly) to exactly its positions and velocities at
     `stop` (temporary continuity constraints, 3.4.1)."""
-    builder = _Initial(problem, behavior, rng, thorough=False)
+    builder = _Initial(problem, behavior, rng, reach="light")
     last = current.n_frames - 1
     state = _arriving(current, start)
     prior = current.state(start - 1) if start > 0 else None
@@ -133,11 +138,14 @@ class _Path:
 
 
 class _Initial:
-    def __init__(self, problem, behavior, rng, thorough=True):
+    def __init__(self, problem, behavior, rng, reach="thorough"):
         self.problem, self.behavior, self.rng = problem, behavior, rng
-        # a proposal's draw (regenerate) reaches COMs by fewer draws than a chain's start
+        # how COM groups reach their constraints: "thorough" (a chain's start), "light" (a
+        # proposal's draw: fewer simulations) or "steered" (one simulation, group_guide)
+        thorough = reach == "thorough"
         self.rollouts, self.pilots, self.attempts = (_ROLLOUTS, _PILOTS, _ATTEMPTS) if thorough else (_LIGHT, 0, 1)
         self.checkpoint = _CHECKPOINT if thorough else _LIGHT_CHECKPOINT
+        self.steer = reach == "steered" and capabilities(behavior).group_guide
         self.dt = problem.dt
         self.paths = [_Path(track, problem) for track in problem.tracks if len(track) >= 2]
         self.guided = capabilities(behavior).guide
@@ -199,9 +207,14 @@ class _Initial:
             if path is not None:
                 knot = min(f for f in path.frames if f > steps)
                 heading.append((c, (knot - steps) * self.dt, path.spline(knot * self.dt)))
+        groups = []
+        if self.steer:  # one simulation, each group steered along its backward path
+            groups = [(list(self.problem.agents_of(c)), lead.positions[:, list(self.problem.agents_of(c))].mean(axis=1))
+                      for c in coms]  # fmt: skip
+            heading = []
         best, best_miss = None, np.inf
         for _ in range(self.rollouts if heading else 1):
-            trial = self.behavior.forward(lead.state(0), steps, self.rng, **_guide_arguments(points))
+            trial = self.behavior.forward(lead.state(0), steps, self.rng, **_guide_arguments(points, groups))
             miss = 0.0
             for c, ahead, target in heading:
                 centre = trial.positions[-2:, list(self.problem.agents_of(c))].mean(axis=1)
@@ -271,8 +284,9 @@ class _Initial:
         every frame of the move (bench/README.md)."""
         coms = [p for p in spanning if not p.is_point]
         knots = sorted({f for p in coms for f in p.frames if first + 1 < f <= stop})
-        if not knots:
-            return self.behavior.forward(state, stop - first, self.rng, **self._guide(spanning, first, stop - first))
+        if not knots or self.steer:
+            guide = self._guide(spanning, first, stop - first, steer=True)
+            return self.behavior.forward(state, stop - first, self.rng, **guide)
         pieces, at, back = [], first, 0
         for knot in knots + ([stop] if knots[-1] < stop else []):
             aimed = [p for p in coms if knot in p.frames]
@@ -321,13 +335,14 @@ class _Initial:
             state, at, back = best.state(-2), at + steps, 1
         return pieces, state, (miss if aimed else 0.0)
 
-    def _guide(self, spanning, start, steps) -> dict:
+    def _guide(self, spanning, start, steps, steer=False) -> dict:
         """Keyword arguments keeping point-path agents on their paths during simulation, so the
-        others react to where they really are (for models declaring `guide`)."""
-        if not self.guided:
-            return {}
+        others react to where they really are (for models declaring `guide`); with `steer`, in
+        the "steered" reach, also steering COM-path groups along theirs (``group_guide``)."""
         times = (start + np.arange(steps + 1)) * self.dt
-        return _guide_arguments({p.agents[0]: p.spline(times) for p in spanning if p.is_point})
+        points = {p.agents[0]: p.spline(times) for p in spanning if p.is_point} if self.guided else {}
+        groups = [(list(p.agents), p.spline(times)) for p in spanning if not p.is_point] if steer and self.steer else []
+        return _guide_arguments(points, groups)
 
     def _onto_paths(self, positions, spanning, start, anchor) -> np.ndarray:
         """Operation 2: translate constrained agents onto their paths, the others with them."""
@@ -575,9 +590,13 @@ def _matching(slots: np.ndarray, origins: np.ndarray, rng) -> np.ndarray:
     return order
 
 
-def _guide_arguments(points: dict) -> dict:
-    """A model's ``guide`` keyword argument (agent -> path), left out where empty."""
-    return {"guide": points} if points else {}
+def _guide_arguments(points: dict, groups: list) -> dict:
+    """A model's ``guide`` (agent -> path) and ``group_guide`` ((agents, path) pairs) keyword
+    arguments, each left out where empty."""
+    found = {"guide": points} if points else {}
+    if groups:
+        found["group_guide"] = groups
+    return found
 
 
 def _state_at_end(motion: Motion, velocities) -> State:

@@ -545,7 +545,7 @@ def _start(problem, aims, behavior, terms, refine, starts, rng) -> Motion:
     many = starts > SURVIVORS
     kept = []  # (score, draw): the SURVIVORS best so far
     for _ in range(starts):
-        draw = initial_trajectories(aims, behavior, rng)
+        draw = initial_trajectories(aims, behavior, rng, thorough=not many)  # many: choosing among draws
         if starts == 1:
             score = 0.0  # nothing to rank
         elif many:  # a step towards the most regular motion: no forward simulation to draw targets from
