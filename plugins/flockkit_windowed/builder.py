@@ -23,7 +23,11 @@ largest distance between a point's places in the two motions over the blend (fro
 must be at most (blend + 1) / 3 times the recording's largest step, so that the smoothstep blend
 (whose steepest step moves 1.5 / (blend + 1) of that distance) adds at most half the largest
 step to a point's own. If none is that good, the lowest minima are taken until one transition survives
-(a recording with no good transition still gives a graph, the best it has).
+(a recording with no good transition still gives a graph, the best it has). Minima whose costs
+are equal but for rounding (a motion that repeats exactly, such as a steady flutter, has many)
+are taken round-robin over the frames they leave from, spread across the recording, so that
+transitions leave from all of it (every stretch of its features) rather than from wherever
+rounding happened to be smallest; such a transition's distance is 0, not rounding noise.
 
 Blend length (the paper compares D_pre, D_post and D without a rule; ours): with D_pre the mean of
 the window's terms up to the transition and D_post the mean from it on, the blend is
@@ -65,6 +69,9 @@ SHIFT_SIZES = (1, 2)
 # Frames that phase shifts leave from at most, evenly spread over the kept frames (our choice: a
 # cycle of up to 128 frames gets them at every frame; longer sparse recordings, fewer).
 SHIFT_NODES = 128
+# Costs of minima this close, relative to the largest cost, are equal but for rounding (our
+# choice: far above float64 rounding of the squared distances, far below any real difference).
+TIE_TOLERANCE = 1e-9
 
 
 @attrs.frozen(kw_only=True)
@@ -124,7 +131,7 @@ class Windowed:
         far = apart >= gap
         # pairs nearer than min_gap are not candidates, nor neighbors that could hide one: a motion that
         # never returns (a flock crossing the scene) still has minima, along the edge of the gap
-        minima = sorted(flockkit.graphs.local_minima(np.where(far, total, np.inf), far), key=lambda pq: (total[pq], pq))
+        minima = _ordered(flockkit.graphs.local_minima(np.where(far, total, np.inf), far), total)
         shifting = self.shift_blend > 0 and round(self.shift_blend / motion.dt) >= 2
         if self.threshold is not None:
             chosen = [pq for pq in minima if total[pq] <= self.threshold]
@@ -270,13 +277,57 @@ class Windowed:
         return np.minimum(blend, left[:, None]).astype(np.int64)
 
     def _transitions(self, motion, chosen, total, blends):
-        found = []
+        """The chosen (p, q) as transitions, their distance the cost D, or 0 where D is within
+        rounding of 0 (an exact repeat): walks weigh distances against their median, which
+        rounding noise must not set."""
+        found, rounding = [], _rounding(total)
         for p, q in sorted(chosen):
             blend = int(blends[p, q])
-            identity = flockkit.Alignment(distance=float(total[p, q]), assignment=np.arange(motion.n_agents),
+            distance = float(total[p, q]) if total[p, q] > rounding else 0.0
+            identity = flockkit.Alignment(distance=distance, assignment=np.arange(motion.n_agents),
                                           rotation=np.eye(motion.dims), translation=np.zeros(motion.dims))  # fmt: skip
             found.append((p, q, identity, int(blend)))
         return found
+
+
+def _ordered(minima, total) -> list[tuple[int, int]]:
+    """`minima` (p, q) by their cost total[p, q], lowest first. Costs equal but for rounding (within
+    TIE_TOLERANCE of the largest finite cost: a motion that repeats exactly, as a steady flutter
+    does, has many) are taken round-robin over their source frames p, the frames visited in an
+    order spread evenly across the recording (bit-reversed), so that the transitions chosen first
+    leave from all of it rather than from wherever rounding happened to be smallest; without
+    that, a walk could hold only some of the recording's stretches (of its features)."""
+    if not minima:
+        return []
+    pq = np.asarray(minima, dtype=np.int64)
+    cost = total[pq[:, 0], pq[:, 1]]
+    tolerance = _rounding(total)
+    level = np.floor(cost / tolerance) if tolerance > 0 else cost
+    rounds = np.zeros(len(pq), dtype=np.int64)  # how many cheaper (or tied, lower q) minima leave p before
+    order = np.lexsort((pq[:, 1], cost, pq[:, 0]))
+    p_sorted = pq[order, 0]
+    starts = np.flatnonzero(np.r_[True, p_sorted[1:] != p_sorted[:-1]])
+    rounds[order] = np.arange(len(pq)) - np.repeat(starts, np.diff(np.r_[starts, len(pq)]))
+    spread = _bit_reversed(pq[:, 0])
+    keys = np.lexsort((pq[:, 1], spread, rounds, level))
+    return [minima[k] for k in keys]
+
+
+def _rounding(total) -> float:
+    """How far apart costs of `total` may be and still be equal but for rounding: TIE_TOLERANCE
+    of the largest finite cost."""
+    finite = total[np.isfinite(total)]
+    return TIE_TOLERANCE * float(np.abs(finite).max()) if len(finite) else 0.0
+
+
+def _bit_reversed(frames: np.ndarray) -> np.ndarray:
+    """Each frame's bits reversed (over as many bits as the largest needs): an order that visits
+    frames evenly spread, halving the spacing at each step (a van der Corput sequence)."""
+    bits = max(1, int(frames.max()).bit_length())
+    reversed_ = np.zeros_like(frames)
+    for b in range(bits):
+        reversed_ |= ((frames >> b) & 1) << (bits - 1 - b)
+    return reversed_
 
 
 def _surviving(motion, transitions, period=None) -> int:
