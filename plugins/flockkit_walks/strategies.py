@@ -257,6 +257,19 @@ class _Escape:
         self.frames = max(math.ceil(seconds / graph.motion.dt), 1)
         self.ways = [1.0, -1.0] if com.shape[1] == 2 else ["left", "right", "down", "up"]
         self.cache = {}
+        # per transition, the heading before it and the sine of its turn times the turn's axis (2D: signed)
+        transitions = graph.transitions
+        starts = np.array([t.start for t in transitions], dtype=int)
+        ends = np.array([t.end for t in transitions], dtype=int)
+        rotations = np.array([t.alignment.rotation for t in transitions]).reshape(-1, com.shape[1], com.shape[1])
+        before = velocity[starts]
+        after = np.einsum("kij,kj->ki", rotations, velocity[ends])
+        scale = np.maximum(np.linalg.norm(before, axis=1) * np.linalg.norm(after, axis=1), 1e-300)
+        if com.shape[1] == 2:
+            self.turning = (before[:, 0] * after[:, 1] - before[:, 1] * after[:, 0]) / scale
+        else:
+            self.turning = np.cross(before, after) / scale[:, None]
+        self.before = before
 
     def path(self, node, since, way) -> np.ndarray:
         key = (node, since >= self.blend, way)
@@ -289,31 +302,25 @@ class _Escape:
     def _pick(self, options, rotation, way):
         """The transition that turns the heading most `way`, if any turns it that way (by over a
         degree), else the clip, else the transition that turns it least the other way."""
-        best, most = None, -math.inf
-        for edge in options:
-            if edge[0] != "transition":
-                continue
-            transition = self.graph.transitions[edge[1]]
-            before = rotation @ self.velocity[transition.start]
-            after = rotation @ transition.alignment.rotation @ self.velocity[transition.end]
-            sense = self._sense(before, after, way)
-            if sense > most:
-                best, most = edge, sense
-        if most > math.sin(math.radians(1)) or options[0][0] != "clip":
-            return best
+        chosen = [k for k, edge in enumerate(options) if edge[0] == "transition"]
+        if not chosen:
+            return options[0]
+        index = [options[k][1] for k in chosen]
+        if self.com.shape[1] == 2:
+            sense = way * self.turning[index]
+        else:  # turning and headings as the walk has rotated them
+            turning, before = self.turning[index] @ rotation.T, self.before[index] @ rotation.T
+            up = np.asarray(flockkit.DEFAULT_UP)
+            if way in ("left", "right"):
+                axis = np.broadcast_to(up, before.shape)
+            else:
+                axis = np.cross(up, before)
+                axis = axis / np.maximum(np.linalg.norm(axis, axis=1, keepdims=True), 1e-300)
+            sense = (1.0 if way in ("left", "down") else -1.0) * np.sum(turning * axis, axis=1)
+        best = int(np.argmax(sense))
+        if sense[best] > math.sin(math.radians(1)) or options[0][0] != "clip":
+            return options[chosen[best]]
         return options[0]
-
-    @staticmethod
-    def _sense(before, after, way) -> float:
-        """The sine of the turn from `before` to `after` about the axis of `way`."""
-        scale = max(np.linalg.norm(before) * np.linalg.norm(after), 1e-300)
-        if len(before) == 2:
-            return way * (before[0] * after[1] - before[1] * after[0]) / scale
-        up = np.asarray(flockkit.DEFAULT_UP)
-        axis = up if way in ("left", "right") else np.cross(up, before)
-        axis = axis / max(np.linalg.norm(axis), 1e-300)
-        sign = 1.0 if way in ("left", "down") else -1.0
-        return sign * float(np.cross(before, after) @ axis) / scale
 
 
 def _turning_radius(graph, com) -> float:
