@@ -331,7 +331,8 @@ def test_bad_input_is_refused_and_changes_nothing():
     odd = Crowd(other, n_agents=2, clusters={"arm": 0, "flag": [0, -1]})
     cases = [
         (lambda: crowd.transition_to_streamed([1, 99], "body", 0, 0.2), "unknown agent id 99"),
-        (lambda: crowd.transition_to_streamed([1, 1], "body", 0, 0.2), "repeat"),
+        (lambda: crowd.transition_to_streamed([1, 1], "body", 0, 0.2), "repeat an id; 1 is given twice"),
+        (lambda: crowd.poses([3, 0, 3], "body"), "repeat an id; 3 is given twice"),
         (lambda: crowd.transition_to_streamed([1], "body", 9, 0.2), "unknown stream id 9"),
         (lambda: crowd.transition_to_streamed([1], "body", 0, 0.0), "blend_time"),
         (lambda: crowd.transition_to_streamed([1], "body", 0, -1), "blend_time"),
