@@ -107,8 +107,9 @@ def _agent_ids(agents, n_agents: int) -> np.ndarray:
     if ids.size and (ids.min() < 0 or ids.max() >= n_agents):
         bad = int(ids[(ids < 0) | (ids >= n_agents)][0])
         raise ValidationError(f"unknown agent id {bad}; the crowd has agents 0..{n_agents - 1}")
-    if ids.size > 1 and np.bincount(ids).max() > 1:  # a count per id, cheaper than sorting them
-        raise ValidationError(f"agents must not repeat an id; {int(np.argmax(np.bincount(ids)))} is given twice")
+    counts = np.bincount(ids) if ids.size > 1 else np.zeros(1, dtype=np.int64)  # cheaper than sorting them
+    if counts.max() > 1:
+        raise ValidationError(f"agents must not repeat an id; {int(np.argmax(counts))} is given twice")
     return ids
 
 

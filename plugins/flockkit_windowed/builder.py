@@ -131,7 +131,8 @@ class Windowed:
         far = apart >= gap
         # pairs nearer than min_gap are not candidates, nor neighbors that could hide one: a motion that
         # never returns (a flock crossing the scene) still has minima, along the edge of the gap
-        minima = _ordered(flockkit.graphs.local_minima(np.where(far, total, np.inf), far), total)
+        rounding = _rounding(total)
+        minima = _ordered(flockkit.graphs.local_minima(np.where(far, total, np.inf), far), total, rounding)
         shifting = self.shift_blend > 0 and round(self.shift_blend / motion.dt) >= 2
         if self.threshold is not None:
             chosen = [pq for pq in minima if total[pq] <= self.threshold]
@@ -139,7 +140,7 @@ class Windowed:
             wanted = max(self.min_transitions, math.ceil(self.transitions_per_minute * motion.duration / 60))
             # a looping graph that gets phase shifts needs no poor transition to be walkable
             chosen = self._adaptive(motion, minima, total, blends, wanted, period, fallback=not (period and shifting))
-        transitions = self._transitions(motion, chosen, total, blends)
+        transitions = self._transitions(motion, chosen, total, blends, rounding)
         if shifting and self._kept(motion, chosen, blends, period) < self.min_transitions:
             transitions = self._with_shifts(motion, transitions, period)
         if not transitions:
@@ -276,11 +277,11 @@ class Windowed:
         left = motion.n_frames - 1 - np.arange(motion.n_frames)  # frames after p: the old motion must exist
         return np.minimum(blend, left[:, None]).astype(np.int64)
 
-    def _transitions(self, motion, chosen, total, blends):
+    def _transitions(self, motion, chosen, total, blends, rounding):
         """The chosen (p, q) as transitions, their distance the cost D, or 0 where D is within
-        rounding of 0 (an exact repeat): walks weigh distances against their median, which
+        `rounding` (``_rounding(total)``) of 0 (an exact repeat): walks weigh distances against their median, which
         rounding noise must not set."""
-        found, rounding = [], _rounding(total)
+        found = []
         for p, q in sorted(chosen):
             blend = int(blends[p, q])
             distance = float(total[p, q]) if total[p, q] > rounding else 0.0
@@ -290,9 +291,9 @@ class Windowed:
         return found
 
 
-def _ordered(minima, total) -> list[tuple[int, int]]:
+def _ordered(minima, total, tolerance: float) -> list[tuple[int, int]]:
     """`minima` (p, q) by their cost total[p, q], lowest first. Costs equal but for rounding (within
-    TIE_TOLERANCE of the largest finite cost: a motion that repeats exactly, as a steady flutter
+    `tolerance`, ``_rounding(total)``: a motion that repeats exactly, as a steady flutter
     does, has many) are taken round-robin over their source frames p, the frames visited in an
     order spread evenly across the recording (bit-reversed), so that the transitions chosen first
     leave from all of it rather than from wherever rounding happened to be smallest; without
@@ -301,7 +302,6 @@ def _ordered(minima, total) -> list[tuple[int, int]]:
         return []
     pq = np.asarray(minima, dtype=np.int64)
     cost = total[pq[:, 0], pq[:, 1]]
-    tolerance = _rounding(total)
     level = np.floor(cost / tolerance) if tolerance > 0 else cost
     rounds = np.zeros(len(pq), dtype=np.int64)  # how many cheaper (or tied, lower q) minima leave p before
     order = np.lexsort((pq[:, 1], cost, pq[:, 0]))
