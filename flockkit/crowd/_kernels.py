@@ -1,4 +1,5 @@
-"""Compiled loops that read a crowd's numpy store: each part's entries sampled, interpolated between
+"""Compiled loops that read a crowd's numpy store: where each part reads, found from its instance
+record and its streams' rings (``plan_reads``), each part's entries sampled, interpolated between
 frames and blended in one pass (``read_entries``), and forward kinematics (``world_matrices``).
 
 They compute what the array API path of ``flockkit.crowd.runtime`` computes (``interpolate_entries``
@@ -48,7 +49,11 @@ from numba.extending import intrinsic
 # Parts per task of the parallel loops: a task's scratch (four rows of rotations) is made once
 # per chunk; chunks are small so that threads share the work evenly when one is held up.
 CHUNK = 16
+# Parts per task of ``plan_reads`` (a few dozen nanoseconds a part).
+PLAN_BLOCK = 512
 _FAST = {"cache": True, "nogil": True, "fastmath": True, "error_model": "numpy", "boundscheck": False}
+# Loops whose arithmetic must round as numpy's does (no reordering, no reciprocals).
+_EXACT = {**_FAST, "fastmath": False}
 
 
 @intrinsic
@@ -194,6 +199,69 @@ def _read(wide, newer, older, share, scratch, q, bones):  # pragma: no cover - c
     if share > 0:
         _rotations(wide, older, scratch, bones)
         _slerp(q.view(np.float32), scratch.view(np.float32), share, q.view(np.float32), bones)
+
+
+@numba.njit(parallel=True, **_EXACT)
+def plan_reads(
+    parts, ids, head, history, lookup, filled, unique_width, lag, then, rows, shares, unique_rows, alpha
+):  # pragma: no cover - compiled
+    """What ``read_entries`` reads for each part: part i is ``parts[ids[i]]`` (one cluster's column
+    of a crowd's instance records: kind, stream, offset, target_kind, target, target_offset,
+    blend_start, blend_time) as it was `lag` frames ago (offsets `lag` frames older, up to the
+    oldest frame its stream holds), at crowd time `then` (float32, as the records' times are).
+    Fills rows, shares, unique_rows and alpha (-1: not blending) as ``read_entries`` takes them,
+    over numba's threads. Returns the first i whose part has no pose to read (kind NONE), or -1."""
+    n = len(ids)
+    first = n
+    for block in numba.prange((n + PLAN_BLOCK - 1) // PLAN_BLOCK):
+        for i in range(block * PLAN_BLOCK, min(n, (block + 1) * PLAN_BLOCK)):
+            part = parts[ids[i]]
+            if part.kind == 0:
+                first = min(first, i)
+                continue
+            _plan_side(part.kind, part.stream, part.offset, head, history, lookup, filled, unique_width, lag,
+                       rows, shares, unique_rows, i, 0)  # fmt: skip
+            if part.blend_time > 0:
+                _plan_side(part.target_kind, part.target, part.target_offset, head, history, lookup, filled,
+                           unique_width, lag, rows, shares, unique_rows, i, 1)  # fmt: skip
+                alpha[i] = min(max((then - part.blend_start) / part.blend_time, float32(0.0)), float32(1.0))
+            else:
+                rows[i, 2], rows[i, 3] = rows[i, 0], rows[i, 1]
+                shares[i, 1], unique_rows[i, 1] = float32(0.0), False
+                alpha[i] = float32(-1.0)
+    return first if first < n else -1
+
+
+@numba.njit(inline="always", **_EXACT)
+def _plan_side(
+    kind, index, offset, head, history, lookup, filled, unique_width, lag, rows, shares, unique_rows, i, side
+):  # pragma: no cover - compiled
+    """``plan_reads`` of one side (0: source, 1: target) of part i: a streamed side reads the
+    store rows of the frames either side of its offset (the stream's ring slots
+    ``(head - frame) % history``), a unique side its slot's row (index * unique_width), whole."""
+    if kind == 2:
+        rows[i, 2 * side] = rows[i, 2 * side + 1] = np.int64(index) * unique_width
+        shares[i, side], unique_rows[i, side] = float32(0.0), True
+        return
+    stream, behind = (np.int64(index), np.float64(offset)) if kind == 1 else (np.int64(0), 0.0)
+    if lag and kind == 1:  # the offset `lag` frames older (a float32 sum, as the records hold offsets)
+        behind = min(np.float64(float32(offset + lag)), np.float64(filled[stream] - 1))
+    whole = math.floor(behind)
+    share = float32(behind - whole)
+    slot = _ring(head[stream] - np.int64(whole), history[stream])
+    newer = lookup[stream, slot]
+    rows[i, 2 * side] = newer
+    rows[i, 2 * side + 1] = lookup[stream, _ring(slot - 1, history[stream])] if share > 0 else newer
+    shares[i, side], unique_rows[i, side] = share, False
+
+
+@numba.njit(inline="always", **_EXACT)
+def _ring(slot, history):  # pragma: no cover - compiled
+    """slot % history (a ring buffer's slot), without the division where slot is already in
+    0 .. history - 1 or one turn below: an integer division costs more than the rest of a part's plan."""
+    if slot < 0:
+        slot += history
+    return slot if 0 <= slot < history else slot % history
 
 
 def read_entries(store, unique, rows, unique_rows, shares, alpha, places, out) -> None:

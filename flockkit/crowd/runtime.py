@@ -869,16 +869,16 @@ class Crowd:
     def _entries(self, ids, c, lag: int = 0, *, out=None, compiled: bool = True, places=None):
         """`entries` of parts `ids` in cluster index `c`, as they were `lag` frames ago (offsets
         `lag` frames older, up to the oldest frame held; α then). A numpy store is read by the
-        compiled loop (`_kernels.read_entries`), into `out` when given; `compiled=False`, or a
-        store in another namespace, reads through the array API. `places`: the rows of `out`
-        the parts go to (default 0..n - 1)."""
-        record = self._buffer[ids, c]
-        if np.any(record["kind"] == NONE):
-            raise ValidationError(f"agent {int(ids[record['kind'] == NONE][0])} has no {self.clusters[c]!r} cluster")
+        compiled loops (`_kernels.plan_reads`, `_kernels.read_entries`), into `out` when given;
+        `compiled=False`, or a store in another namespace, reads through the array API. `places`:
+        the rows of `out` the parts go to (default 0..n - 1)."""
         bones = self.skeletons[c].n_joints
         then = self.time - lag / self.pool.fps
         if self.pool.xp is np and compiled:
-            return self._entries_compiled(record, bones, lag, then, out, places)
+            return self._entries_compiled(ids, c, bones, lag, then, out, places)
+        record = self._buffer[ids, c]
+        if np.any(record["kind"] == NONE):
+            self._no_cluster(ids[record["kind"] == NONE][0], c)
 
         def read(kind, index, offset):
             return self._read(kind, index, self._lagged(kind, index, offset, lag), bones)
@@ -901,6 +901,9 @@ class Crowd:
         s = record[steady]
         return _merge(xp, read(s["kind"], s["stream"], s["offset"]), steady, mixed, blending)
 
+    def _no_cluster(self, agent, c):
+        raise ValidationError(f"agent {int(agent)} has no {self.clusters[c]!r} cluster")
+
     def _lagged(self, kind, index, offset, lag: int):
         """Offsets `lag` frames older, up to the oldest frame each stream holds."""
         if not lag:
@@ -908,48 +911,26 @@ class Crowd:
         held = np.where(kind == STREAMED, self.pool.filled[np.where(kind == STREAMED, index, 0)], 1)
         return np.minimum(offset + lag, held - 1)
 
-    def _rows(self, kind, index, offset):
-        """Where parts reading (kind, stream or slot, offset) find their entries: the newer and the
-        older of the two frames either side of the offset (floats into the store; a unique slot's
-        row of its store where `unique`), how far between them (float32; 0: the newer alone)."""
-        streamed = kind == STREAMED
-        behind = np.asarray(offset, dtype=np.float64)
-        whole = np.floor(behind)
-        share = np.where(streamed, behind - whole, 0).astype(np.float32)
-        streams, frame = np.where(streamed, index, 0), np.where(streamed, whole, 0).astype(np.int64)
-        newer = self.pool.rows(streams, frame)
-        older = np.where(share > 0, self.pool.rows(streams, frame + 1), newer)
-        unique = kind == UNIQUE
-        if unique.any():
-            width = self.unique.max_bones * ENTRY_FLOATS
-            newer = np.where(unique, index.astype(np.int64) * width, newer)
-            older = np.where(unique, newer, older)
-        return newer, older, share, unique
-
-    def _entries_compiled(self, record, bones: int, lag: int, then: float, out, places=None):
-        """`_entries` of a numpy store by `_kernels.read_entries`: every part's source, and its
-        target while blending, read and mixed in one pass into `out` (made when None)."""
-        n = len(record)
+    def _entries_compiled(self, ids, c, bones: int, lag: int, then: float, out, places=None):
+        """`_entries` of a numpy store: what each part reads (its source, and its target while
+        blending) found by `_kernels.plan_reads`, then read and mixed in one pass by
+        `_kernels.read_entries` into `out` (made when None)."""
+        n = len(ids)
         if out is None:
             out = np.empty((n, bones, ENTRY_FLOATS), dtype=np.float32)
         rows = np.empty((n, 4), dtype=np.int64)
-        shares = np.zeros((n, 2), dtype=np.float32)
-        on_unique = np.zeros((n, 2), dtype=np.bool_)
-        source = record["kind"], record["stream"], record["offset"]
-        rows[:, 0], rows[:, 1], shares[:, 0], on_unique[:, 0] = self._rows(*source[:2], self._lagged(*source, lag))
-        alpha = np.full(n, -1.0, dtype=np.float32)  # not blending: the source alone
-        blending = np.flatnonzero(record["blend_time"] > 0)
-        rows[:, 2:] = rows[:, :2]
-        if len(blending):
-            r = record[blending]
-            target = r["target_kind"], r["target"], r["target_offset"]
-            rows[blending, 2], rows[blending, 3], shares[blending, 1], on_unique[blending, 1] = self._rows(
-                *target[:2], self._lagged(*target, lag)
-            )
-            alpha[blending] = np.clip((then - r["blend_start"]) / r["blend_time"], 0, 1)
+        shares = np.empty((n, 2), dtype=np.float32)
+        on_unique = np.empty((n, 2), dtype=np.bool_)
+        alpha = np.empty(n, dtype=np.float32)
+        pool = self.pool
+        width = self.unique.max_bones * ENTRY_FLOATS if self.unique is not None else 0
+        missing = _kernels.plan_reads(self._buffer[:, c], ids, pool.head, pool.history, pool.lookup, pool.filled,
+                                      width, lag, np.float32(then), rows, shares, on_unique, alpha)  # fmt: skip
+        if missing >= 0:
+            self._no_cluster(ids[missing], c)
         unique = self.unique.store.reshape(-1) if self.unique is not None else np.zeros(0, dtype=np.float32)
         places = np.arange(n) if places is None else places
-        _kernels.read_entries(self.pool.store, unique, rows, on_unique, shares, alpha, places, out)
+        _kernels.read_entries(pool.store, unique, rows, on_unique, shares, alpha, places, out)
         return out
 
     def poses(self, agents=None, cluster=None, *, space: str = "local", out=None):

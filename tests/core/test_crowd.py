@@ -344,6 +344,8 @@ def test_bad_input_is_refused_and_changes_nothing():
         ),
         (lambda: crowd.transition_to_unique([1], "body", 0, 0.2), "no UniquePool"),
         (lambda: odd.transition_to_streamed([1], "flag", 0, 0.2), "agent 1 has no 'flag' cluster"),
+        (lambda: odd.poses([0, 1], "flag"), "agent 1 has no 'flag' cluster"),
+        (lambda: odd.poses(cluster="flag", out=np.empty((2, 7, 12), np.float32)), "agent 1 has no 'flag' cluster"),
         (lambda: crowd.poses([0], "body", space="screen"), "space"),
     ]
     for call, message in cases:
