@@ -4,6 +4,7 @@ source frames and neighbours, saved to one .npz and exported to USD."""
 from __future__ import annotations
 
 import attrs
+import numba
 import numpy as np
 
 from .. import _npzfile, validate
@@ -15,7 +16,7 @@ from ..regions import Polygon
 from .desync import NEAREST, NEIGHBOUR_DIAGONALS, largest_in_step, stacked
 from .flow import FlowField, SelfMovement, flow_constraints
 from .layers import GraphLayers
-from .movement import Paths, source_frames_at, world_positions
+from .movement import Paths, source_frames_at
 from .placement import Placement, heading_turn, turned_half
 from .templates import footprint, template_view
 
@@ -77,31 +78,50 @@ class SceneAnimation:
 
     def motion(self, i: int) -> Motion:
         """Object i's motion in the world: its walk played, cut to n_frames, scaled, turned by its
-        heading about +z and moved to its position."""
-        played = template_view(self.templates[self.placement.templates[i]]).synthesize(self.walks[i])
-        center, _ = self._footprints[self.placement.templates[i]]
-        if self.paths is not None and self.paths.moving[i]:
+        heading about +z and moved to its position (at each frame, where it moves: ``paths``)."""
+        if self._moves(i):
             paths = self.paths
-            positions = world_positions(played.positions, center, self.placement.scales[i], paths.clocks[i],
-                                        paths.headings[i], paths.positions[i])  # fmt: skip
-            return Motion._adopt(positions, self.dt)
-        dims = played.dims
-        scale, turn = self.placement.scales[i], heading_turn(self.placement.headings[i], dims)
+            return self._at_clock(i, paths.clocks[i], paths.headings[i], paths.positions[i])
+        kind = self.placement.templates[i]
+        view = template_view(self.templates[kind])
+        dims = view.source.dims
+        matrix = self.placement.scales[i] * heading_turn(self.placement.headings[i], dims)
         where = np.zeros(dims)
         where[:2] = self.placement.positions[i]
-        positions = (played.positions[: self.n_frames] - center) @ (scale * turn).T + where
-        return Motion._adopt(positions, self.dt)
+        return self._played(i, matrix, where - matrix @ self._footprints[kind][0])
 
     def local_motion(self, i: int) -> Motion:
         """Object i's points in its own frame at each output frame: its walk played at its clock,
         about the template's center, scaled; `transforms` places them (a moving object's export)."""
-        played = template_view(self.templates[self.placement.templates[i]]).synthesize(self.walks[i])
-        center, _ = self._footprints[self.placement.templates[i]]
-        clock = self.paths.clocks[i] if self.paths is not None else np.arange(self.n_frames, dtype=float)
-        still = np.zeros(self.n_frames)
-        positions = world_positions(played.positions, center, self.placement.scales[i], clock, still,
-                                    np.zeros((self.n_frames, 2)))  # fmt: skip
-        return Motion._adopt(positions, self.dt)
+        if self._moves(i):
+            return self._at_clock(i, self.paths.clocks[i], np.zeros(self.n_frames), np.zeros((self.n_frames, 2)))
+        kind = self.placement.templates[i]
+        dims = template_view(self.templates[kind]).source.dims
+        scale = self.placement.scales[i]
+        return self._played(i, scale * np.eye(dims), -scale * self._footprints[kind][0])
+
+    def _moves(self, i: int) -> bool:
+        return self.paths is not None and bool(self.paths.moving[i])
+
+    def _played(self, i: int, matrix: np.ndarray, offset: np.ndarray) -> Motion:
+        """Object i's first n_frames frames played, each point p written as matrix @ p + offset
+        by the pass that plays it."""
+        view = template_view(self.templates[self.placement.templates[i]])
+        return Motion._adopt(view.played(self.walks[i], self.n_frames, matrix, offset), self.dt)
+
+    def _at_clock(self, i: int, clock, headings, positions) -> Motion:
+        """Object i played at `clock` (F,; source frames, linear between them), about its
+        template's center, scaled, turned by `headings` (F,) about +z and moved to `positions`
+        (F, 2): only the source frames the clock reaches are played."""
+        kind = self.placement.templates[i]
+        clock = np.asarray(clock, dtype=np.float64)
+        reached = int(np.floor(max(float(clock.max()), 0.0))) + 2  # at_clock reads frames below and above
+        local = template_view(self.templates[kind]).played(self.walks[i], reached)
+        out = np.empty((len(clock), *local.shape[1:]))
+        _placed_at_clock(local, np.asarray(self._footprints[kind][0], dtype=np.float64),
+                         float(self.placement.scales[i]), clock, np.asarray(headings, dtype=np.float64),
+                         np.asarray(positions, dtype=np.float64), out)  # fmt: skip
+        return Motion._adopt(out, self.dt)
 
     def transforms(self) -> tuple[np.ndarray, np.ndarray]:
         """(positions (objects, frames, 2) on the ground, headings (objects, frames) radians about
@@ -213,6 +233,29 @@ class SceneAnimation:
         """The largest share of frames on which two neighbours play source frames at most
         IN_STEP_FRAMES apart at the same time (in some part)."""
         return largest_in_step(self.source_frames(), self.neighbours())
+
+
+@numba.njit(cache=True, nogil=True)
+def _placed_at_clock(local, center, scale, clock, headings, positions, out):
+    """``movement.world_positions`` in one pass: `out` (F, N, D) is `local` (S, N, D) read at
+    `clock` (linear between the frames around each, the last frame held beyond it), about
+    `center`, scaled, turned by each frame's heading about +z and moved to each frame's position
+    (F, 2)."""
+    last, dims = local.shape[0] - 1, local.shape[2]
+    for t in range(out.shape[0]):
+        c = min(max(clock[t], 0.0), float(last))
+        below = min(int(np.floor(c)), max(last - 1, 0))
+        above = min(below + 1, last)
+        u = c - below
+        cos, sin = np.cos(headings[t]), np.sin(headings[t])
+        px, py = positions[t, 0], positions[t, 1]
+        for p in range(out.shape[1]):
+            x = ((1 - u) * local[below, p, 0] + u * local[above, p, 0] - center[0]) * scale
+            y = ((1 - u) * local[below, p, 1] + u * local[above, p, 1] - center[1]) * scale
+            out[t, p, 0] = cos * x - sin * y + px
+            out[t, p, 1] = sin * x + cos * y + py
+            if dims == 3:
+                out[t, p, 2] = ((1 - u) * local[below, p, 2] + u * local[above, p, 2] - center[2]) * scale
 
 
 def _constraint_json(constraint) -> dict:

@@ -272,14 +272,29 @@ def synthesize_layers(layers: GraphLayers, walk: LayeredWalk) -> Motion:
     blends two of them where the part's walk blends (``flockkit.graphs.blended_frames``), or reads
     the part's placed frames where its walk moves it. The smoothing is linear, so each part's
     share of it is made once per source frame and played the same way, summed per frame."""
+    return Motion._adopt(played_layers(layers, walk), layers.source.dt)
+
+
+def played_layers(layers: GraphLayers, walk: LayeredWalk, n_frames: int | None = None, matrix=None,
+                  offset=None) -> np.ndarray:  # fmt: skip
+    """The positions (F, N, D) :func:`synthesize_layers` plays, only the first `n_frames` (default:
+    all; frames past them are never made), each point p written as ``matrix @ p + offset`` where
+    `matrix` (D, D) and `offset` (D,) are given: an object placed in the world (scaled, turned and
+    moved) by the same pass that plays it, with no second pass over the frames."""
     if not isinstance(walk, LayeredWalk) or len(walk.walks) != layers.n_parts:
         raise ValidationError(f"synthesizing {layers.n_parts} layers needs a LayeredWalk of {layers.n_parts} walks")
     pairs = list(zip(layers.graphs, walk.walks))
     in_place = [_stays_in_place(graph, w) for graph, w in pairs]
     blends = [blended_frames(graph, w) if still else None for (graph, w), still in zip(pairs, in_place)]
     frames = min(len(b[0]) if b is not None else played_length(graph, w) for (graph, w), b in zip(pairs, blends))
+    if n_frames is not None:
+        frames = min(frames, int(n_frames))
+    mapped = matrix is not None
+    d = layers.source.dims
+    matrix = np.ascontiguousarray(matrix if mapped else np.eye(d), dtype=np.float64)
+    offset = np.ascontiguousarray(offset if mapped else np.zeros(d), dtype=np.float64)
     playback = _playback(layers)
-    k_parts, d = layers.n_parts, layers.source.dims
+    k_parts = layers.n_parts
     # per frame and part: the first item of the frame blended into (or played), of the frame
     # blended out of, and the weight of the first; the same for the part's share of the seams
     new_row, old_row = np.empty((frames, k_parts), dtype=np.int64), np.empty((frames, k_parts), dtype=np.int64)
@@ -309,18 +324,20 @@ def synthesize_layers(layers: GraphLayers, walk: LayeredWalk) -> Motion:
     moving = np.concatenate(moving) if moving else np.empty((0, d))
     positions = np.empty((frames, layers.source.n_agents, d))
     _play(playback.items, moving, part_moving, new_row, old_row, weight, share_moving, share_new, share_old,
-              playback.runs, playback.offset, playback.points, playback.local, playback.first, positions)  # fmt: skip
-    return Motion._adopt(positions, layers.source.dt)
+          playback.runs, playback.offset, playback.points, playback.local, playback.first, mapped, matrix, offset,
+          positions)  # fmt: skip
+    return positions
 
 
 @numba.njit(cache=True, nogil=True)
 def _play(items, moving, part_moving, new_row, old_row, weight, share_moving, share_new, share_old, runs, offset,
-          points, local, first, out):  # fmt: skip
+          points, local, first, mapped, matrix, shift, out):  # fmt: skip
     """Write every frame of `out` (T, N, D): part k's points (``points[first[k]:first[k + 1]]``)
     read their items, row ``new_row[t, k] + local`` of `items` (of `moving` where
     ``part_moving[k]``), blended as ``(1 - w) * old + w * new`` with the row from ``old_row``
     where the part's weight w is below 1; the smoothed points (the last group) read `offset` plus
-    every part's share, summed in `runs` (part, first, stop, first row of the share) order.
+    every part's share, summed in `runs` (part, first, stop, first row of the share) order. Where
+    `mapped`, each frame is then mapped to ``matrix @ p + shift`` while it is still in cache.
 
     It works on flat views and spells out D = 3 (a mesh's case): a loop over the coordinates
     there ran at half the speed. It runs on one thread: it moves the output's bytes about as fast
@@ -331,6 +348,28 @@ def _play(items, moving, part_moving, new_row, old_row, weight, share_moving, sh
     for t in range(weight.shape[0]):
         _play_frame(items, moving, part_moving, new_row, old_row, weight, share_moving, share_new, share_old, runs,
                     offset, points, local, first, flat, smoothed, t, n, dims)  # fmt: skip
+        if mapped:
+            affine(flat, t * n * dims, (t + 1) * n * dims, dims, matrix, shift)
+
+
+@numba.njit(cache=True, nogil=True)
+def affine(flat, start, stop, dims, matrix, shift):
+    """Map the points of ``flat[start:stop]`` (D coordinates each) to ``matrix @ p + shift``, in
+    place."""
+    if dims == 3:
+        m00, m01, m02 = matrix[0, 0], matrix[0, 1], matrix[0, 2]
+        m10, m11, m12 = matrix[1, 0], matrix[1, 1], matrix[1, 2]
+        m20, m21, m22 = matrix[2, 0], matrix[2, 1], matrix[2, 2]
+        for o in range(start, stop, 3):
+            x, y, z = flat[o], flat[o + 1], flat[o + 2]
+            flat[o] = m00 * x + m01 * y + m02 * z + shift[0]
+            flat[o + 1] = m10 * x + m11 * y + m12 * z + shift[1]
+            flat[o + 2] = m20 * x + m21 * y + m22 * z + shift[2]
+    else:
+        for o in range(start, stop, 2):
+            x, y = flat[o], flat[o + 1]
+            flat[o] = matrix[0, 0] * x + matrix[0, 1] * y + shift[0]
+            flat[o + 1] = matrix[1, 0] * x + matrix[1, 1] * y + shift[1]
 
 
 @numba.njit(cache=True, nogil=True)

@@ -7,10 +7,10 @@ import attrs
 import numpy as np
 
 from ..errors import ValidationError
-from ..graphs import MotionGraph, synthesize_graph
+from ..graphs import MotionGraph, played_positions, synthesize_graph
 from ..motion import Motion
 from .features import Features
-from .layers import GraphLayers, LayeredWalk, synthesize_layers
+from .layers import GraphLayers, LayeredWalk, affine, played_layers, synthesize_layers
 
 
 @attrs.frozen(eq=False)
@@ -63,6 +63,19 @@ class TemplateView:
 
     def synthesize(self, walk) -> Motion:
         return synthesize_layers(self.template, walk) if self.layered else synthesize_graph(self.template, walk)
+
+    def played(self, walk, n_frames: int | None = None, matrix=None, offset=None) -> np.ndarray:
+        """(F, N, D): the first `n_frames` frames (default: all) that `walk` plays, frames past
+        them never made, each point p mapped to ``matrix @ p + offset`` where they are given (an
+        object placed in the world) as it is written."""
+        if self.layered:
+            return played_layers(self.template, walk, n_frames, matrix, offset)
+        positions = np.ascontiguousarray(played_positions(self.template, walk, n_frames))
+        if matrix is not None:
+            d = positions.shape[2]
+            matrix, offset = (np.ascontiguousarray(a, dtype=np.float64) for a in (matrix, offset))
+            affine(positions.reshape(-1), 0, positions.size, d, matrix, offset)
+        return positions
 
 
 def template_view(template) -> TemplateView:
