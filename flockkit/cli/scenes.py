@@ -55,9 +55,10 @@ def _cmd_scene(args) -> int:
     print(
         f"wrote {', '.join(str(folder / name) for name in names)}: {animation.placement.n_objects} objects, "
         f"{animation.n_frames} frames; neighbours in step (within {report['in_step_frames']} frame) at most "
-        f"{report['in_step_before']:.1%} of frames before de-synchronisation, {report['in_step_after']:.1%} after; "
-        f"pairs in step over 5% of frames {report['pairs_in_step_before']:.1%} before, "
-        f"{report['pairs_in_step_after']:.1%} after"
+        f"{report['in_step_before']:.1%} of frames after the first walks ({report['first_rounds']} rounds), "
+        f"{report['in_step_after']:.1%} after {report['walked_again']} objects were walked again; pairs in step "
+        f"over 5% of frames {report['pairs_in_step_before']:.1%} after the first walks, "
+        f"{report['pairs_in_step_after']:.1%} at the end"
     )
     return 0
 

@@ -46,8 +46,10 @@ class _Motions:
 class SceneAnimation:
     """A synthesized scene: the templates, where each object stands (`placement`), each object's
     walk (a Walk, or a LayeredWalk for layered templates), `n_frames` output frames `dt` apart,
-    and the constraints it followed. `report`, when it comes from Scene.synthesize, holds before
-    and after de-synchronisation the largest share of frames two neighbours play in step
+    and the constraints it followed. `report`, when it comes from Scene.synthesize, holds after
+    the first walks (made in rounds, each object avoiding the frames of its neighbours walked
+    before it: ``first_rounds``) and at the end (after the pairs still in step were walked again:
+    ``walked_again`` objects) the largest share of frames two neighbours play in step
     (``in_step_before``, ``in_step_after``: source frames at most ``in_step_frames`` apart in some
     part) and the share of neighbour pairs in step on more than 5% of frames
     (``pairs_in_step_before``, ``pairs_in_step_after``); see :meth:`neighbours`; and over the

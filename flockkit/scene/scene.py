@@ -275,7 +275,9 @@ class Scene:
         return np.where(lengths > 1, world / np.maximum(lengths, 1e-300), world)  # several flows: at most 1
 
     def synthesize(self, progress: bool = False) -> SceneAnimation:
-        """Place, walk every object's parts after its targets, then de-synchronise neighbours."""
+        """Place, walk every object's parts after its targets (in rounds, each object avoiding
+        the frames of its neighbours walked before it), then walk again the neighbours still in
+        step."""
         from .._progress import progress_bar
 
         placement = self.place()
