@@ -8,9 +8,9 @@ frame10); each must be a regular file, and a link in a folder must stay inside i
 from __future__ import annotations
 
 import glob as globbing
-import math
 import os
 import re
+import threading
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -67,8 +67,10 @@ def read_sequence(pattern: str) -> tuple[np.ndarray, np.ndarray, str]:
     positions = np.empty((len(files), *points.shape))
     positions[0] = points
 
+    local = threading.local()  # each thread's buffer, read into frame after frame
+
     def read(t):
-        _read_later(files[t], files[0], positions[t], faces, known)
+        local.buffer = _read_later(files[t], files[0], positions[t], faces, known, getattr(local, "buffer", None))
 
     import numba
 
@@ -109,39 +111,70 @@ _MAX_VERTEX = 2**40  # far above any file's vertex count, far below numpy's int6
 # What the compiled pass found: the file read, or a file the line-by-line parser must read (a
 # field that is not a plain decimal number, a byte outside plain ASCII, another topology than
 # the first frame's, or anything that parser would refuse).
-_READ, _CAREFUL = 0, 1
-_NO_CORNERS = np.zeros(0, dtype=np.int64)
+_READ, _CAREFUL, _FULL = 0, 1, 2
+
+
+def _read_padded(file, buffer=None) -> tuple[np.ndarray, int]:
+    """(a buffer holding the bytes of the regular file `file` followed by :data:`_PAD` line ends,
+    the file's length): `buffer` where it is large enough, else a new one (the size checked
+    against the memory budget first), so that a thread reads frame after frame into one buffer,
+    with no copy of the bytes."""
+    fd = _files.open_regular(file)
+    with os.fdopen(fd, "rb", buffering=0) as handle:
+        size = os.fstat(fd).st_size
+        if buffer is None or len(buffer) < size + _PAD:
+            validate.allocation(size + size // 8 + _PAD, f"{file}: reading {size} bytes", itemsize=1)
+            buffer = np.empty(size + size // 8 + _PAD, dtype=np.uint8)  # room for later, larger frames
+        view = memoryview(buffer)
+        n = 0
+        while n < size:
+            got = handle.readinto(view[n:size])
+            if not got:
+                break
+            n += got
+    buffer[n : n + _PAD] = _LINE_END
+    return buffer, n
 
 
 def _read_first(file) -> tuple[np.ndarray, np.ndarray, tuple | None]:
     """The vertices (V, 3) and faces of the first frame, and the corners and corner counts of
     its faces as the compiled pass reads them (None where that pass could not read it: later
     frames then go through the line-by-line parser too)."""
-    data = _files.read_bytes(file)
-    buffer = np.frombuffer(data, dtype=np.uint8)
-    scan, powers = _compiled()
-    status, points, corners, counts = scan(buffer, np.empty((max(16, len(data) // 64), 3)), _NO_CORNERS,
-                                           _NO_CORNERS, False, *powers)  # fmt: skip
+    buffer, n = _read_padded(file)
+    status, points, corners, counts = _scan_alone(buffer, n)
     if status == _READ:
         return points, _faces(corners, counts), (corners, counts)
-    return (*_parse_obj(file, _text(file, data)), None)
+    return (*_parse_obj(file, _text(file, buffer[:n].tobytes())), None)
 
 
-def _read_later(file, first, out: np.ndarray, faces: np.ndarray, known) -> None:
-    """Read the frame `file` into `out` (V, 3); FileFormatError naming it if it is not an OBJ
-    file or its topology differs from `first`'s (`faces`)."""
-    data = _files.read_bytes(file)
+def _scan_alone(buffer, n) -> tuple:
+    """:func:`_scan` of a file read on its own (see :func:`_read_padded`), given room for its
+    vertices, corners and faces: (status, vertices, corners, corner counts)."""
+    rows = max(16, n // 32)  # enough for "v" lines of 32 bytes and "f" lines of 3 corners of 4 bytes
+    while True:
+        points, corners, counts = np.empty((rows, 3)), np.empty(3 * rows, dtype=np.int64), np.empty(rows, np.int64)
+        found = _compiled()(buffer, n, points, corners, counts, False)
+        if found[0] != _FULL:
+            return found
+        rows *= 2  # at most n // 2 + 1 vertices, faces or corners (a byte and a blank each)
+
+
+def _read_later(file, first, out: np.ndarray, faces: np.ndarray, known, buffer=None) -> np.ndarray:
+    """Read the frame `file` into `out` (V, 3) through `buffer` (see :func:`_read_padded`; the
+    buffer used is returned); FileFormatError naming it if it is not an OBJ file or its topology
+    differs from `first`'s (`faces`)."""
+    buffer, n = _read_padded(file, buffer)
     if known is not None:
-        scan, powers = _compiled()
-        if scan(np.frombuffer(data, dtype=np.uint8), out, *known, True, *powers)[0] == _READ:
-            return
-    points, polygons = _parse_obj(file, _text(file, data))
+        if _compiled()(buffer, n, out, *known, True)[0] == _READ:
+            return buffer
+    points, polygons = _parse_obj(file, _text(file, buffer[:n].tobytes()))
     if len(points) != len(out) or not np.array_equal(polygons, faces):
         raise FileFormatError(
             f"{file}: its topology differs from {first} ({len(points)} vertices and {len(polygons)} faces, against "
             f"{len(out)} and {len(faces)}); an OBJ sequence keeps one topology"
         )
     out[...] = points
+    return buffer
 
 
 def _text(file, data: bytes) -> str:
@@ -188,18 +221,24 @@ def _powers_of_five() -> tuple[np.ndarray, np.ndarray]:
 
 
 def _compiled():
-    """(:func:`_scan` and its helpers compiled by numba on first use and cached on disk, the
-    table of powers of five). They are compiled from this module's source, not from the
-    functions' bytecode, which a coverage-guided fuzzer (atheris) rewrites with calls numba
-    cannot compile; the bounds are checked, as the bytes are untrusted."""
+    """:func:`_scan` and its helpers, compiled by numba on first use and cached on disk (the
+    table of powers of five, :func:`_powers_of_five`, a constant of the compiled code). They are
+    compiled from this module's source, not from the functions' bytecode, which a
+    coverage-guided fuzzer (atheris) rewrites with calls numba cannot compile. Numba's bounds
+    checks are off: every index into the file's bytes stays inside them and their padding
+    (:func:`_scan` says why), and every index into another array is checked where it is
+    computed."""
     global _COMPILED
     if _COMPILED is None:
         import types
 
         import numba
+        from numba.cpython.unsafe import numbers
 
-        names = ("_multiply", "_leading_zeros", "_eisel_lemire", "_number", "_scan")
+        names = ("_multiply", "_eisel_lemire", "_long_number", "_word", "_digit_run", "_scan")
         namespace = dict(globals())
+        namespace["_leading_zeros"], namespace["_trailing_zeros"] = numbers.leading_zeros, numbers.trailing_zeros
+        namespace["_FIVE_HIGH"], namespace["_FIVE_LOW"] = _powers_of_five()  # constants of the compiled code
         try:
             code = compile(Path(__file__).read_text(encoding="utf-8"), __file__, "exec")
             found = {c.co_name: c for c in code.co_consts if isinstance(c, types.CodeType) and c.co_name in names}
@@ -209,18 +248,20 @@ def _compiled():
             function = types.FunctionType(found[name], namespace, name)
             function.__module__, function.__qualname__ = __name__, name
             function.__doc__ = globals()[name].__doc__
-            inline = "always" if name == "_number" else "never"  # inlined into its loop: 10% faster
-            namespace[name] = numba.njit(cache=True, nogil=True, boundscheck=True, inline=inline)(function)
-        _COMPILED = namespace["_scan"], _powers_of_five()
+            inline = "always" if name in ("_word", "_digit_run") else "never"  # inlined into their loops
+            namespace[name] = numba.njit(cache=True, nogil=True, boundscheck=False, inline=inline)(function)
+        _COMPILED = namespace["_scan"]
     return _COMPILED
 
 
 _COMPILED = None
+_FIVE_HIGH = _FIVE_LOW = None  # the table of powers of five, given to the compiled code only
 # Constants of the compiled pass, as numba reads them (64-bit unsigned words where it computes
 # with them).
 _U32, _U64_MASK32 = np.uint64(32), np.uint64(0xFFFFFFFF)
-_U1, _U63 = np.uint64(1), np.uint64(63)
+_U1, _U3, _U8, _U16, _U63 = np.uint64(1), np.uint64(3), np.uint64(8), np.uint64(16), np.uint64(63)
 _PRECISION_MASK = np.uint64(0xFFFFFFFFFFFFFFFF >> 55)  # the bits below a double's 53 and 2 more
+_FRACTION = np.uint64(2**52 - 1)  # a double's 52 stored bits of its mantissa
 # Clinger's fast path: a mantissa of at most 2**53 and 10**e, |e| <= 22, are exact doubles, so
 # one product or quotient rounds once, as a correctly rounded reading does.
 _EXACT_MANTISSA = np.uint64(2**53)
@@ -229,6 +270,28 @@ _POWERS = 10.0 ** np.arange(23)
 # word, and Eisel and Lemire's conversion is exact for all of them.
 _KEPT_DIGITS = 19
 _U0, _U10 = np.uint64(0), np.uint64(10)
+# Eight bytes at a time (:func:`_digit_run`): the bytes' high and low halves, '0' in every byte,
+# 6 in every byte; 10**k for the k <= 8 digits of a run.
+_HIGH_HALVES, _LOW_HALVES = np.uint64(0xF0F0F0F0F0F0F0F0), np.uint64(0x0F0F0F0F0F0F0F0F)
+_ZEROS, _SIXES = np.uint64(0x3030303030303030), np.uint64(0x0606060606060606)
+_SECOND_BYTES = np.uint64(0x000000FF000000FF)
+_TIMES_100, _TIMES_1 = np.uint64(100 + (1000000 << 32)), np.uint64(1 + (10000 << 32))
+_RUN_POWERS = 10 ** np.arange(9, dtype=np.uint64)
+# Bytes after a file's bytes in the buffer the compiled pass reads: line ends, on which every scan
+# stops, so that no scan needs to test for the end (an 8-byte word read at the end stays inside).
+_PAD = 16
+_LINE_END = 10
+
+
+def _leading_zeros(w):
+    """The leading zero bits of a 64-bit word (64 for zero); compiled as LLVM's ctlz."""
+    return 64 - int(w).bit_length()
+
+
+def _trailing_zeros(w):
+    """The trailing zero bits of a 64-bit word (64 for zero); compiled as LLVM's cttz."""
+    w = int(w)
+    return 64 if w == 0 else (w & -w).bit_length() - 1
 
 
 def _multiply(a, b):
@@ -239,31 +302,20 @@ def _multiply(a, b):
     return p11 + (p01 >> _U32) + (p10 >> _U32) + (middle >> _U32), (middle << _U32) | (p00 & _U64_MASK32)
 
 
-def _leading_zeros(w):
-    """The leading zero bits of a nonzero 64-bit word."""
-    count = 0
-    for bits in (32, 16, 8, 4, 2, 1):
-        if w >> np.uint64(64 - bits) == 0:
-            count += bits
-            w = w << np.uint64(bits)
-    return count
-
-
-def _eisel_lemire(mantissa, q, power_high, power_low):
+def _eisel_lemire(mantissa, q):
     """The double nearest mantissa * 10**q (mantissa a nonzero 64-bit word of at most 19
     digits), ties to even, as Python's float reads it: Eisel and Lemire's conversion (see
-    :func:`_powers_of_five`)."""
+    :func:`_powers_of_five`), the double built from its bits."""
     if q < -342:
         return 0.0
     if q > 308:
         return np.inf
-    w = mantissa
-    shifted = _leading_zeros(w)
-    w = w << np.uint64(shifted)
-    index = q + 342
-    high, low = _multiply(w, power_high[index])
+    shifted = np.int64(_leading_zeros(mantissa))
+    w = mantissa << np.uint64(shifted)
+    index = q + 342  # in 0..650, the table's rows
+    high, low = _multiply(w, _FIVE_HIGH[index])
     if high & _PRECISION_MASK == _PRECISION_MASK:  # the next 64 bits of the power may carry into these
-        more = _multiply(w, power_low[index])[0]
+        more = _multiply(w, _FIVE_LOW[index])[0]
         low = low + more
         if more > low:
             high = high + _U1
@@ -271,12 +323,12 @@ def _eisel_lemire(mantissa, q, power_high, power_low):
     shift = np.uint64(upper + 9)
     bits = high >> shift
     exponent = (((152170 + 65536) * q) >> 16) + 63 + upper - shifted + 1023
-    if exponent <= 0:  # a subnormal, or zero
+    if exponent <= 0:  # a subnormal, or zero: its bits are the rounded mantissa's
         if 1 - exponent >= 64:
             return 0.0
         bits = bits >> np.uint64(1 - exponent)
         bits = (bits + (bits & _U1)) >> _U1
-        return math.ldexp(float(bits), -1074)
+        return np.uint64(bits).view(np.float64)
     if low <= _U1 and -4 <= q <= 23 and bits & np.uint64(3) == _U1 and bits << shift == high:
         bits = bits & ~_U1  # exactly halfway: to even
     bits = (bits + (bits & _U1)) >> _U1
@@ -285,17 +337,14 @@ def _eisel_lemire(mantissa, q, power_high, power_low):
         exponent += 1
     if exponent >= 2047:
         return np.inf
-    return math.ldexp(float(bits), exponent - 1075)
+    return np.uint64((bits & _FRACTION) | (np.uint64(exponent) << np.uint64(52))).view(np.float64)
 
 
-def _number(data, i, n, power_high, power_low):
-    """The number whose field starts at data[i]: (the index after it, its value, whether it is a
-    plain decimal number ``[+-] digits [. digits] [(e|E) [+-] digits]`` with a digit in the
-    mantissa, ending at a blank or a line's end, whose value Python's float gives finite and
-    this reads exactly). Digits are read as integers; Clinger's fast path rounds the easy ones,
-    Eisel and Lemire's conversion the others (17 digits, large exponents); a mantissa of more
-    than 19 digits is read as its first 19 and, where it has more nonzero ones, as the next
-    mantissa too, and accepted where both give the same double."""
+def _long_number(data, i, n):
+    """(the index after it, its value, whether it is read) of a number of more than 19
+    significant digits starting at data[i], a byte at a time (data[:n] the file), in the form
+    :func:`_scan` reads: the mantissa is read as its first 19 digits and, where it has more
+    nonzero ones, as the next mantissa too, and accepted where both give the same double."""
     negative = False
     if i < n and (data[i] == 43 or data[i] == 45):
         negative = data[i] == 45
@@ -359,123 +408,216 @@ def _number(data, i, n, power_high, power_low):
     elif not inexact and mantissa <= _EXACT_MANTISSA and -22 <= scale <= 22:
         value = float(mantissa) * _POWERS[scale] if scale >= 0 else float(mantissa) / _POWERS[-scale]
     else:
-        value = _eisel_lemire(mantissa, scale, power_high, power_low)
-        if inexact and _eisel_lemire(mantissa + _U1, scale, power_high, power_low) != value:
+        value = _eisel_lemire(mantissa, scale)
+        if inexact and _eisel_lemire(mantissa + _U1, scale) != value:
             return i, 0.0, False
         if value == np.inf:
             return i, 0.0, False
     return i, -value if negative else value, True
 
 
-def _scan(data, out, known_corners, known_counts, compare, power_high, power_low):
-    """One pass over an OBJ file's bytes: (status, vertices (V, 3), corners, corner counts).
+def _word(data, i):
+    """The 8 bytes at data[i] as one little-endian 64-bit word (one load: the index unsigned,
+    so that no test for a negative one comes between the bytes)."""
+    j = np.uint64(i)
+    return (np.uint64(data[j]) | np.uint64(data[j + _U1]) << _U8 | np.uint64(data[j + np.uint64(2)]) << _U16
+            | np.uint64(data[j + _U3]) << np.uint64(24) | np.uint64(data[j + np.uint64(4)]) << _U32
+            | np.uint64(data[j + np.uint64(5)]) << np.uint64(40) | np.uint64(data[j + np.uint64(6)]) << np.uint64(48)
+            | np.uint64(data[j + np.uint64(7)]) << np.uint64(56))  # fmt: skip
+
+
+def _digit_run(w):
+    """(k, the number the k digits write) for the k <= 8 digits that the 8 bytes of the word `w`
+    (see :func:`_word`) begin with: the first byte that is not a digit found from the bits of
+    all 8 at once, and the digits converted with three multiplications (Lemire's "parse eight
+    digits" of fast_float), the bytes after them shifted out and zeros shifted in before them."""
+    # a byte is a digit where its high half is 3 and its low half stays below 10 (adding 6 keeps
+    # the high half 3); a carry out of a byte only comes from one that is not a digit
+    other = ((w & _HIGH_HALVES) ^ _ZEROS) | (((w + _SIXES) & _HIGH_HALVES) ^ _ZEROS)
+    k = np.int64(_trailing_zeros(other) >> _U3)
+    if k == 0:
+        return 0, _U0
+    d = (w & _LOW_HALVES) << np.uint64(64 - 8 * k)
+    d = d * _U10 + (d >> _U8)
+    d = ((d & _SECOND_BYTES) * _TIMES_100 + ((d >> _U16) & _SECOND_BYTES) * _TIMES_1) >> _U32
+    return k, d & _U64_MASK32
+
+
+def _scan(data, n, out, corners, counts, compare):
+    """One pass over an OBJ file's bytes, data[:n]: (status, vertices (V, 3), corners, corner
+    counts).
 
     Lines are split at \\n and \\r and fields at spaces and tabs, as the line-by-line parser
     splits plain ASCII (a leading UTF-8 byte order mark skipped, as it drops it); any other
     control character or a byte above 126 gives up (_CAREFUL). A line whose first field is ``v``
-    must hold three numbers :func:`_number` reads (the rest of the line is ignored, as that parser
-    ignores it), and one whose first field is ``f`` three or more corners (``[+-] digits``,
-    optionally followed by ``/`` and anything; negative ones count back from the vertices so
-    far), else it gives up. Vertices are written into `out` (grown where it is full, unless
-    `compare`). Without `compare` the faces' corners and counts are returned; with it, the
-    vertices must fill `out` exactly and the faces be `known_corners` and `known_counts`, else it
-    gives up."""
-    n = len(data)
+    must hold three plain decimal numbers (``[+-] digits [. digits] [(e|E) [+-] digits]`` with a
+    digit in the mantissa, whose value Python's float gives finite; the rest of the line is
+    ignored, as that parser ignores it), and one whose first field is ``f`` three or more corners
+    (``[+-] digits``, optionally followed by ``/`` and anything; negative ones count back from
+    the vertices so far), else it gives up. Vertices are written into `out`, and without
+    `compare` the faces' corners and corner counts into `corners` and `counts` (_FULL where one
+    of them is full: the caller gives larger ones); with `compare`, the vertices must fill `out`
+    exactly and the faces be `corners` and `counts`, else it gives up. Nothing is allocated, so
+    that no array changes in the loop (numba counts references to an array that does).
+
+    Numbers: digits are read 8 at a time (:func:`_digit_run`) into an integer mantissa;
+    Clinger's fast path rounds the easy ones (mantissa up to 2**53, exponent up to 22), Eisel
+    and Lemire's conversion the others (17 digits, large exponents); a number of more than 19
+    significant digits goes to :func:`_long_number`.
+
+    Bounds: data[n : n + _PAD] must be line ends (checked first). Every loop over the bytes stops
+    at a line end, so none passes index n; a line's first byte is looked at only below n, and
+    the byte after it then at most at n; a word (:func:`_word`) is read from an index at most n.
+    Rows of `out`, `corners` and `counts` are written or read after comparing the count with
+    their length."""
     points = out
+    if n < 0 or len(data) < n + _PAD or points.shape[1] != 3:
+        return _CAREFUL, points[:0], corners[:0], counts[:0]
+    for k in range(n, n + _PAD):
+        if data[k] != _LINE_END:
+            return _CAREFUL, points[:0], corners[:0], counts[:0]
     count = 0
-    corners = np.empty(0 if compare else max(16, n // 8), dtype=np.int64)
-    counts = np.empty(0 if compare else max(16, n // 32), dtype=np.int64)
     n_corners, n_faces, largest = 0, 0, -1
     i = 3 if n >= 3 and data[0] == 0xEF and data[1] == 0xBB and data[2] == 0xBF else 0
     while i < n:
-        while i < n and (data[i] == 32 or data[i] == 9):
-            i += 1
-        if i >= n:
-            break
         c = data[i]
+        while c == 32 or c == 9:
+            i += 1
+            c = data[i]
         if c == 10 or c == 13:
             i += 1
             continue
-        kind = 0  # the line's first field: 1 "v", 2 "f", 0 another
-        if (c == 118 or c == 102) and (
-            i + 1 >= n or data[i + 1] == 32 or data[i + 1] == 9 or data[i + 1] == 10 or data[i + 1] == 13
-        ):
-            kind = 1 if c == 118 else 2
+        after = data[i + 1]  # i < n here: the line holds a byte other than a line end
+        if c == 118 and (after == 32 or after == 9 or after == 10 or after == 13):  # "v"
             i += 1
-        if kind == 1:
             if count == len(points):
-                if compare:
-                    return _CAREFUL, points[:0], corners[:0], counts[:0]
-                grown = np.empty((2 * count, 3))
-                grown[:count] = points
-                points = grown
+                return _CAREFUL if compare else _FULL, points[:0], corners[:0], counts[:0]
             for axis in range(3):
-                while i < n and (data[i] == 32 or data[i] == 9):
+                c = data[i]
+                while c == 32 or c == 9:
                     i += 1
-                i, value, good = _number(data, i, n, power_high, power_low)
-                if not good:
+                    c = data[i]
+                start = i
+                negative = c == 45
+                if c == 43 or c == 45:
+                    i += 1
+                mantissa, begin, point = _U0, i, -1
+                while True:  # the digits, 8 at a time, and one point among them
+                    k, run = _digit_run(_word(data, i))
+                    mantissa = mantissa * _RUN_POWERS[k] + run  # wraps past 19 digits, which go elsewhere
+                    i += k
+                    if k < 8:
+                        if data[i] != 46 or point >= 0:
+                            break
+                        point = i
+                        i += 1
+                digits, scale = i - begin, 0
+                if point >= 0:
+                    digits, scale = digits - 1, point + 1 - i
+                if digits == 0:
                     return _CAREFUL, points[:0], corners[:0], counts[:0]
-                points[count, axis] = value
+                c = data[i]
+                if c == 101 or c == 69:  # "e" or "E"
+                    i += 1
+                    sign = 1
+                    c = data[i]
+                    if c == 43 or c == 45:
+                        sign = -1 if c == 45 else 1
+                        i += 1
+                    exponent, exponent_digits = 0, 0
+                    c = data[i]
+                    while 48 <= c <= 57:
+                        if exponent < 100_000:
+                            exponent = exponent * 10 + (c - 48)
+                        exponent_digits += 1
+                        i += 1
+                        c = data[i]
+                    if exponent_digits == 0:
+                        return _CAREFUL, points[:0], corners[:0], counts[:0]
+                    scale += sign * exponent
+                if not (c == 32 or c == 9 or c == 10 or c == 13):  # more in the field: the careful parser judges it
+                    return _CAREFUL, points[:0], corners[:0], counts[:0]
+                if digits > _KEPT_DIGITS:  # leading zeros aside?
+                    j = begin
+                    while data[j] == 48 or data[j] == 46:
+                        digits -= data[j] == 48
+                        j += 1
+                if digits > _KEPT_DIGITS:
+                    i, value, good = _long_number(data, start, n)
+                    if not good:
+                        return _CAREFUL, points[:0], corners[:0], counts[:0]
+                    points[count, axis] = value
+                    continue
+                if mantissa == 0:
+                    value = 0.0
+                elif mantissa <= _EXACT_MANTISSA and -22 <= scale <= 22:
+                    value = float(mantissa) * _POWERS[scale] if scale >= 0 else float(mantissa) / _POWERS[-scale]
+                else:
+                    value = _eisel_lemire(mantissa, scale)
+                    if value == np.inf:
+                        return _CAREFUL, points[:0], corners[:0], counts[:0]
+                points[count, axis] = -value if negative else value
             count += 1
-        elif kind == 2:
+        elif c == 102 and (after == 32 or after == 9 or after == 10 or after == 13):  # "f"
+            i += 1
             own = 0
             while True:
-                while i < n and (data[i] == 32 or data[i] == 9):
+                c = data[i]
+                while c == 32 or c == 9:
                     i += 1
-                if i >= n or data[i] == 10 or data[i] == 13:
+                    c = data[i]
+                if c == 10 or c == 13:
                     break
-                negative = False
-                if data[i] == 43 or data[i] == 45:
-                    negative = data[i] == 45
+                negative = c == 45
+                if c == 43 or c == 45:
                     i += 1
-                index, digits = 0, 0
-                while i < n and 48 <= data[i] <= 57:
-                    if index <= _MAX_VERTEX:
-                        index = index * 10 + (data[i] - 48)
-                    digits += 1
-                    i += 1
-                if i < n and data[i] == 47:  # "/" and texture or normal numbers, which are ignored
-                    while i < n and 32 < data[i] <= 126:
-                        i += 1
-                if digits == 0 or index == 0 or index > _MAX_VERTEX:
+                index, begin = 0, i
+                while True:  # at most 16 digits: a 17th is not a field's end below
+                    k, run = _digit_run(_word(data, i))
+                    index = index * np.int64(_RUN_POWERS[k]) + np.int64(run)
+                    i += k
+                    if k < 8 or i - begin >= 16:
+                        break
+                if index == 0 or index > _MAX_VERTEX:
                     return _CAREFUL, points[:0], corners[:0], counts[:0]
-                if i < n and not (data[i] == 32 or data[i] == 9 or data[i] == 10 or data[i] == 13):
+                if data[i] == 47:  # "/" and texture or normal numbers, which are ignored
+                    while 32 < data[i] <= 126:
+                        i += 1
+                c = data[i]
+                if not (c == 32 or c == 9 or c == 10 or c == 13):
                     return _CAREFUL, points[:0], corners[:0], counts[:0]
                 corner = count - index if negative else index - 1
                 if corner < 0:
                     return _CAREFUL, points[:0], corners[:0], counts[:0]
                 largest = max(largest, corner)
+                if n_corners >= len(corners):
+                    return _CAREFUL if compare else _FULL, points[:0], corners[:0], counts[:0]
                 if compare:
-                    if n_corners >= len(known_corners) or known_corners[n_corners] != corner:
+                    if corners[n_corners] != corner:
                         return _CAREFUL, points[:0], corners[:0], counts[:0]
                 else:
-                    if n_corners == len(corners):
-                        more = np.empty(2 * n_corners, dtype=np.int64)
-                        more[:n_corners] = corners
-                        corners = more
                     corners[n_corners] = corner
                 n_corners += 1
                 own += 1
             if own < 3:
                 return _CAREFUL, points[:0], corners[:0], counts[:0]
+            if n_faces >= len(counts):
+                return _CAREFUL if compare else _FULL, points[:0], corners[:0], counts[:0]
             if compare:
-                if n_faces >= len(known_counts) or known_counts[n_faces] != own:
+                if counts[n_faces] != own:
                     return _CAREFUL, points[:0], corners[:0], counts[:0]
             else:
-                if n_faces == len(counts):
-                    more = np.empty(2 * n_faces, dtype=np.int64)
-                    more[:n_faces] = counts
-                    counts = more
                 counts[n_faces] = own
             n_faces += 1
-        while i < n and data[i] != 10 and data[i] != 13:  # the rest of the line: plain ASCII or tabs
-            c = data[i]
+        c = data[i]
+        while c != 10 and c != 13:  # the rest of the line: plain ASCII or tabs
             if c > 126 or (c < 32 and c != 9):
                 return _CAREFUL, points[:0], corners[:0], counts[:0]
             i += 1
+            c = data[i]
     if count == 0 or largest >= count:
         return _CAREFUL, points[:0], corners[:0], counts[:0]
-    if compare and (count != len(points) or n_faces != len(known_counts) or n_corners != len(known_corners)):
+    if compare and (count != len(points) or n_faces != len(counts) or n_corners != len(corners)):
         return _CAREFUL, points[:0], corners[:0], counts[:0]
     return _READ, points[:count], corners[:n_corners], counts[:n_faces]
 

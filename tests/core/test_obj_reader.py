@@ -88,12 +88,11 @@ def test_numbers_written_every_way_read_as_pythons_float_reads_them(tmp_path, se
 def compiled(path, known=None):
     """What the compiled pass reads of `path`: alone, or as a later frame of one read as `known`
     (its vertex count, corners and counts)."""
-    scan, powers = obj._compiled()
-    data = np.frombuffer(path.read_bytes(), np.uint8)
+    data, n = obj._read_padded(path)
     if known is None:
-        return scan(data, np.empty((4, 3)), obj._NO_CORNERS, obj._NO_CORNERS, False, *powers)
+        return obj._scan_alone(data, n)
     count, corners, counts = known
-    return scan(data, np.empty((count, 3)), corners, counts, True, *powers)
+    return obj._compiled()(data, n, np.empty((count, 3)), corners, counts, True)
 
 
 def assert_same_bits(found, expected):
