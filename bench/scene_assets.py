@@ -6,8 +6,14 @@ arrow keyframed 0.3 -> 0.9 -> 0.3 over the clip), built as ``flockkit build --la
 0.8, 0.6 at each quarter), ``headings = "aligned"``, the region 3 footprint diagonals a side per
 object. Prints the seconds of each stage: reading and building the layers (once), placement,
 targets, the walks per template part (first pass), de-synchronisation (rounds of walks again),
-and the synthesis of vertices (SceneAnimation.motion, timed over a sample of objects and scaled
-to all of them; a scene is never held in memory whole), with ``--profile`` the functions where
+and the synthesis of vertices (SceneAnimation.motion: the object's walk played and placed in the
+world, scaled, turned and moved, by one compiled pass, only the scene's frames; timed over a
+sample of objects, the best of 3 calls each, and scaled to all of them, plus what is made once
+per template and process, its "set-up"; a scene is never held in memory whole) in
+milliseconds per second of output per 1 000 vertices against its peer (flockkit.synthesize, every
+frame the walk plays, then placed by numpy: one matrix product over all points and frames and
+the offset added in place) and the largest difference between the two relative to the object's
+size, with ``--profile`` the functions where
 the walks spend their time (cProfile, one job), with ``--check N`` N objects walked by the
 annotated walk's compiled loops and by its Python reference, which must be the same.
 
@@ -28,6 +34,7 @@ from pathlib import Path
 
 import attrs
 import numpy as np
+from timing import timed  # bench/timing.py: the scripts run from bench/
 
 import flockkit
 from flockkit.scene import Arrow, FlowField
@@ -99,12 +106,23 @@ def stages(scene: flockkit.Scene, sample: int) -> dict:
     times["de-sync"], clock = time.perf_counter() - clock, time.perf_counter()
     times["cpu"] = cpu_seconds() - cpu  # placement to de-sync, user + system, workers included
     animation = attrs.evolve(animation, walks=walks)
+    # once per template and process: the compiled pass loaded from its cache and what a template's
+    # synthesis reads whatever the walk (its parts' sources, seam shares) made
+    clock = time.perf_counter()
+    for kind in range(len(scene.templates)):
+        members = np.flatnonzero(placement.templates == kind)
+        if len(members):
+            animation.motion(int(members[0]))
+    setup = time.perf_counter() - clock
     picked = np.linspace(0, placement.n_objects - 1, min(sample, placement.n_objects)).round().astype(int)
-    vertices = 0
+    vertices, took, peer, gap = 0, 0.0, 0.0, 0.0
     for i in picked:
-        vertices += animation.motion(int(i)).n_agents
-    took = time.perf_counter() - clock
-    times["synthesis (scaled)"] = took * placement.n_objects / len(picked)
+        ours, seconds = timed(lambda i=int(i): animation.motion(i), repeat=3)
+        plain, peer_seconds = timed(lambda i=int(i): placed_plainly(animation, i), repeat=3)
+        vertices, took, peer = vertices + ours.n_agents, took + seconds, peer + peer_seconds
+        gap = max(gap, float(np.abs(ours.positions - plain).max() / np.ptp(ours.positions[0], axis=0).max()))
+    times["synthesis set-up"] = setup
+    times["synthesis (scaled)"] = setup + took * placement.n_objects / len(picked)
     times["first rounds"], times["walked again"] = rounds, again
     times["in step before"], times["pairs before"] = before
     times["in step after"], times["pairs after"] = (
@@ -112,7 +130,29 @@ def stages(scene: flockkit.Scene, sample: int) -> dict:
         pairs_in_step(frames, neighbours),
     )
     times["ms per output s per 1k vertices"] = took * 1000 / (scene.duration * vertices / 1000)
+    times["peer ms per output s per 1k vertices"] = peer * 1000 / (scene.duration * vertices / 1000)
+    times["max difference / size"] = gap
     return times
+
+
+def placed_plainly(animation, i: int) -> np.ndarray:
+    """The peer of ``animation.motion(i)`` for an object that stands: the object's walk played
+    by flockkit.synthesize (every frame it plays), cut to the scene's frames, then placed by numpy
+    as one matrix product over all points of all frames, ``(p - center) @ (scale turn).T + where``,
+    and the offset added in place."""
+    from flockkit.scene.placement import heading_turn
+
+    placement, kind = animation.placement, animation.placement.templates[i]
+    template = animation.templates[kind]
+    played = flockkit.synthesize(template, animation.walks[i]).positions[: animation.n_frames]
+    d = played.shape[2]
+    center = footprint(template)[0]
+    matrix = placement.scales[i] * heading_turn(placement.headings[i], d)
+    where = np.zeros(d)
+    where[:2] = placement.positions[i]
+    out = played.reshape(-1, d) @ matrix.T
+    out += where - matrix @ center
+    return out.reshape(played.shape)
 
 
 def check(scene: flockkit.Scene, objects: int) -> str:
