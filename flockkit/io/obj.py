@@ -27,26 +27,27 @@ UP_AXIS = "y"
 
 
 def _natural(path: str):
-    return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", Path(path).name)]
+    return [int(part) if part.isdigit() else part for part in re.split(r"(\d+)", os.path.basename(path))]
 
 
 def _frames(pattern: str) -> list[str]:
     """The frames of an OBJ sequence in natural order: a folder's .obj files, a glob's matches,
-    or one file. Each must be a regular file, and a link in a folder must stay inside it."""
+    or one file. Each must be a regular file, and a link in a folder must stay inside it (only
+    links are resolved: any other file's name stays in its folder)."""
     path = Path(pattern)
     if path.is_dir():
-        files = [str(f) for f in path.iterdir() if f.suffix.lower() == ".obj"]
-    elif path.exists():
-        files = [pattern]
+        with os.scandir(path) as entries:
+            found = [(entry.path, entry.is_symlink()) for entry in entries
+                     if os.path.splitext(entry.name)[1].lower() == ".obj"]  # fmt: skip
     else:
-        files = globbing.glob(pattern)
-    if not files:
+        found = [(file, os.path.islink(file)) for file in ([pattern] if path.exists() else globbing.glob(pattern))]
+    if not found:
         raise FileNotFoundError(f"{pattern}: no .obj files")
-    for file in files:
+    for file in (file for file, link in found if link):
         folder = Path(file).parent.resolve()
         if not Path(file).resolve().is_relative_to(folder):
             raise FileFormatError(f"{file}: a link that leads outside {folder}; an OBJ sequence stays in its folder")
-    return sorted(files, key=_natural)
+    return sorted((file for file, _ in found), key=_natural)
 
 
 def read_sequence(pattern: str) -> tuple[np.ndarray, np.ndarray, str]:
