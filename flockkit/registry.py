@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import difflib
+import functools
 import importlib.metadata
 import inspect
 import os
@@ -73,7 +74,10 @@ class Component:
         return f"plugin {self.plugin!r} ({where})"
 
 
+@functools.cache
 def _protocol_methods(protocol: type) -> dict[str, inspect.Signature]:
+    """The public methods of an interface (a Protocol class, fixed once defined) and their call
+    signatures from an instance: read once per interface, not at every component made."""
     methods = {}
     for name, value in vars(protocol).items():
         if inspect.isfunction(value) and not name.startswith("_"):
