@@ -113,6 +113,7 @@ _MAX_VERTEX = 2**40  # far above any file's vertex count, far below numpy's int6
 # field that is not a plain decimal number, a byte outside plain ASCII, another topology than
 # the first frame's, or anything that parser would refuse).
 _READ, _CAREFUL, _FULL = 0, 1, 2
+_NO_BYTES = np.zeros(0, dtype=np.uint8)
 
 
 def _read_padded(file, buffer=None) -> tuple[np.ndarray, int]:
@@ -142,19 +143,20 @@ def _read_first(file) -> tuple[np.ndarray, np.ndarray, tuple | None]:
     its faces as the compiled pass reads them (None where that pass could not read it: later
     frames then go through the line-by-line parser too)."""
     buffer, n = _read_padded(file)
-    status, points, corners, counts = _scan_alone(buffer, n)
+    status, points, corners, counts, starts = _scan_alone(buffer, n)
     if status == _READ:
-        return points, _faces(corners, counts), (corners, counts)
+        return points, _faces(corners, counts), (corners, counts, starts, buffer[: n + _PAD])
     return (*_parse_obj(file, _text(file, buffer[:n].tobytes())), None)
 
 
 def _scan_alone(buffer, n) -> tuple:
     """:func:`_scan` of a file read on its own (see :func:`_read_padded`), given room for its
-    vertices, corners and faces: (status, vertices, corners, corner counts)."""
+    vertices, corners and faces: (status, vertices, corners, corner counts, where each face's
+    line starts)."""
     rows = max(16, n // 32)  # enough for "v" lines of 32 bytes and "f" lines of 3 corners of 4 bytes
     while True:
         points, corners, counts = np.empty((rows, 3)), np.empty(3 * rows, dtype=np.int64), np.empty(rows, np.int64)
-        found = _compiled()(buffer, n, points, corners, counts, False)
+        found = _compiled()(buffer, n, points, corners, counts, np.empty(rows, np.int64), _NO_BYTES, False)
         if found[0] != _FULL:
             return found
         rows *= 2  # at most n // 2 + 1 vertices, faces or corners (a byte and a blank each)
@@ -236,7 +238,7 @@ def _compiled():
         import numba
         from numba.cpython.unsafe import numbers
 
-        names = ("_multiply", "_eisel_lemire", "_long_number", "_word", "_digit_run", "_scan")
+        names = ("_multiply", "_eisel_lemire", "_long_number", "_word", "_digit_run", "_zero_bytes", "_scan")
         namespace = dict(globals())
         namespace["_leading_zeros"], namespace["_trailing_zeros"] = numbers.leading_zeros, numbers.trailing_zeros
         namespace["_FIVE_HIGH"], namespace["_FIVE_LOW"] = _powers_of_five()  # constants of the compiled code
@@ -249,7 +251,7 @@ def _compiled():
             function = types.FunctionType(found[name], namespace, name)
             function.__module__, function.__qualname__ = __name__, name
             function.__doc__ = globals()[name].__doc__
-            inline = "always" if name in ("_word", "_digit_run") else "never"  # inlined into their loops
+            inline = "always" if name in ("_word", "_digit_run", "_zero_bytes") else "never"  # into their loops
             namespace[name] = numba.njit(cache=True, nogil=True, boundscheck=False, inline=inline)(function)
         _COMPILED = namespace["_scan"]
     return _COMPILED
@@ -282,6 +284,9 @@ _RUN_POWERS = 10 ** np.arange(9, dtype=np.uint64)
 # stops, so that no scan needs to test for the end (an 8-byte word read at the end stays inside).
 _PAD = 16
 _LINE_END = 10
+# Line ends in every byte of a word, and the words :func:`_zero_bytes` works with.
+_LINE_FEEDS, _RETURNS = np.uint64(0x0A0A0A0A0A0A0A0A), np.uint64(0x0D0D0D0D0D0D0D0D)
+_BYTE_ONES, _BYTE_HIGHS = np.uint64(0x0101010101010101), np.uint64(0x8080808080808080)
 
 
 def _leading_zeros(w):
@@ -427,6 +432,12 @@ def _word(data, i):
             | np.uint64(data[j + np.uint64(7)]) << np.uint64(56))  # fmt: skip
 
 
+def _zero_bytes(w):
+    """A word whose lowest set bit is the high bit of the first zero byte of the word `w` (no bit
+    set where it has none; bits above the first may be set too)."""
+    return (w - _BYTE_ONES) & ~w & _BYTE_HIGHS
+
+
 def _digit_run(w):
     """(k, the number the k digits write) for the k <= 8 digits that the 8 bytes of the word `w`
     (see :func:`_word`) begin with: the first byte that is not a digit found from the bits of
@@ -444,9 +455,9 @@ def _digit_run(w):
     return k, d & _U64_MASK32
 
 
-def _scan(data, n, out, corners, counts, compare):
+def _scan(data, n, out, corners, counts, starts, first, compare):
     """One pass over an OBJ file's bytes, data[:n]: (status, vertices (V, 3), corners, corner
-    counts).
+    counts, face starts).
 
     Lines are split at \\n and \\r and fields at spaces and tabs, as the line-by-line parser
     splits plain ASCII (a leading UTF-8 byte order mark skipped, as it drops it); any other
@@ -456,10 +467,14 @@ def _scan(data, n, out, corners, counts, compare):
     ignored, as that parser ignores it), and one whose first field is ``f`` three or more corners
     (``[+-] digits``, optionally followed by ``/`` and anything; negative ones count back from
     the vertices so far), else it gives up. Vertices are written into `out`, and without
-    `compare` the faces' corners and corner counts into `corners` and `counts` (_FULL where one
-    of them is full: the caller gives larger ones); with `compare`, the vertices must fill `out`
-    exactly and the faces be `corners` and `counts`, else it gives up. Nothing is allocated, so
-    that no array changes in the loop (numba counts references to an array that does).
+    `compare` the faces' corners and corner counts into `corners` and `counts`, and where each
+    face's corners start in `data` (after its "f") into `starts` (-1 for a face with a relative
+    corner): _FULL where one of them is full, and the caller gives larger ones. With `compare`,
+    the vertices must fill `out` exactly and the faces be `corners` and `counts`, else it gives
+    up; `first` is then the first frame's bytes and padding (its data[: n + _PAD]) and `starts`
+    where its faces start: a face whose line holds the same bytes as the first frame's (up to
+    its line end) has its corners, and is not read again. Nothing is allocated, so that no array
+    changes in the loop (numba counts references to an array that does).
 
     Numbers: digits are read 8 at a time (:func:`_digit_run`) into an integer mantissa;
     Clinger's fast path rounds the easy ones (mantissa up to 2**53, exponent up to 22), Eisel
@@ -469,14 +484,22 @@ def _scan(data, n, out, corners, counts, compare):
     Bounds: data[n : n + _PAD] must be line ends (checked first). Every loop over the bytes stops
     at a line end, so none passes index n; a line's first byte is looked at only below n, and
     the byte after it then at most at n; a word (:func:`_word`) is read from an index at most n.
-    Rows of `out`, `corners` and `counts` are written or read after comparing the count with
-    their length."""
+    The last _PAD bytes of `first` must be line ends too (checked first), a start in it is used
+    where it is at most len(first) - _PAD, and a word of it is read only 8 bytes after one that
+    held no line end. Rows of `out`, `corners`, `counts` and `starts` are written or read after
+    comparing the count with their length."""
     points = out
     if n < 0 or len(data) < n + _PAD or points.shape[1] != 3:
-        return _CAREFUL, points[:0], corners[:0], counts[:0]
+        return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
     for k in range(n, n + _PAD):
         if data[k] != _LINE_END:
-            return _CAREFUL, points[:0], corners[:0], counts[:0]
+            return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
+    if compare:
+        if len(first) < _PAD:
+            return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
+        for k in range(len(first) - _PAD, len(first)):
+            if first[k] != _LINE_END:
+                return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
     count = 0
     n_corners, n_faces, largest = 0, 0, -1
     i = 3 if n >= 3 and data[0] == 0xEF and data[1] == 0xBB and data[2] == 0xBF else 0
@@ -492,7 +515,7 @@ def _scan(data, n, out, corners, counts, compare):
         if c == 118 and (after == 32 or after == 9 or after == 10 or after == 13):  # "v"
             i += 1
             if count == len(points):
-                return _CAREFUL if compare else _FULL, points[:0], corners[:0], counts[:0]
+                return _CAREFUL if compare else _FULL, points[:0], corners[:0], counts[:0], starts[:0]
             for axis in range(3):
                 c = data[i]
                 while c == 32 or c == 9:
@@ -516,7 +539,7 @@ def _scan(data, n, out, corners, counts, compare):
                 if point >= 0:
                     digits, scale = digits - 1, point + 1 - i
                 if digits == 0:
-                    return _CAREFUL, points[:0], corners[:0], counts[:0]
+                    return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                 c = data[i]
                 if c == 101 or c == 69:  # "e" or "E"
                     i += 1
@@ -534,10 +557,10 @@ def _scan(data, n, out, corners, counts, compare):
                         i += 1
                         c = data[i]
                     if exponent_digits == 0:
-                        return _CAREFUL, points[:0], corners[:0], counts[:0]
+                        return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                     scale += sign * exponent
                 if not (c == 32 or c == 9 or c == 10 or c == 13):  # more in the field: the careful parser judges it
-                    return _CAREFUL, points[:0], corners[:0], counts[:0]
+                    return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                 if digits > _KEPT_DIGITS:  # leading zeros aside?
                     j = begin
                     while data[j] == 48 or data[j] == 46:
@@ -546,7 +569,7 @@ def _scan(data, n, out, corners, counts, compare):
                 if digits > _KEPT_DIGITS:
                     i, value, good = _long_number(data, start, n)
                     if not good:
-                        return _CAREFUL, points[:0], corners[:0], counts[:0]
+                        return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                     points[count, axis] = value
                     continue
                 if mantissa == 0:
@@ -556,12 +579,28 @@ def _scan(data, n, out, corners, counts, compare):
                 else:
                     value = _eisel_lemire(mantissa, scale)
                     if value == np.inf:
-                        return _CAREFUL, points[:0], corners[:0], counts[:0]
+                        return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                 points[count, axis] = -value if negative else value
             count += 1
         elif c == 102 and (after == 32 or after == 9 or after == 10 or after == 13):  # "f"
             i += 1
-            own = 0
+            j = starts[n_faces] if compare and n_faces < len(starts) and n_faces < len(counts) else -1
+            if 0 <= j <= len(first) - _PAD:
+                k = i
+                while True:  # the line's bytes against the first frame's, 8 at a time
+                    w = _word(data, k)
+                    differ = np.int64(_trailing_zeros(w ^ _word(first, j)) >> _U3)  # the first byte that differs
+                    end = np.int64(_trailing_zeros(_zero_bytes(w ^ _LINE_FEEDS) | _zero_bytes(w ^ _RETURNS)) >> _U3)
+                    if end < differ or end < 8 or differ < 8:
+                        break
+                    k += 8
+                    j += 8
+                if end < differ:  # the same bytes up to the line end, which both have
+                    i = k + end
+                    n_corners += counts[n_faces]
+                    n_faces += 1
+                    continue
+            own, relative, begin_face = 0, False, i
             while True:
                 c = data[i]
                 while c == 32 or c == 9:
@@ -580,47 +619,49 @@ def _scan(data, n, out, corners, counts, compare):
                     if k < 8 or i - begin >= 16:
                         break
                 if index == 0 or index > _MAX_VERTEX:
-                    return _CAREFUL, points[:0], corners[:0], counts[:0]
+                    return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                 if data[i] == 47:  # "/" and texture or normal numbers, which are ignored
                     while 32 < data[i] <= 126:
                         i += 1
                 c = data[i]
                 if not (c == 32 or c == 9 or c == 10 or c == 13):
-                    return _CAREFUL, points[:0], corners[:0], counts[:0]
+                    return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                 corner = count - index if negative else index - 1
+                relative = relative or negative
                 if corner < 0:
-                    return _CAREFUL, points[:0], corners[:0], counts[:0]
+                    return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                 largest = max(largest, corner)
                 if n_corners >= len(corners):
-                    return _CAREFUL if compare else _FULL, points[:0], corners[:0], counts[:0]
+                    return _CAREFUL if compare else _FULL, points[:0], corners[:0], counts[:0], starts[:0]
                 if compare:
                     if corners[n_corners] != corner:
-                        return _CAREFUL, points[:0], corners[:0], counts[:0]
+                        return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                 else:
                     corners[n_corners] = corner
                 n_corners += 1
                 own += 1
             if own < 3:
-                return _CAREFUL, points[:0], corners[:0], counts[:0]
-            if n_faces >= len(counts):
-                return _CAREFUL if compare else _FULL, points[:0], corners[:0], counts[:0]
+                return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
+            if n_faces >= len(counts) or n_faces >= len(starts):
+                return _CAREFUL if compare else _FULL, points[:0], corners[:0], counts[:0], starts[:0]
             if compare:
                 if counts[n_faces] != own:
-                    return _CAREFUL, points[:0], corners[:0], counts[:0]
+                    return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
             else:
                 counts[n_faces] = own
+                starts[n_faces] = -1 if relative else begin_face
             n_faces += 1
         c = data[i]
         while c != 10 and c != 13:  # the rest of the line: plain ASCII or tabs
             if c > 126 or (c < 32 and c != 9):
-                return _CAREFUL, points[:0], corners[:0], counts[:0]
+                return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
             i += 1
             c = data[i]
     if count == 0 or largest >= count:
-        return _CAREFUL, points[:0], corners[:0], counts[:0]
+        return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
     if compare and (count != len(points) or n_faces != len(counts) or n_corners != len(corners)):
-        return _CAREFUL, points[:0], corners[:0], counts[:0]
-    return _READ, points[:count], corners[:n_corners], counts[:n_faces]
+        return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
+    return _READ, points[:count], corners[:n_corners], counts[:n_faces], starts[:n_faces]
 
 
 def _parse_obj(file, text: str) -> tuple[np.ndarray, np.ndarray]:

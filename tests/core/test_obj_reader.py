@@ -79,20 +79,20 @@ def test_numbers_written_every_way_read_as_pythons_float_reads_them(tmp_path, se
     # plain repr coordinates are read by the compiled pass, faces and all
     plain = tmp_path / "plain.obj"
     write(plain, [f"v {x!r} {y!r} {z!r}\n" for x, y, z in values[1].tolist()] + face_lines)
-    status, points, corners, counts = compiled(plain)
+    status, points, corners, counts, _ = compiled(plain)
     assert status == obj._READ
     assert_same_bits(points, values[1])
     np.testing.assert_array_equal(obj._faces(corners, counts), faces)
 
 
-def compiled(path, known=None):
-    """What the compiled pass reads of `path`: alone, or as a later frame of one read as `known`
-    (its vertex count, corners and counts)."""
+def compiled(path, first=None):
+    """What the compiled pass reads of `path`: alone, or as a later frame of the sequence whose
+    first frame is `first`."""
     data, n = obj._read_padded(path)
-    if known is None:
+    if first is None:
         return obj._scan_alone(data, n)
-    count, corners, counts = known
-    return obj._compiled()(data, n, np.empty((count, 3)), corners, counts, True)
+    points, _, known = obj._read_first(first)
+    return obj._compiled()(data, n, np.empty((len(points), 3)), *known, True)
 
 
 def assert_same_bits(found, expected):
@@ -104,7 +104,7 @@ def assert_same_bits(found, expected):
 # Ways a tool writes a number, as (name, format): the compiled pass reads the first ones whole.
 PLAIN = [("repr", repr), ("%.17g", lambda v: f"{v:.17g}"), ("%.6f", lambda v: f"{v:.6f}"),
          ("%e", lambda v: f"{v:e}"), ("%.25e", lambda v: f"{v:.25e}"), ("%.20g", lambda v: f"{v:.20g}"),
-         ("%g", lambda v: f"{v:g}"), ("+", lambda v: f"+{v!r}" if v >= 0 else repr(v)),
+         ("%g", lambda v: f"{v:g}"), ("+", lambda v: repr(v) if np.signbit(v) else f"+{v!r}"),
          ("%E", lambda v: f"{v:.12E}"), (".5", lambda v: repr(v).replace("0.", ".", 1) if abs(v) < 1 else repr(v)),
          ("5.", lambda v: f"{v:.0f}." if abs(v) < 1e300 else repr(v)),
          ("zeros", lambda v: f"{'-' if np.signbit(v) else ''}000{abs(v)!r}")]  # fmt: skip
@@ -132,12 +132,11 @@ def test_every_number_reads_as_pythons_float(tmp_path_factory, mesh, ways, data)
     assert_same_bits(read.reshape(len(texts), -1), [[float(token) for token in tokens] for tokens in texts])
     np.testing.assert_array_equal(faces, mesh.faces)
     if all((name, way) in PLAIN for name, way in chosen):
-        status, points, corners, counts = compiled(folder / "frame0.obj")
+        status, points, corners, counts, _ = compiled(folder / "frame0.obj")
         assert status == obj._READ
         assert_same_bits(points.ravel(), [float(token) for token in texts[0]])
-        known = (len(points), corners, counts)
         for t in range(1, len(positions)):
-            assert compiled(folder / f"frame{t}.obj", known)[0] == obj._READ
+            assert compiled(folder / f"frame{t}.obj", folder / "frame0.obj")[0] == obj._READ
 
 
 @pytest.mark.parametrize(
@@ -288,6 +287,6 @@ def test_polygons_and_relative_corners_read_as_the_careful_parser(tmp_path, thre
         assert_reads_as_the_careful_parser(tmp_path, paths)
     finally:
         numba.set_num_threads(before)
-    status, _, corners, counts = compiled(paths[0])
+    status, _, corners, counts, _ = compiled(paths[0])
     assert status == obj._READ and counts.tolist() == [5, 3, 4, 6, 3, 4]
     np.testing.assert_array_equal(obj._faces(corners, counts), careful(paths[0])[1])
