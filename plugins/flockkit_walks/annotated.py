@@ -3,7 +3,8 @@
 The walk minimizes E = C_T + alpha C_C + beta N_T over the output frames it must cover:
 
 - C_T, the transition cost: the distances of the transitions taken, each divided by the median
-  distance of the graph's transitions (so one ordinary transition costs about 1 on any graph);
+  distance of the graph's transitions (so one ordinary transition costs about 1 on any graph; of
+  those above 0 where most are 0, as a looping source's exact repeats are);
 - C_C, the constraint cost: the distance between the played feature arrow (the source frame's
   arrow, turned with the walk) and the target arrow, summed over output frames times dt (so a
   mismatch of 0.1 for one second costs 0.1, whatever the frame rate);
@@ -287,7 +288,11 @@ class _Shared:
         self.period, self.shift, self.clip_target = graph.period, tables.shift, tables.clip_target
         distance = np.array([t.alignment.distance for t in graph.transitions])
         ordinary = [t.alignment.distance for t, s in zip(graph.transitions, self.shift) if not t.is_turn and not s]
+        # the unit of C_T: the median ordinary distance, or, where most are 0 (a looping source's
+        # exact repeats), the median of those above 0, so the others still cost what they differ
+        positive = [d for d in ordinary if d > 0]
         scale = float(np.median(ordinary)) if ordinary else 0.0
+        scale = scale if scale > 0 or not positive else float(np.median(positive))
         self.trans_cost = distance / scale if scale > 0 else np.zeros(len(distance))
         self.trans_cost[self.shift != 0] = 0.0  # phase shifts keep the motion continuous: no C_T, no N_T
         # frames after a transition before the next: its blend, and at least one (two transitions with

@@ -94,3 +94,26 @@ def test_walks_from_the_error_tables_equal_walks_that_compute_every_error(monkey
         walks.append([strategy.walk(graph, np.random.default_rng(seed), 20.0) for seed in range(3)])
     assert walks[0] == walks[1]
     assert any(kind == "transition" for w in walks[0] for kind, _ in w.edges)  # choices were made
+
+
+def test_transition_costs_keep_their_unit_where_most_ordinary_transitions_cost_nothing():
+    """C_T divides each transition's distance by the median ordinary distance; where most are 0 (a
+    looping source's exact repeats) the unit is the median of those above 0, so a transition that
+    does differ still costs what it differs instead of nothing."""
+    import attrs
+    from flockkit_walks import annotated
+
+    motion, _, _ = inputs.plants(dt=1 / 10, seconds=24.0, points=8, rates=(1.5, 3.0))
+    graph = flockkit.build_graph(motion, builder="kovar")
+    ordinary = [k for k, t in enumerate(graph.transitions) if not t.is_turn and not graph.shifts[k]]
+    assert len(ordinary) >= 3
+    paid = ordinary[: max(1, len(ordinary) // 3)]  # a third differ, the rest repeat exactly
+    distances = {k: 0.5 + k for k in paid}
+    transitions = [
+        attrs.evolve(t, alignment=attrs.evolve(t.alignment, distance=distances.get(k, 0.0)))
+        for k, t in enumerate(graph.transitions)
+    ]
+    costs = annotated._Shared(attrs.evolve(graph, transitions=transitions), beta=1.0).trans_cost
+    unit = np.median(list(distances.values()))
+    np.testing.assert_allclose(costs[paid], [distances[k] / unit for k in paid])
+    assert np.all(costs[[k for k in ordinary if k not in distances]] == 0)
