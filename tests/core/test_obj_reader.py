@@ -290,3 +290,93 @@ def test_polygons_and_relative_corners_read_as_the_careful_parser(tmp_path, thre
     status, _, corners, counts, _ = compiled(paths[0])
     assert status == obj._READ and counts.tolist() == [5, 3, 4, 6, 3, 4]
     np.testing.assert_array_equal(obj._faces(corners, counts), careful(paths[0])[1])
+
+
+# A small sequence's frames (faces with texture numbers and relative corners among them), and the
+# bytes damage is drawn from: what OBJ files hold, a NUL, a byte outside ASCII, and runs of digits
+# longer than a 64-bit word holds.
+FIRST = b"# first\nv 0.5 -1.25 3\nv 1e-3 +2. .5\nv 10 20 30\nv -0 0 1\nf 1 2 3\nf 1/1 3//2 4/1/1\nf -1 -2 -3\n"
+LATER = b"# later\nv 0.75 -1.5 3.25\nv 2e-3 +3. .25\nv 11 21 31\nv -1 0 2\nf 1 2 3\nf 1/1 3//2 4/1/1\nf -1 -2 -3\n"
+PIECES = [bytes([b]) for b in b"0123456789.-+eE \t\n\r/vf#\x00\xff"] + [b"9" * 20, b"1" * 300, b"0" * 30, b"\n"]
+
+
+def reference(paths):
+    """The sequence as the line-by-line parser reads each frame, and the first bad frame's
+    FileFormatError (its own, or that its topology differs from the first frame's)."""
+    points, faces = obj._parse_obj(paths[0], obj._text(paths[0], paths[0].read_bytes()))
+    frames = [points]
+    for path in paths[1:]:
+        other, own = obj._parse_obj(path, obj._text(path, path.read_bytes()))
+        if len(other) != len(points) or not np.array_equal(own, faces):
+            raise FileFormatError(f"{path}: its topology differs")
+        frames.append(other)
+    return np.stack(frames), faces
+
+
+@st.composite
+def hostile(draw, data: bytes):
+    """`data` damaged (bytes changed, cut short) and edited: pieces of OBJ files put in, over or
+    in place of its bytes."""
+    data = bytearray(draw(strategies.damaged(data, max_flips=1)))
+    for _ in range(draw(st.integers(0, 3))):
+        at = draw(st.integers(0, len(data)))
+        data[at : at + draw(st.integers(0, 2))] = draw(st.sampled_from(PIECES))
+    return bytes(data)
+
+
+@settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(first=st.one_of(st.just(FIRST), hostile(FIRST)), later=st.one_of(st.just(LATER), hostile(LATER)),
+       ends=st.sampled_from([b"", b"\n", b"\r\n"]))  # fmt: skip
+def test_hostile_frames_read_as_the_careful_parser_or_are_named(tmp_path_factory, first, later, ends):
+    """Damaged and edited frames (a truncated line, a number at the very end of the file, a NUL,
+    30 or 300 digits, a face index past the vertices or 0 or counting back too far, a face line
+    that differs from the first frame's by a byte) read as the line-by-line parser reads them,
+    bit for bit, or fail with a FileFormatError naming the first bad frame, as it does."""
+    folder = tmp_path_factory.mktemp("hostile")
+    paths = [folder / f"frame{t}.obj" for t in range(3)]
+    for path, data in zip(paths, [first, later, LATER.rstrip(b"\n") + ends]):
+        path.write_bytes(data)
+    try:
+        expected = reference(paths)
+    except FileFormatError as error:
+        bad = str(error).split(":")[0].split(",")[0]
+        with pytest.raises(FileFormatError) as raised:
+            obj.read_sequence(str(folder))
+        assert str(raised.value).startswith(bad)
+        return
+    positions, faces, _ = obj.read_sequence(str(folder))
+    assert_same_bits(positions, expected[0])
+    np.testing.assert_array_equal(faces, expected[1])
+
+
+def test_the_compiled_pass_reads_only_padded_bytes(tmp_path):
+    """The compiled pass reads no byte past the file's without the line ends after it that stop
+    its scans: a buffer without them, or a first frame's without them, is left to the careful
+    parser (and a face start past the first frame's bytes is not used)."""
+    path = tmp_path / "frame.obj"
+    path.write_bytes(FIRST)
+    data, n = obj._read_padded(path)
+    assert data[n : n + obj._PAD].tolist() == [10] * obj._PAD
+    status, points, corners, counts, starts = obj._scan_alone(data, n)
+    assert status == obj._READ and len(points) == 4 and counts.tolist() == [3, 3, 3]
+    assert starts[-1] == -1  # relative corners: read again in every frame
+    scan = obj._compiled()
+    first = data[: n + obj._PAD]
+    later = np.frombuffer(LATER + b"\n" * obj._PAD, np.uint8)
+    out = np.empty((4, 3))
+    assert scan(later, len(LATER), out, corners, counts, starts, first, True)[0] == obj._READ
+    assert_same_bits(out, careful_bytes(tmp_path, LATER)[0])
+    unpadded = np.frombuffer(LATER + b"\n" * (obj._PAD - 1) + b"1", np.uint8)
+    assert scan(unpadded, len(LATER), out, corners, counts, starts, first, True)[0] == obj._CAREFUL
+    assert scan(later, len(LATER) + 1, out, corners, counts, starts, first, True)[0] == obj._CAREFUL
+    broken = first.copy()
+    broken[-1] = ord("1")
+    assert scan(later, len(LATER), out, corners, counts, starts, broken, True)[0] == obj._CAREFUL
+    far = np.full_like(starts, len(first))
+    assert scan(later, len(LATER), out, corners, counts, far, first, True)[0] == obj._READ
+
+
+def careful_bytes(folder, data):
+    path = folder / "careful.obj"
+    path.write_bytes(data)
+    return careful(path)
