@@ -230,7 +230,10 @@ def _scene(tour: _Tour, graph) -> dict:
             round(min(within), 3),
             round(float(np.median(within)), 3),
         ],
-        "neighbours in step (before, after)": [animation.report["in_step_before"], animation.report["in_step_after"]],
+        "neighbours in step (first walks, end)": [
+            animation.report["in_step_before"],
+            animation.report["in_step_after"],
+        ],
     }
 
 
@@ -392,7 +395,10 @@ def _fox_scene(tour: _Tour, folder: Path) -> dict:
         "foxes": animation.placement.n_objects,
         "seconds": animation.n_frames * animation.dt,
         "speed (m/s, least and most)": [round(float(speeds.min()), 3), round(float(speeds.max()), 3)],
-        "neighbours in step (before, after)": [animation.report["in_step_before"], animation.report["in_step_after"]],
+        "neighbours in step (first walks, end)": [
+            animation.report["in_step_before"],
+            animation.report["in_step_after"],
+        ],
         "usd": usd,
     }
 

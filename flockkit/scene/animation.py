@@ -239,8 +239,8 @@ class SceneAnimation:
 
 @numba.njit(cache=True, nogil=True)
 def _placed_at_clock(local, center, scale, clock, headings, positions, out):
-    """``movement.world_positions`` in one pass: `out` (F, N, D) is `local` (S, N, D) read at
-    `clock` (linear between the frames around each, the last frame held beyond it), about
+    """A moving object's points in one pass: `out` (F, N, D) is `local` (S, N, D) read at
+    `clock` (``movement.at_clock``: linear between the frames around each, the ends held), about
     `center`, scaled, turned by each frame's heading about +z and moved to each frame's position
     (F, 2)."""
     last, dims = local.shape[0] - 1, local.shape[2]

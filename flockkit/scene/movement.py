@@ -196,22 +196,6 @@ def avoid_in_source_time(avoid, clock: np.ndarray, n_source: int):
     return np.asarray(avoid)[..., output]
 
 
-def world_positions(local: np.ndarray, center, scale: float, clock, headings, positions) -> np.ndarray:
-    """(F, N, 3 or 2): a moving object's points: its played points per source frame `local`
-    (S, N, D) read at `clock` (F,), about the template's `center`, scaled, turned by each frame's
-    heading about +z and moved to each frame's position (F, 2)."""
-    played = at_clock(local, clock) - center
-    dims = played.shape[2]
-    c, s = np.cos(headings)[:, None], np.sin(headings)[:, None]
-    x, y = played[..., 0] * scale, played[..., 1] * scale
-    out = np.empty_like(played)
-    out[..., 0] = c * x - s * y + positions[:, None, 0]
-    out[..., 1] = s * x + c * y + positions[:, None, 1]
-    if dims == 3:
-        out[..., 2] = played[..., 2] * scale
-    return out
-
-
 @attrs.frozen(eq=False)
 class Course:
     """A moving object's plan: the arrow its walk follows at each source frame, `track` (S, D),

@@ -355,7 +355,7 @@ def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data
     assert summary["sticklebacks"]["center kept in the video frame"]
     least, median = summary["scene"]["share of frames heading within 30 degrees of the arrow (least, median)"]
     assert median >= 0.8 and least >= 0.7, summary["scene"]
-    assert summary["scene"]["neighbours in step (before, after)"][1] <= 0.05
+    assert summary["scene"]["neighbours in step (first walks, end)"][1] <= 0.05
     crowd = summary["crowd"]
     assert crowd["memory (bytes, Equation 5)"][0] == crowd["memory (bytes, Equation 5)"][1]
     assert crowd["cheer stream running (at the cheer, at the end)"] == [True, False]
@@ -369,7 +369,7 @@ def test_demo_writes_every_picture_and_the_summary(capsys, tmp_path, shared_data
     assert str((tmp_path / "demo").resolve()) in out
     assert foxes["shown and written"] == 100
     assert summary["fox scene"]["foxes"] == 8 and summary["fox scene"]["usd"] == "fox-scene.usdc"
-    assert summary["fox scene"]["neighbours in step (before, after)"][1] <= 0.05
+    assert summary["fox scene"]["neighbours in step (first walks, end)"][1] <= 0.05
     steps = summary["seconds"]  # every step is timed, drawing and rendering included, and the whole
     renders = [f"render {name} in Blender" for name, _ in DEMO_RENDERS.values()] if rendered else []
     assert list(steps) == DEMO_STEPS + renders + ["the whole demo"]
