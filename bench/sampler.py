@@ -61,7 +61,8 @@ def scenarios(folder: Path, iterations: int, seed: int) -> None:
     for path in sorted(folder.glob("*.toml")):
         problem, settings = load_scenario(path)
         settings.update(iterations=iterations, seed=seed)
-        model = flockkit.get("behavior", "boids", dt=problem.dt, obstacles=problem.obstacles)
+        model = flockkit.get("behavior", settings.get("behavior", "boids"), dt=problem.dt, obstacles=problem.obstacles,
+                             **settings.get("behavior_params", {}))  # fmt: skip  # the scenario's own model
         initial = solve(problem, **dict(settings, iterations=0, refine=0, starts=1)).motion
         refined = solve(problem, **dict(settings, iterations=0)).motion
         begin = time.perf_counter()
