@@ -280,6 +280,7 @@ _ZEROS, _SIXES = np.uint64(0x3030303030303030), np.uint64(0x0606060606060606)
 _SECOND_BYTES = np.uint64(0x000000FF000000FF)
 _TIMES_100, _TIMES_1 = np.uint64(100 + (1000000 << 32)), np.uint64(1 + (10000 << 32))
 _RUN_POWERS = 10 ** np.arange(9, dtype=np.uint64)
+_TEN_TO_8, _U255 = np.uint64(10**8), np.uint64(255)
 # Bytes after a file's bytes in the buffer the compiled pass reads: line ends, on which every scan
 # stops, so that no scan needs to test for the end (an 8-byte word read at the end stays inside).
 _PAD = 16
@@ -525,19 +526,26 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
                 negative = c == 45
                 if c == 43 or c == 45:
                     i += 1
-                mantissa, begin, point = _U0, i, -1
-                while True:  # the digits, 8 at a time, and one point among them
+                mantissa, begin = _U0, i
+                while True:  # the integer's digits, 8 at a time
                     k, run = _digit_run(_word(data, i))
                     mantissa = mantissa * _RUN_POWERS[k] + run  # wraps past 19 digits, which go elsewhere
                     i += k
                     if k < 8:
-                        if data[i] != 46 or point >= 0:
-                            break
-                        point = i
-                        i += 1
+                        break
                 digits, scale = i - begin, 0
-                if point >= 0:
-                    digits, scale = digits - 1, point + 1 - i
+                if data[i] == 46:  # the point, and the fraction's digits
+                    i += 1
+                    begin = i
+                    while True:
+                        k, run = _digit_run(_word(data, i))
+                        if k < 8:
+                            mantissa = mantissa * _RUN_POWERS[k] + run
+                            i += k
+                            break
+                        mantissa = mantissa * _TEN_TO_8 + run  # a step of 8: the next word is read before
+                        i += 8  # these digits are added up
+                    digits, scale = digits + i - begin, begin - i
                 if digits == 0:
                     return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                 c = data[i]
