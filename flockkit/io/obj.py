@@ -536,7 +536,7 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
                 digits, scale = i - begin, 0
                 if data[i] == 46:  # the point, and the fraction's digits
                     i += 1
-                    begin = i
+                    fraction = i
                     while True:
                         k, run = _digit_run(_word(data, i))
                         if k < 8:
@@ -545,7 +545,7 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
                             break
                         mantissa = mantissa * _TEN_TO_8 + run  # a step of 8: the next word is read before
                         i += 8  # these digits are added up
-                    digits, scale = digits + i - begin, begin - i
+                    digits, scale = digits + i - fraction, fraction - i
                 if digits == 0:
                     return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                 c = data[i]

@@ -293,11 +293,12 @@ def test_polygons_and_relative_corners_read_as_the_careful_parser(tmp_path, thre
 
 
 # A small sequence's frames (faces with texture numbers and relative corners among them), and the
-# bytes damage is drawn from: what OBJ files hold, a NUL, a byte outside ASCII, and runs of digits
-# longer than a 64-bit word holds.
+# bytes damage is drawn from: what OBJ files hold, a NUL, a byte outside ASCII, runs of digits
+# longer than a 64-bit word holds, and numbers of more than 19 digits with few significant ones.
 FIRST = b"# first\nv 0.5 -1.25 3\nv 1e-3 +2. .5\nv 10 20 30\nv -0 0 1\nf 1 2 3\nf 1/1 3//2 4/1/1\nf -1 -2 -3\n"
 LATER = b"# later\nv 0.75 -1.5 3.25\nv 2e-3 +3. .25\nv 11 21 31\nv -1 0 2\nf 1 2 3\nf 1/1 3//2 4/1/1\nf -1 -2 -3\n"
-PIECES = [bytes([b]) for b in b"0123456789.-+eE \t\n\r/vf#\x00\xff"] + [b"9" * 20, b"1" * 300, b"0" * 30, b"\n"]
+PIECES = [bytes([b]) for b in b"0123456789.-+eE \t\n\r/vf#\x00\xff"] + [b"9" * 20, b"1" * 300, b"0" * 30, b"\n",
+          b"123456789012345680.000000", b"0.000000000000000000001234567"]  # fmt: skip
 
 
 def reference(paths):
@@ -380,3 +381,19 @@ def careful_bytes(folder, data):
     path = folder / "careful.obj"
     path.write_bytes(data)
     return careful(path)
+
+
+@pytest.mark.parametrize(
+    "text",
+    ["123456789012345680.000000", "0.000000000000000000001234567", "000000000000000000001.5", "12345678901234567890",
+     "1234567890123456789.0", "1.00000000000000000000000001", "9999999999999999999", "18446744073709551616",
+     "-0.000000000000000000000000000000", "0.1234567890123456789", "+00000000.00000000001e+30"],
+)  # fmt: skip
+def test_numbers_of_more_than_19_digits_read_as_pythons_float(tmp_path, text):
+    """Numbers whose digits overflow a 64-bit word (leading and trailing zeros among them) are read
+    by the compiled pass as Python's float reads them."""
+    path = tmp_path / "frame.obj"
+    path.write_text(f"v {text} 1 {text}\nv 0 0 0\nv 1 1 1\nf 1 2 3\n")
+    status, points, *_ = compiled(path)
+    assert status == obj._READ
+    assert_same_bits(points[0], [float(text), 1.0, float(text)])
