@@ -238,7 +238,7 @@ def _compiled():
         import numba
         from numba.cpython.unsafe import numbers
 
-        names = ("_multiply", "_eisel_lemire", "_long_number", "_word", "_digit_run", "_zero_bytes", "_scan")
+        names = ("_multiply", "_eisel_lemire", "_long_number", "_at", "_word", "_digit_run", "_zero_bytes", "_scan")
         namespace = dict(globals())
         namespace["_leading_zeros"], namespace["_trailing_zeros"] = numbers.leading_zeros, numbers.trailing_zeros
         namespace["_FIVE_HIGH"], namespace["_FIVE_LOW"] = _powers_of_five()  # constants of the compiled code
@@ -251,7 +251,7 @@ def _compiled():
             function = types.FunctionType(found[name], namespace, name)
             function.__module__, function.__qualname__ = __name__, name
             function.__doc__ = globals()[name].__doc__
-            inline = "always" if name in ("_word", "_digit_run", "_zero_bytes") else "never"  # into their loops
+            inline = "always" if name in ("_at", "_word", "_digit_run", "_zero_bytes") else "never"  # in their loops
             namespace[name] = numba.njit(cache=True, nogil=True, boundscheck=False, inline=inline)(function)
         _COMPILED = namespace["_scan"]
     return _COMPILED
@@ -433,6 +433,11 @@ def _word(data, i):
             | np.uint64(data[j + np.uint64(7)]) << np.uint64(56))  # fmt: skip
 
 
+def _at(data, i):
+    """data[i], i an index known not to be negative (read unsigned: no test for a negative one)."""
+    return data[np.uint64(i)]
+
+
 def _zero_bytes(w):
     """A word whose lowest set bit is the high bit of the first zero byte of the word `w` (no bit
     set where it has none; bits above the first may be set too)."""
@@ -505,23 +510,23 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
     n_corners, n_faces, largest = 0, 0, -1
     i = 3 if n >= 3 and data[0] == 0xEF and data[1] == 0xBB and data[2] == 0xBF else 0
     while i < n:
-        c = data[i]
+        c = _at(data, i)
         while c == 32 or c == 9:
             i += 1
-            c = data[i]
+            c = _at(data, i)
         if c == 10 or c == 13:
             i += 1
             continue
-        after = data[i + 1]  # i < n here: the line holds a byte other than a line end
+        after = _at(data, i + 1)  # i < n here: the line holds a byte other than a line end
         if c == 118 and (after == 32 or after == 9 or after == 10 or after == 13):  # "v"
             i += 1
             if count == len(points):
                 return _CAREFUL if compare else _FULL, points[:0], corners[:0], counts[:0], starts[:0]
             for axis in range(3):
-                c = data[i]
+                c = _at(data, i)
                 while c == 32 or c == 9:
                     i += 1
-                    c = data[i]
+                    c = _at(data, i)
                 start = i
                 negative = c == 45
                 if c == 43 or c == 45:
@@ -534,7 +539,7 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
                     if k < 8:
                         break
                 digits, scale = i - begin, 0
-                if data[i] == 46:  # the point, and the fraction's digits
+                if _at(data, i) == 46:  # the point, and the fraction's digits
                     i += 1
                     fraction = i
                     while True:
@@ -548,22 +553,22 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
                     digits, scale = digits + i - fraction, fraction - i
                 if digits == 0:
                     return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
-                c = data[i]
+                c = _at(data, i)
                 if c == 101 or c == 69:  # "e" or "E"
                     i += 1
                     sign = 1
-                    c = data[i]
+                    c = _at(data, i)
                     if c == 43 or c == 45:
                         sign = -1 if c == 45 else 1
                         i += 1
                     exponent, exponent_digits = 0, 0
-                    c = data[i]
+                    c = _at(data, i)
                     while 48 <= c <= 57:
                         if exponent < 100_000:
                             exponent = exponent * 10 + (c - 48)
                         exponent_digits += 1
                         i += 1
-                        c = data[i]
+                        c = _at(data, i)
                     if exponent_digits == 0:
                         return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                     scale += sign * exponent
@@ -571,8 +576,8 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
                     return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                 if digits > _KEPT_DIGITS:  # leading zeros aside?
                     j = begin
-                    while data[j] == 48 or data[j] == 46:
-                        digits -= data[j] == 48
+                    while _at(data, j) == 48 or _at(data, j) == 46:
+                        digits -= _at(data, j) == 48
                         j += 1
                 if digits > _KEPT_DIGITS:
                     i, value, good = _long_number(data, start, n)
@@ -610,10 +615,10 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
                     continue
             own, relative, begin_face = 0, False, i
             while True:
-                c = data[i]
+                c = _at(data, i)
                 while c == 32 or c == 9:
                     i += 1
-                    c = data[i]
+                    c = _at(data, i)
                 if c == 10 or c == 13:
                     break
                 negative = c == 45
@@ -628,10 +633,10 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
                         break
                 if index == 0 or index > _MAX_VERTEX:
                     return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
-                if data[i] == 47:  # "/" and texture or normal numbers, which are ignored
-                    while 32 < data[i] <= 126:
+                if _at(data, i) == 47:  # "/" and texture or normal numbers, which are ignored
+                    while 32 < _at(data, i) <= 126:
                         i += 1
-                c = data[i]
+                c = _at(data, i)
                 if not (c == 32 or c == 9 or c == 10 or c == 13):
                     return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                 corner = count - index if negative else index - 1
@@ -659,12 +664,12 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
                 counts[n_faces] = own
                 starts[n_faces] = -1 if relative else begin_face
             n_faces += 1
-        c = data[i]
+        c = _at(data, i)
         while c != 10 and c != 13:  # the rest of the line: plain ASCII or tabs
             if c > 126 or (c < 32 and c != 9):
                 return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
             i += 1
-            c = data[i]
+            c = _at(data, i)
     if count == 0 or largest >= count:
         return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
     if compare and (count != len(points) or n_faces != len(counts) or n_corners != len(corners)):
