@@ -583,7 +583,7 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
                     i, value, good = _long_number(data, start, n)
                     if not good:
                         return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
-                    points[count, axis] = value
+                    points[np.uint64(count), np.uint64(axis)] = value
                     continue
                 if mantissa == 0:
                     value = 0.0
@@ -593,11 +593,11 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
                     value = _eisel_lemire(mantissa, scale)
                     if value == np.inf:
                         return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
-                points[count, axis] = -value if negative else value
+                points[np.uint64(count), np.uint64(axis)] = -value if negative else value
             count += 1
         elif c == 102 and (after == 32 or after == 9 or after == 10 or after == 13):  # "f"
             i += 1
-            j = starts[n_faces] if compare and n_faces < len(starts) and n_faces < len(counts) else -1
+            j = starts[np.uint64(n_faces)] if compare and n_faces < len(starts) and n_faces < len(counts) else -1
             if 0 <= j <= len(first) - _PAD:
                 k = i
                 while True:  # the line's bytes against the first frame's, 8 at a time
@@ -610,7 +610,7 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
                     j += 8
                 if end < differ:  # the same bytes up to the line end, which both have
                     i = k + end
-                    n_corners += counts[n_faces]
+                    n_corners += counts[np.uint64(n_faces)]
                     n_faces += 1
                     continue
             own, relative, begin_face = 0, False, i
@@ -647,10 +647,10 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
                 if n_corners >= len(corners):
                     return _CAREFUL if compare else _FULL, points[:0], corners[:0], counts[:0], starts[:0]
                 if compare:
-                    if corners[n_corners] != corner:
+                    if corners[np.uint64(n_corners)] != corner:
                         return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
                 else:
-                    corners[n_corners] = corner
+                    corners[np.uint64(n_corners)] = corner
                 n_corners += 1
                 own += 1
             if own < 3:
@@ -658,11 +658,11 @@ def _scan(data, n, out, corners, counts, starts, first, compare):
             if n_faces >= len(counts) or n_faces >= len(starts):
                 return _CAREFUL if compare else _FULL, points[:0], corners[:0], counts[:0], starts[:0]
             if compare:
-                if counts[n_faces] != own:
+                if counts[np.uint64(n_faces)] != own:
                     return _CAREFUL, points[:0], corners[:0], counts[:0], starts[:0]
             else:
-                counts[n_faces] = own
-                starts[n_faces] = -1 if relative else begin_face
+                counts[np.uint64(n_faces)] = own
+                starts[np.uint64(n_faces)] = -1 if relative else begin_face
             n_faces += 1
         c = _at(data, i)
         while c != 10 and c != 13:  # the rest of the line: plain ASCII or tabs
