@@ -54,36 +54,32 @@ def read_sequence(pattern: str) -> tuple[np.ndarray, np.ndarray, str]:
     """(positions (T, V, 3), faces (F, 3 or 4), the first frame's name) of the OBJ sequence
     `pattern`: a folder, a glob, or one file (a path that exists is never read as a glob).
 
-    Every file is asked into the system's cache first (:func:`_read_ahead`). The first frame is
-    read on its own; the others are read by a pool of threads (as many as
-    numba's, ``numba.get_num_threads()``), each file by one thread straight into its frame of the
-    output, with the compiled pass (:func:`_scan`) that reads the numbers as Python's float and
-    int read them and checks that the faces are the first frame's. A file that pass does not
-    read whole goes through the line-by-line parser, whose errors name the file and the line;
-    where several frames are bad, the error is the first one's."""
-    files = _frames(pattern)
-    _read_ahead(files)
-    points, faces, known = _read_first(files[0])
-    validate.allocation(len(files) * points.size, f"{pattern}: {len(files)} frames of {len(points)} vertices")
-    positions = np.empty((len(files), *points.shape))
-    positions[0] = points
-
-    local = threading.local()  # each thread's buffer, read into frame after frame
-
-    def read(t):
-        local.buffer = _read_later(files[t], files[0], positions[t], faces, known, getattr(local, "buffer", None))
-
+    The first frame is read while a thread asks the system to read the others into its cache
+    (:func:`_read_ahead`); then they are read by a pool of threads (as many as numba's,
+    ``numba.get_num_threads()``; with one, by the calling thread), each file by one thread
+    straight into its frame of the output, with the compiled pass (:func:`_scan`) that reads
+    the numbers as Python's float and int read them and checks that the faces are the first
+    frame's (a face line that holds the first frame's bytes is not read again). A file that
+    pass does not read whole goes through the line-by-line parser, whose errors name the file
+    and the line; where several frames are bad, the error is the first one's."""
     import numba
 
+    files = _frames(pattern)
     later = range(1, len(files))
-    threads = min(numba.get_num_threads(), len(later))
-    if threads > 1:
-        with ThreadPoolExecutor(threads) as pool:
-            for _ in pool.map(read, later):  # in frame order: the first bad frame's error is raised
-                pass
-    else:
-        for t in later:
-            read(t)
+    threads = max(1, min(numba.get_num_threads(), len(later)))
+    with ThreadPoolExecutor(threads) as pool:
+        pool.submit(_read_ahead, files[1:])
+        points, faces, known = _read_first(files[0])
+        validate.allocation(len(files) * points.size, f"{pattern}: {len(files)} frames of {len(points)} vertices")
+        positions = np.empty((len(files), *points.shape))
+        positions[0] = points
+        local = threading.local()  # each thread's buffer, read into frame after frame
+
+        def read(t):
+            local.buffer = _read_later(files[t], files[0], positions[t], faces, known, getattr(local, "buffer", None))
+
+        for _ in pool.map(read, later) if threads > 1 else map(read, later):  # in frame order: the first bad
+            pass  # frame's error is raised
     return positions, faces, Path(files[0]).stem
 
 
