@@ -139,18 +139,19 @@ def _read_first(file) -> tuple[np.ndarray, np.ndarray, tuple | None]:
     its faces as the compiled pass reads them (None where that pass could not read it: later
     frames then go through the line-by-line parser too)."""
     buffer, n = _read_padded(file)
-    status, points, corners, counts, starts = _scan_alone(buffer, n)
+    status, points, corners, counts, starts = _scan_alone(buffer, n, file)
     if status == _READ:
         return points, _faces(corners, counts), (corners, counts, starts, buffer[: n + _PAD])
     return (*_parse_obj(file, _text(file, buffer[:n].tobytes())), None)
 
 
-def _scan_alone(buffer, n) -> tuple:
-    """:func:`_scan` of a file read on its own (see :func:`_read_padded`), given room for its
-    vertices, corners and faces: (status, vertices, corners, corner counts, where each face's
-    line starts)."""
+def _scan_alone(buffer, n, file="") -> tuple:
+    """:func:`_scan` of the file `file` read on its own (see :func:`_read_padded`), given room
+    for its vertices, corners and faces (the room checked against the memory budget): (status,
+    vertices, corners, corner counts, where each face's line starts)."""
     rows = max(16, n // 32)  # enough for "v" lines of 32 bytes and "f" lines of 3 corners of 4 bytes
     while True:
+        validate.allocation(8 * rows, f"{file}: room for {rows} vertices and faces")  # 8 numbers a row
         points, corners, counts = np.empty((rows, 3)), np.empty(3 * rows, dtype=np.int64), np.empty(rows, np.int64)
         found = _compiled()(buffer, n, points, corners, counts, np.empty(rows, np.int64), _NO_BYTES, False)
         if found[0] != _FULL:

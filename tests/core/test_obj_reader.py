@@ -397,3 +397,15 @@ def test_numbers_of_more_than_19_digits_read_as_pythons_float(tmp_path, text):
     status, points, *_ = compiled(path)
     assert status == obj._READ
     assert_same_bits(points[0], [float(text), 1.0, float(text)])
+
+
+def test_the_room_for_a_first_frame_is_checked_against_the_memory_budget(tmp_path, monkeypatch):
+    """A first frame of many small faces asks for room in doubling steps, each checked against the
+    memory budget first: over it, a ValidationError naming the file."""
+    from flockkit.errors import ValidationError
+
+    (tmp_path / "frame0.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\n" + "f 1 2 3\n" * 40_000)
+    assert obj.read_sequence(str(tmp_path))[1].shape == (40_000, 3)
+    monkeypatch.setenv("FLOCKKIT_MEMORY_LIMIT", "2M")
+    with pytest.raises(ValidationError, match=r"frame0.obj: room for \d+ vertices and faces needs"):
+        obj.read_sequence(str(tmp_path))
