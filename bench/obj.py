@@ -12,7 +12,10 @@ frames (every face given its own corners, 9 711 vertices, ``%.6f``). For each it
   the same bytes read again from the page cache;
 - flockkit's read_sequence (vertices and faces, every number as Python's float reads it) cold,
   the pages dropped the same way, and warm (with numba's threads, and with one), and the ratio
-  of its cold speed to the disk's (cold times the best of 3, warm ones of 5);
+  of its cold speed to the disk's (all times the best of 5);
+- one core's parse rate: flockkit's compiled pass alone (``obj._scan``) over the later frames'
+  bytes already in memory, one after another (what one thread can give, file reading and
+  Python per file aside);
 - the peers, on the same bytes already in memory, reading the vertices only (no faces):
   ``numpy.fromstring(..., sep=" ")`` over each file's vertex lines with their ``v`` blanked
   (numpy's C parser, correctly rounded, no Python per line: the fastest plain numpy parse we
@@ -64,7 +67,7 @@ def drop(files) -> None:
             os.close(fd)
 
 
-def cold(function, files, repeat: int = 3):
+def cold(function, files, repeat: int = 5):
     """The result and the best wall time of `repeat` calls of `function`, the files' pages
     dropped before each."""
     best = float("inf")
@@ -101,8 +104,8 @@ def main() -> None:
              ("Dance soup %.6f", *soup, "%.6f")]  # fmt: skip
     print(f"threads: {numba.get_num_threads()} (numba's); MB/s of the files' bytes; the peers read vertices only")
     print(f"{'sequence':>16} {'frames':>6} {'MB':>5} | {'disk cold':>9} {'cached':>7} | {'flockkit cold':>13} "
-          f"{'warm':>5} {'1 thread':>8} {'cold/disk':>9} | {'fromstring':>10} {'loadtxt':>7} {'line by line':>12} | "
-          f"{'load':>5}")  # fmt: skip
+          f"{'warm':>5} {'1 thread':>8} {'cold/disk':>9} {'1-core pass':>11} | {'fromstring':>10} {'loadtxt':>7} "
+          f"{'line by line':>12} | {'load':>5}")  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:  # /tmp: on the disk here (ext4), not in memory
         for name, frames, own_faces, number in cases:
             folder = Path(tmp) / name.replace(" ", "-").replace("%", "")
@@ -122,6 +125,17 @@ def main() -> None:
             numba.set_num_threads(1)
             _, alone = timed(lambda folder=folder: obj.read_sequence(str(folder)), repeat=5)
             numba.set_num_threads(threads)
+            padded = [obj._read_padded(file) for file in files[1:]]
+            first, _, known = obj._read_first(files[0])
+            out = np.empty((len(files), *first.shape))
+
+            def parse(padded=padded, known=known, out=out):
+                return [obj._compiled()(b, n, out[t], *known, True)[0] for t, (b, n) in enumerate(padded, 1)]
+
+            statuses, pass_time = timed(parse, repeat=5)
+            assert statuses == [obj._READ] * len(padded)
+            np.testing.assert_array_equal(out[1:].view(np.uint64), found[1:].view(np.uint64))
+            pass_rate = sum(n for _, n in padded) / 1e6 / pass_time
             texts = [d.decode() for d in data]
 
             def loadtxt(texts=texts):
@@ -135,7 +149,7 @@ def main() -> None:
                 np.testing.assert_array_equal(np.asarray(other).view(np.uint64), found.view(np.uint64))
             print(f"{name:>16} {len(files):>6} {size:>5.1f} | {size / disk:>9.0f} {size / cached:>7.0f} | "
                   f"{size / reader_cold:>13.0f} {size / reader:>5.0f} {size / alone:>8.0f} "
-                  f"{disk / reader_cold:>9.2f} | "
+                  f"{disk / reader_cold:>9.2f} {pass_rate:>11.0f} | "
                   f"{size / numpy_c:>10.0f} {size / peer:>7.0f} {size / careful:>12.0f} | "
                   f"{os.getloadavg()[0]:>5.2f}", flush=True)  # fmt: skip
         fresh = (f"import sys, time; sys.path.insert(0, {str(Path(__file__).parent)!r}); import flockkit; "
