@@ -107,7 +107,7 @@ def _read_ahead(files) -> None:
 _MAX_VERTEX = 2**40  # far above any file's vertex count, far below numpy's int64
 # What the compiled pass found: the file read, or a file the line-by-line parser must read (a
 # field that is not a plain decimal number, a byte outside plain ASCII, another topology than
-# the first frame's, or anything that parser would refuse).
+# the first frame's, or anything that parser would refuse), or an array it was given full.
 _READ, _CAREFUL, _FULL = 0, 1, 2
 _NO_BYTES = np.zeros(0, dtype=np.uint8)
 
@@ -116,7 +116,7 @@ def _read_padded(file, buffer=None) -> tuple[np.ndarray, int]:
     """(a buffer holding the bytes of the regular file `file` followed by :data:`_PAD` line ends,
     the file's length): `buffer` where it is large enough, else a new one (the size checked
     against the memory budget first), so that a thread reads frame after frame into one buffer,
-    with no copy of the bytes."""
+    straight from the file (no bytes object, no text)."""
     fd = _files.open_regular(file)
     with os.fdopen(fd, "rb", buffering=0) as handle:
         size = os.fstat(fd).st_size
@@ -135,9 +135,10 @@ def _read_padded(file, buffer=None) -> tuple[np.ndarray, int]:
 
 
 def _read_first(file) -> tuple[np.ndarray, np.ndarray, tuple | None]:
-    """The vertices (V, 3) and faces of the first frame, and the corners and corner counts of
-    its faces as the compiled pass reads them (None where that pass could not read it: later
-    frames then go through the line-by-line parser too)."""
+    """The vertices (V, 3) and faces of the first frame, and what the compiled pass compares a
+    later frame with: the corners and corner counts of its faces, where their lines start, and
+    its bytes with their padding (None where that pass could not read it: later frames then go
+    through the line-by-line parser too)."""
     buffer, n = _read_padded(file)
     status, points, corners, counts, starts = _scan_alone(buffer, n, file)
     if status == _READ:
