@@ -278,7 +278,7 @@ _ZEROS, _SIXES = np.uint64(0x3030303030303030), np.uint64(0x0606060606060606)
 _SECOND_BYTES = np.uint64(0x000000FF000000FF)
 _TIMES_100, _TIMES_1 = np.uint64(100 + (1000000 << 32)), np.uint64(1 + (10000 << 32))
 _RUN_POWERS = 10 ** np.arange(9, dtype=np.uint64)
-_TEN_TO_8, _U255 = np.uint64(10**8), np.uint64(255)
+_TEN_TO_8 = np.uint64(10**8)
 # Bytes after a file's bytes in the buffer the compiled pass reads: line ends, on which every scan
 # stops, so that no scan needs to test for the end (an 8-byte word read at the end stays inside).
 _PAD = 16
