@@ -44,6 +44,7 @@ __all__ = [
     "proposal_contexts",
     "motion_graphs",
     "walks",
+    "layered_walks",
     "features",
     "keyframed_arrows",
     "segmentations",
@@ -756,6 +757,35 @@ def walks(graph, *, max_edges=12, max_translation=10.0):
         )
 
     return draw_walk()
+
+
+def layered_walks(*, dims=None, max_parts=3, max_agents=4, max_edges=8):
+    """(GraphLayers, LayeredWalk): 1 to `max_parts` graphs from :func:`motion_graphs` (D = `dims`,
+    None: 2 or 3), each over its own points, those points dealt out over the source in a drawn
+    order, and a walk per part from :func:`walks` (turns, trades of points, start poses)."""
+    _check_count("max_parts", max_parts)
+    _check_count("max_agents", max_agents, low=2)
+    _check_count("max_edges", max_edges, low=0)
+    dims_strategy = _dims(dims)
+
+    @st.composite
+    def draw_layered(draw):
+        from ..scene.layers import GraphLayers, LayeredWalk
+
+        d = draw(dims_strategy)
+        graphs = draw(st.lists(motion_graphs(dims=d, max_agents=max_agents), min_size=1, max_size=max_parts))
+        graphs = [g for g in graphs if g.motion.n_frames == graphs[0].motion.n_frames]
+        sizes = [g.motion.n_agents for g in graphs]
+        labels = np.array(draw(st.permutations(np.repeat(np.arange(len(graphs)), sizes).tolist())))
+        positions = np.empty((graphs[0].motion.n_frames, len(labels), d))
+        for k, graph in enumerate(graphs):
+            positions[:, labels == k] = graph.motion.positions
+        source = Motion(positions=positions, dt=graphs[0].motion.dt)
+        layers = GraphLayers(source=source, segmentation=Segmentation(labels=labels, n_parts=len(graphs)),
+                             graphs=graphs)  # fmt: skip
+        return layers, LayeredWalk(walks=[draw(walks(g, max_edges=max_edges)) for g in graphs])
+
+    return draw_layered()
 
 
 def problems(*, dims=None, max_agents=6, max_constraints=4, max_coordinate=10.0):

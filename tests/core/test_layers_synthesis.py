@@ -7,7 +7,6 @@ parts' points in any order."""
 import numpy as np
 import pytest
 from hypothesis import given, settings
-from hypothesis import strategies as st
 
 import flockkit
 from flockkit.testing import strategies
@@ -31,28 +30,8 @@ def parts_played(layers, walk):
     return expected
 
 
-@st.composite
-def layers_and_walks(draw):
-    """Layers of 1 to 3 parts, each a graph from flockkit.testing.strategies.motion_graphs over its
-    own points (transitions that turn the points and trade them), the parts' points dealt out in
-    a drawn order, and a walk per part from strategies.walks (start poses included)."""
-    dims = draw(st.sampled_from([2, 3]))
-    graphs = draw(st.lists(strategies.motion_graphs(dims=dims, max_agents=4), min_size=1, max_size=3))
-    graphs = [g for g in graphs if g.motion.n_frames == graphs[0].motion.n_frames]
-    sizes = [g.motion.n_agents for g in graphs]
-    labels = np.array(draw(st.permutations(np.repeat(np.arange(len(graphs)), sizes).tolist())))
-    positions = np.empty((graphs[0].motion.n_frames, len(labels), dims))
-    for k, graph in enumerate(graphs):
-        positions[:, labels == k] = graph.motion.positions
-    source = flockkit.Motion(positions=positions, dt=graphs[0].motion.dt)
-    segmentation = flockkit.Segmentation(labels=labels, n_parts=len(graphs))
-    layers = flockkit.GraphLayers(source=source, segmentation=segmentation, graphs=graphs)
-    walks = [draw(strategies.walks(graph, max_edges=8)) for graph in graphs]
-    return layers, flockkit.LayeredWalk(walks=walks)
-
-
 @settings(max_examples=30, deadline=None)
-@given(layers_and_walks())
+@given(strategies.layered_walks())
 def test_every_part_plays_its_own_walk_bit_for_bit(drawn):
     layers, walk = drawn
     played = flockkit.synthesize(layers, walk)

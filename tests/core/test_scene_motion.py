@@ -96,20 +96,10 @@ def check_object(animation, i, played, size):
 def templates_and_walks(draw):
     """A drawn MotionGraph (2D or 3D) with a walk, or layers of 1 to 3 such graphs over dealt-out
     points with a walk per part (walks that turn and trade points, start poses)."""
-    dims = draw(st.sampled_from([2, 3]))
-    graphs = draw(st.lists(strategies.motion_graphs(dims=dims, max_agents=4), min_size=1, max_size=3))
     if draw(st.booleans()):
-        return graphs[0], draw(strategies.walks(graphs[0], max_edges=8))
-    graphs = [g for g in graphs if g.motion.n_frames == graphs[0].motion.n_frames]
-    sizes = [g.motion.n_agents for g in graphs]
-    labels = np.array(draw(st.permutations(np.repeat(np.arange(len(graphs)), sizes).tolist())))
-    positions = np.empty((graphs[0].motion.n_frames, len(labels), dims))
-    for k, graph in enumerate(graphs):
-        positions[:, labels == k] = graph.motion.positions
-    source = flockkit.Motion(positions=positions, dt=graphs[0].motion.dt)
-    segmentation = flockkit.Segmentation(labels=labels, n_parts=len(graphs))
-    layers = flockkit.GraphLayers(source=source, segmentation=segmentation, graphs=graphs)
-    return layers, flockkit.LayeredWalk(walks=[draw(strategies.walks(g, max_edges=8)) for g in graphs])
+        graph = draw(strategies.motion_graphs(max_agents=4))
+        return graph, draw(strategies.walks(graph, max_edges=8))
+    return draw(strategies.layered_walks())
 
 
 angles = st.floats(-10.0, 10.0, allow_nan=False)

@@ -253,6 +253,18 @@ def test_walks_fit_their_graph_and_play(data):
     assert _proper(rotation) and np.abs(translation).max() <= 3.0
 
 
+@settings(max_examples=15, deadline=None)
+@given(fst.layered_walks(dims=3, max_parts=2))
+def test_layered_walks_deal_every_point_to_one_part_and_play(drawn):
+    layers, walk = drawn
+    assert 1 <= layers.n_parts <= 2 and len(walk.walks) == layers.n_parts and layers.source.dims == 3
+    parts = layers.segmentation.parts()
+    assert sorted(np.concatenate(parts).tolist()) == list(range(layers.source.n_agents))
+    for points, graph in zip(parts, layers.graphs):
+        np.testing.assert_array_equal(layers.source.positions[:, points], graph.motion.positions)
+    assert np.isfinite(flockkit.synthesize(layers, walk).positions).all()
+
+
 @settings(max_examples=30, deadline=None)
 @given(fst.features(min_frames=2, max_frames=8, dims=3, dt=0.1))
 def test_features_are_normalized_arrows(features):
@@ -368,6 +380,9 @@ def test_capabilities_declare_only_what_the_kind_reads(kind, data):
         (fst.animated_meshes, {"max_faces": 0}),
         (fst.motion_graphs, {"max_agents": 1}),
         (fst.walks, {"graph": "not a graph"}),
+        (fst.layered_walks, {"max_parts": 0}),
+        (fst.layered_walks, {"max_agents": 1}),
+        (fst.layered_walks, {"dims": 4}),
         (fst.problems, {"max_constraints": 0}),
         (fst.proposal_contexts, {"behavior": 3}),
         (fst.configurations, {"degenerate": "yes"}),
