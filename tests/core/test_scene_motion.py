@@ -19,6 +19,7 @@ from flockkit.scene import Paths, Placement
 from flockkit.testing import inputs, strategies
 
 from ..conftest import SHARED_DATA, require_folder
+from .test_layers_synthesis import parts_played
 
 
 def played_plainly(template, walk) -> np.ndarray:
@@ -26,12 +27,7 @@ def played_plainly(template, walk) -> np.ndarray:
     faces), cut to the shortest part; a single graph's synthesis."""
     if isinstance(template, flockkit.MotionGraph):
         return flockkit.synthesize(template, walk).positions
-    own = [flockkit.synthesize(graph, w).positions for graph, w in zip(template.graphs, walk.walks)]
-    frames = min(len(p) for p in own)
-    out = np.empty((frames, template.source.n_agents, template.source.dims))
-    for points, played in zip(template.segmentation.parts(), own):
-        out[:, points] = played[:frames]
-    return out
+    return parts_played(template, walk)
 
 
 def center_of(template) -> np.ndarray:
