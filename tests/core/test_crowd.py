@@ -400,3 +400,35 @@ def test_sampling_and_blending_run_through_the_array_api_alone():
     assert strict_pose.rotations.__array_namespace__() is strict
     np.testing.assert_allclose(np.asarray(strict_pose.rotations), reference.rotations, atol=1e-6)
     np.testing.assert_allclose(np.asarray(strict_pose.translations), reference.translations, atol=1e-6)
+
+
+@pytest.mark.parametrize("lag", [0, 1, 3, 50])
+def test_the_compiled_reading_finds_what_the_array_api_path_reads(lag):
+    """Where each part reads, found by the compiled pass over the instance records (store rows
+    either side of a dilating offset, `lag` frames older up to the oldest frame held, unique
+    slots, blend weights), against the array API path's numpy gathers: the same poses to float32
+    rounding, for parts steady, dilating, blending into streams and into a unique slot."""
+    pool = StreamPool(
+        [
+            Stream(controller=player(), history=20),
+            Stream(controller=player(rate=1.5), history=40),
+            Stream(controller=player(rate=0.7, start=0.3), history=30, default="Stopped"),
+        ],
+        fps=FPS,
+    )
+    unique = UniquePool(2, max_bones=J, fps=FPS)
+    unique.set(1, player(rate=2.0))
+    crowd = Crowd(pool, n_agents=30, clusters={"body": np.arange(30) % 2}, unique=unique, seed=4)
+    for _ in range(6):
+        crowd.update()
+    crowd.transition_to_streamed(np.arange(0, 12), "body", 2, blend_time=0.4, time_to_dilate=1.0)
+    crowd.transition_to_unique([13, 14], "body", 1, blend_time=0.2)
+    for _ in range(4):
+        crowd.update()
+    ids = np.random.default_rng(lag).permutation(30)
+    blending = crowd.alphas("body")[ids] > 0
+    assert blending.sum() == 14 and (~blending).sum() == 16
+    assert np.any(crowd.instance_buffer()["target_offset"][ids, 0] % 1 > 0)  # some read between two frames
+    c = crowd.cluster_index("body")
+    compiled, reference = crowd._entries(ids, c, lag), crowd._entries(ids, c, lag, compiled=False)
+    np.testing.assert_allclose(compiled, reference, atol=2e-6)
