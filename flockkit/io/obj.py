@@ -236,7 +236,8 @@ def _compiled():
         import numba
         from numba.cpython.unsafe import numbers
 
-        names = ("_multiply", "_eisel_lemire", "_long_number", "_at", "_word", "_digit_run", "_zero_bytes", "_scan")
+        names = ("_multiply", "_eisel_lemire", "_long_digits", "_long_number", "_at", "_word", "_digit_run",
+                 "_zero_bytes", "_scan")  # fmt: skip
         namespace = dict(globals())
         namespace["_leading_zeros"], namespace["_trailing_zeros"] = numbers.leading_zeros, numbers.trailing_zeros
         namespace["_FIVE_HIGH"], namespace["_FIVE_LOW"] = _powers_of_five()  # constants of the compiled code
@@ -345,6 +346,29 @@ def _eisel_lemire(mantissa, q):
     return np.uint64((bits & _FRACTION) | (np.uint64(exponent) << np.uint64(52))).view(np.float64)
 
 
+def _long_digits(data, i, n, mantissa, kept, scale, digits, inexact, fraction):
+    """:func:`_long_number`'s run of digits from data[i] (the integer's, or the `fraction`'s):
+    the first _KEPT_DIGITS significant ones kept in the mantissa, each later one counted in the
+    scale (an integer's) or dropped (a fraction's), and whether any of those was not 0. Returns
+    (i, mantissa, kept, scale, digits, inexact) after them."""
+    while i < n:
+        digit = np.int64(data[i]) - 48
+        if digit < 0 or digit > 9:
+            break
+        if kept < _KEPT_DIGITS:
+            mantissa = mantissa * _U10 + np.uint64(digit)
+            kept += 1
+            if fraction:
+                scale -= 1
+        else:
+            if not fraction:
+                scale += 1
+            inexact = inexact or digit != 0
+        digits += 1
+        i += 1
+    return i, mantissa, kept, scale, digits, inexact
+
+
 def _long_number(data, i, n):
     """(the index after it, its value, whether it is read) of a number of more than 19
     significant digits starting at data[i], a byte at a time (data[:n] the file), in the form
@@ -358,18 +382,7 @@ def _long_number(data, i, n):
     while i < n and data[i] == 48:  # leading zeros
         digits += 1
         i += 1
-    while i < n:
-        digit = np.int64(data[i]) - 48
-        if digit < 0 or digit > 9:
-            break
-        if kept < _KEPT_DIGITS:
-            mantissa = mantissa * _U10 + np.uint64(digit)
-            kept += 1
-        else:
-            scale += 1
-            inexact = inexact or digit != 0
-        digits += 1
-        i += 1
+    i, mantissa, kept, scale, digits, inexact = _long_digits(data, i, n, mantissa, kept, scale, digits, inexact, False)
     if i < n and data[i] == 46:
         i += 1
         if kept == 0:  # zeros after the point, before the first significant digit
@@ -377,18 +390,8 @@ def _long_number(data, i, n):
                 scale -= 1
                 digits += 1
                 i += 1
-        while i < n:
-            digit = np.int64(data[i]) - 48
-            if digit < 0 or digit > 9:
-                break
-            if kept < _KEPT_DIGITS:
-                mantissa = mantissa * _U10 + np.uint64(digit)
-                kept += 1
-                scale -= 1
-            else:
-                inexact = inexact or digit != 0
-            digits += 1
-            i += 1
+        i, mantissa, kept, scale, digits, inexact = _long_digits(data, i, n, mantissa, kept, scale, digits, inexact,
+                                                                 True)  # fmt: skip
     if digits == 0:
         return i, 0.0, False
     if i < n and (data[i] == 101 or data[i] == 69):
