@@ -50,6 +50,14 @@ def frames(tmp_path, count, make):
     return [tmp_path / f"frame{t}.obj" for t in range(count)]
 
 
+def quad_frames(tmp_path, count):
+    """`count` frames of one quad (4 vertices written by repr, one face), moved by t in frame t."""
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
+    return frames(
+        tmp_path, count, lambda t: [f"v {x!r} {y!r} {z!r}\n" for x, y, z in (quad + t).tolist()] + ["f 1 2 3 4\n"]
+    )
+
+
 def assert_reads_as_the_careful_parser(tmp_path, paths):
     positions, faces, _ = obj.read_sequence(str(tmp_path))
     for t, path in enumerate(paths):
@@ -191,12 +199,7 @@ def test_a_triangle_soup_and_relative_indices(tmp_path):
 
 
 def test_later_frames_that_break_the_rules_are_named_by_the_careful_parser(tmp_path):
-    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
-
-    def make(t):
-        return [f"v {x!r} {y!r} {z!r}\n" for x, y, z in (quad + t).tolist()] + ["f 1 2 3 4\n"]
-
-    paths = frames(tmp_path, 3, make)
+    paths = quad_frames(tmp_path, 3)
     good = paths[2].read_text()
     for bad, message in [
         ("v 2.0 3.0", r"frame2.obj, line 4: not an OBJ vertex"),
@@ -225,12 +228,7 @@ def test_later_frames_that_break_the_rules_are_named_by_the_careful_parser(tmp_p
 
 
 def test_a_bad_first_frame_and_the_first_of_several_bad_frames_are_named(tmp_path):
-    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
-
-    def make(t):
-        return [f"v {x!r} {y!r} {z!r}\n" for x, y, z in (quad + t).tolist()] + ["f 1 2 3 4\n"]
-
-    paths = frames(tmp_path, 8, make)
+    paths = quad_frames(tmp_path, 8)
     good = paths[0].read_text()
     for bad, message in [
         ("v 0.0 0.0 0.0x", r"frame0.obj, line 1: not an OBJ vertex"),
