@@ -217,8 +217,8 @@ class _Initial:
             trial = self.behavior.forward(lead.state(0), steps, self.rng, **_guide_arguments(points, groups))
             miss = 0.0
             for c, ahead, target in heading:
-                centre = trial.positions[-2:, list(self.problem.agents_of(c))].mean(axis=1)
-                landing = c.position + ahead * (centre[-1] - centre[0]) / self.dt
+                _, carried = _carried_on(trial.positions, list(self.problem.agents_of(c)), ahead, self.dt)
+                landing = c.position + carried
                 miss += float(np.sum((landing - target) ** 2))
             if miss < best_miss:
                 best, best_miss = trial, miss
@@ -319,15 +319,15 @@ class _Initial:
                 for _ in range(self.pilots):
                     pilot = self.behavior.forward(state, knot - at + back, self.rng, **whole)[back:]
                     for k, p in enumerate(aimed):
-                        centre = pilot.positions[[steps - 1, steps, -1]][:, list(p.agents)].mean(axis=1)
-                        bias[k] += (centre[2] - centre[1] - ahead * (centre[1] - centre[0]) / self.dt) / self.pilots
+                        centre, carried = _carried_on(pilot.positions[: steps + 1], list(p.agents), ahead, self.dt)
+                        bias[k] += (pilot.positions[-1, list(p.agents)].mean(axis=0) - centre - carried) / self.pilots
             best, miss = None, np.inf
             for _ in range(self.rollouts if aimed else 1):
                 trial = self.behavior.forward(state, steps + back, self.rng, **guide)[back:]
                 squared = 0.0
                 for k, p in enumerate(aimed):
-                    centre = trial.positions[-2:, list(p.agents)].mean(axis=1)
-                    landing = centre[-1] + ahead * (centre[-1] - centre[0]) / self.dt + bias[k]
+                    centre, carried = _carried_on(trial.positions, list(p.agents), ahead, self.dt)
+                    landing = centre + carried + bias[k]
                     squared += float(np.sum((landing - p.spline(knot * self.dt)) ** 2))
                 if squared < miss:
                     best, miss = trial, squared
@@ -588,6 +588,13 @@ def _matching(slots: np.ndarray, origins: np.ndarray, rng) -> np.ndarray:
     scale = float(np.median(cost)) or 1.0
     _, order = linear_sum_assignment(cost + rng.gumbel(0.0, 0.05 * scale, cost.shape))
     return order
+
+
+def _carried_on(positions, agents, seconds: float, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """The center of `agents` at the last frame of `positions`, and how far the velocity of its
+    last step carries it in `seconds`: where a group heads."""
+    centre = positions[-2:, agents].mean(axis=1)
+    return centre[-1], seconds * (centre[-1] - centre[0]) / dt
 
 
 def _guide_arguments(points: dict, groups: list) -> dict:
